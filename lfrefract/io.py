@@ -1,0 +1,215 @@
+"""File I/O: float EXR images (OpenEXR), JSON sidecars with a schema version, atomic outputs.
+
+Nothing here leaves a half-written file or directory behind: files are written to a temporary
+name beside their destination and renamed into place, and an output directory is assembled in
+a staging directory that is renamed into place only when everything in it has been written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import OpenEXR
+
+from lfrefract._validate import ParameterError
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "FileFormatError",
+    "read_exr",
+    "read_json",
+    "staged_directory",
+    "write_exr",
+    "write_json",
+]
+
+#: Version of the sidecar and directory layout written by this package.
+SCHEMA_VERSION = 1
+
+_ROLE_KEY = "lfrefract_role"
+_SCHEMA_KEY = "lfrefract_schema_version"
+
+
+class FileFormatError(ValueError):
+    """A file is missing, of the wrong kind, or does not hold what it should."""
+
+
+def _atomic_target(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
+    """Write a float image as a ZIP-compressed float32 OpenEXR file, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination ``.exr`` file.
+    image : ndarray, shape (H, W) or (H, W, 3)
+        Real-valued image; a single channel is stored as ``Y``, three as ``RGB``. NaN and
+        +-inf are stored as they are (a depth map marks "no surface" with +inf).
+    role : str
+        What the image is (``"raw"``, ``"ideal"``, ``"depth"``, ...), stored in the header.
+
+    Returns
+    -------
+    Path
+        The written path.
+    """
+    path = Path(path)
+    arr = np.asarray(image)
+    if not np.issubdtype(arr.dtype, np.floating) and not np.issubdtype(arr.dtype, np.integer):
+        raise ParameterError(f"image must hold real numbers, got dtype {arr.dtype}")
+    if arr.ndim == 2:
+        channels = {"Y": np.ascontiguousarray(arr, dtype=np.float32)}
+    elif arr.ndim == 3 and arr.shape[2] == 3:
+        channels = {"RGB": np.ascontiguousarray(arr, dtype=np.float32)}
+    else:
+        raise ParameterError(f"image must have shape (H, W) or (H, W, 3), got {arr.shape}")
+    header = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        _ROLE_KEY: str(role),
+        _SCHEMA_KEY: str(SCHEMA_VERSION),
+    }
+    tmp = _atomic_target(path)
+    try:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(str(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_exr(path: str | os.PathLike, *, role: str | None = None) -> np.ndarray:
+    """Read an image written by :func:`write_exr` (or any RGB / single-channel float EXR).
+
+    Parameters
+    ----------
+    path : path-like
+        An OpenEXR file.
+    role : str, optional
+        If given, the header's role must match (an image written for another purpose is an error).
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W) or (H, W, 3)
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, not an OpenEXR file, or holds other channels or another role.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"no such file: {str(path)!r}")
+    with path.open("rb") as fh:
+        magic = fh.read(4)
+    if magic != b"\x76\x2f\x31\x01":
+        raise FileFormatError(f"{str(path)!r} is not an OpenEXR file (magic bytes {magic!r})")
+    with OpenEXR.File(str(path)) as exr:
+        header = exr.header()
+        channels = exr.channels()
+    if role is not None and header.get(_ROLE_KEY) != role:
+        raise FileFormatError(f"{str(path)!r} holds a {header.get(_ROLE_KEY)!r} image, expected {role!r}")
+    names = sorted(channels)
+    if names == ["RGB"] or names == ["Y"] or names == ["Z"]:
+        return np.asarray(channels[names[0]].pixels, dtype=np.float32)
+    if set("RGB") <= set(names):
+        return np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+    raise FileFormatError(f"{str(path)!r} has channels {names}; expected RGB or a single Y channel")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def _finite_json(value: Any) -> Any:
+    """Replace non-finite floats by strings so the JSON stays standard."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_json(v) for v in value]
+    return value
+
+
+def write_json(path: str | os.PathLike, data: dict) -> Path:
+    """Write a sidecar ``data`` (with ``schema_version`` added) as indented JSON, atomically."""
+    path = Path(path)
+    payload = {"schema_version": SCHEMA_VERSION, **data}
+    text = json.dumps(_finite_json(json.loads(json.dumps(payload, default=_json_default))), indent=2)
+    tmp = _atomic_target(path)
+    try:
+        tmp.write_text(text + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_json(path: str | os.PathLike) -> dict:
+    """Read a sidecar written by :func:`write_json`, checking its schema version."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"no such file: {str(path)!r}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"{str(path)!r} is not valid JSON: {exc}") from None
+    version = data.get("schema_version") if isinstance(data, dict) else None
+    if version != SCHEMA_VERSION:
+        raise FileFormatError(f"{str(path)!r} has schema_version {version!r}, this lfrefract reads {SCHEMA_VERSION}")
+    return data
+
+
+@contextlib.contextmanager
+def staged_directory(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Iterator[Path]:
+    """Assemble an output directory atomically.
+
+    Yields a fresh staging directory beside ``out_dir``. When the block finishes without an
+    exception the staging directory replaces ``out_dir``; on any exception it is deleted and
+    ``out_dir`` is left as it was.
+
+    Raises
+    ------
+    FileExistsError
+        If ``out_dir`` exists, is not empty and ``overwrite`` is False.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"output {str(out)!r} exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"output directory {str(out)!r} is not empty (pass overwrite to replace it)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    try:
+        yield stage
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    if out.exists():
+        shutil.rmtree(out)
+    os.replace(stage, out)

@@ -1,0 +1,238 @@
+"""Mitsuba sensor plugins: the plenoptic camera and the ideal OpenCV pinhole, in Dr.Jit.
+
+Both generate rays in the camera frame of :mod:`lfrefract` (OpenCV: +x right, +y down, +z
+forward) and map them to the world with the camera pose (``to_world``). Mitsuba's film is
+addressed in continuous coordinates with pixel centres at half-integers; OpenCV pixel
+``(u, v)`` is film position ``(u + 0.5, v + 0.5)``. This is the single place that conversion
+happens. Under a crop window the film sample is mapped back to full-film coordinates.
+
+The plenoptic sensor is an independent Dr.Jit implementation of the physical model whose numpy
+twin is :meth:`lfrefract.LightFieldCamera.rays_through_lenses`; the tests compare the two.
+"""
+
+from __future__ import annotations
+
+import math
+from types import ModuleType
+
+import numpy as np
+
+from lfrefract import LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry
+
+__all__ = ["pinhole_sensor_dict", "plenoptic_sensor_dict", "register"]
+
+PLENOPTIC = "lfsim_plenoptic"
+PINHOLE = "lfsim_pinhole"
+
+
+def _film(mi: ModuleType, width: int, height: int, crop: tuple[int, int, int, int] | None) -> dict:
+    film = {
+        "type": "hdrfilm",
+        "width": width,
+        "height": height,
+        "pixel_format": "rgb",
+        "component_format": "float32",
+        "rfilter": {"type": "box"},
+    }
+    if crop is not None:
+        x, y, w, h = crop
+        film.update(crop_offset_x=x, crop_offset_y=y, crop_width=w, crop_height=h)
+    return film
+
+
+def _to_world(mi: ModuleType, pose: Pose):
+    return mi.ScalarTransform4f(pose.matrix.tolist())
+
+
+def plenoptic_sensor_dict(
+    mi: ModuleType,
+    camera: LightFieldCamera,
+    pose: Pose,
+    *,
+    spp: int,
+    crop: tuple[int, int, int, int] | None = None,
+) -> dict:
+    """Mitsuba dict of the plenoptic sensor for ``camera`` at ``pose``.
+
+    ``crop`` is ``(x, y, width, height)`` in pixels for band rendering.
+    """
+    mla = camera.mla
+    return {
+        "type": PLENOPTIC,
+        "to_world": _to_world(mi, pose),
+        "focal_length_m": camera.focal_length_m,
+        "lens_to_mla_m": camera.lens_to_mla_m,
+        "f_number": camera.f_number,
+        "grid": mla.grid,
+        "mla_pitch_m": mla.pitch_m,
+        "mla_focal_length_m": mla.focal_length_m,
+        "mla_rotation_rad": mla.rotation_rad,
+        "mla_offset_x_m": mla.offset_m[0],
+        "mla_offset_y_m": mla.offset_m[1],
+        "pixel_pitch_m": camera.sensor.pixel_pitch_m,
+        "film": _film(mi, camera.sensor.width_px, camera.sensor.height_px, crop),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    }
+
+
+def pinhole_sensor_dict(
+    mi: ModuleType,
+    pinhole: PinholeCamera,
+    pose: Pose,
+    *,
+    spp: int,
+    crop: tuple[int, int, int, int] | None = None,
+) -> dict:
+    """Mitsuba dict of the ideal pinhole sensor with OpenCV intrinsics."""
+    return {
+        "type": PINHOLE,
+        "to_world": _to_world(mi, pose),
+        "focal_px": pinhole.focal_px,
+        "cx_px": pinhole.cx_px,
+        "cy_px": pinhole.cy_px,
+        "film": _film(mi, pinhole.width_px, pinhole.height_px, crop),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    }
+
+
+def register(mi: ModuleType) -> None:
+    """Define and register both sensors for the current Mitsuba variant."""
+    import drjit as dr
+
+    class _CameraSensor(mi.Sensor):
+        """Shared parts: world transform, crop-aware film coordinates, ray differentials."""
+
+        def __init__(self, props):
+            mi.Sensor.__init__(self, props)
+            matrix = np.array(props["to_world"].matrix, dtype=np.float64)
+            self._rot = mi.ScalarMatrix3f(matrix[:3, :3].tolist())
+            self._pos = mi.ScalarPoint3f(matrix[:3, 3].tolist())
+
+        def _film_pixels(self, position_sample):
+            """OpenCV pixel coordinates (u, v) of a film sample, crop-aware."""
+            film = self.film()
+            size = mi.ScalarVector2f(film.size())
+            offset = mi.ScalarVector2f(film.crop_offset())
+            crop = mi.ScalarVector2f(film.crop_size())
+            p = offset + position_sample * crop
+            return p.x - 0.5, p.y - 0.5, size
+
+        def _ray(self, time, origin_cam, direction_cam, maxt=None):
+            ray = mi.Ray3f(self._rot @ origin_cam + self._pos, self._rot @ direction_cam, time, [])
+            if maxt is not None:
+                ray.maxt = maxt
+            return ray
+
+        def sample_ray_differential(self, time, wavelength_sample, position_sample, aperture_sample, active=True):
+            ray, weight = self.sample_ray(time, wavelength_sample, position_sample, aperture_sample, active)
+            return mi.RayDifferential3f(ray), weight
+
+    class PlenopticSensor(_CameraSensor):
+        """Raw lenslet image of a plenoptic 1.0 camera (see :mod:`lfrefract.camera`).
+
+        Each sample picks a point in the pixel (film sample) and a point on the aperture of the
+        microlens whose micro-image holds it (aperture sample, uniform over the lattice cell).
+        The path is bent by the thin microlens and the thin main lens. Paths that miss the
+        main-lens aperture get zero weight and a zero-length ray, so they cost no traversal.
+        The weight is 1 otherwise: pixel values are mean radiance, like Mitsuba's cameras.
+        """
+
+        def __init__(self, props):
+            _CameraSensor.__init__(self, props)
+            size = self.film().size()
+            self.camera = LightFieldCamera(
+                focal_length_m=float(props["focal_length_m"]),
+                lens_to_mla_m=float(props["lens_to_mla_m"]),
+                f_number=float(props["f_number"]),
+                mla=MicrolensArray(
+                    grid=str(props["grid"]),
+                    pitch_m=float(props["mla_pitch_m"]),
+                    focal_length_m=float(props["mla_focal_length_m"]),
+                    rotation_rad=float(props["mla_rotation_rad"]),
+                    offset_m=(float(props["mla_offset_x_m"]), float(props["mla_offset_y_m"])),
+                ),
+                sensor=SensorGeometry(
+                    width_px=int(size[0]), height_px=int(size[1]), pixel_pitch_m=float(props["pixel_pitch_m"])
+                ),
+            )
+            self.m_needs_sample_3 = True
+
+        def sample_lens_offset(self, aperture_sample):
+            """Image-plane offset from the lens centre (metres) for an aperture sample."""
+            mla = self.camera.mla
+            c, s = math.cos(mla.rotation_rad), math.sin(mla.rotation_rad)
+            if mla.grid == "square":
+                lx = (aperture_sample.x - 0.5) * mla.pitch_m
+                ly = (aperture_sample.y - 0.5) * mla.pitch_m
+            else:
+                scaled = 3.0 * aperture_sample.x
+                k = dr.minimum(dr.floor(scaled), 2.0)
+                a = scaled - k
+                b = aperture_sample.y
+                radius = mla.pitch_m / math.sqrt(3.0)
+                ang0 = math.pi / 6.0 + k * (2.0 * math.pi / 3.0)
+                ang1 = ang0 + 2.0 * math.pi / 3.0
+                lx = radius * (a * dr.cos(ang0) + b * dr.cos(ang1))
+                ly = radius * (a * dr.sin(ang0) + b * dr.sin(ang1))
+            return mi.Vector2f(c * lx - s * ly, s * lx + c * ly)
+
+        def nearest_lens_centre(self, point):
+            """Image-plane centre of the lattice point nearest to ``point`` (Vector2f)."""
+            mla = self.camera.mla
+            basis = mla.basis_m.tolist()
+            inv = np.linalg.inv(mla.basis_m).tolist()
+            rel = point - mi.Vector2f(*mla.offset_m)
+            fa = dr.floor(inv[0][0] * rel.x + inv[0][1] * rel.y)
+            fb = dr.floor(inv[1][0] * rel.x + inv[1][1] * rel.y)
+            best = mi.Vector2f(0.0)
+            best_d2 = mi.Float(dr.inf)
+            for da, db in ((0, 0), (1, 0), (0, 1), (1, 1)):
+                ia, ib = fa + da, fb + db
+                cand = mi.Vector2f(basis[0][0] * ia + basis[0][1] * ib, basis[1][0] * ia + basis[1][1] * ib)
+                d2 = dr.squared_norm(cand - rel)
+                closer = d2 < best_d2
+                best = dr.select(closer, cand, best)
+                best_d2 = dr.select(closer, d2, best_d2)
+            return best + mi.Vector2f(*mla.offset_m)
+
+        def sample_ray(self, time, wavelength_sample, position_sample, aperture_sample, active=True):
+            cam = self.camera
+            u, v, size = self._film_pixels(position_sample)
+            pitch = cam.sensor.pixel_pitch_m
+            sensor_img = mi.Vector2f((u - 0.5 * (size.x - 1.0)) * pitch, (v - 0.5 * (size.y - 1.0)) * pitch)
+            centre_img = self.nearest_lens_centre(sensor_img / cam.micro_image_scale)
+            through_img = centre_img + self.sample_lens_offset(aperture_sample)
+            # Image-plane -> camera frame: x = -xi, y = -eta.
+            slope_in = (sensor_img - centre_img) / cam.mla.focal_length_m
+            hit = -through_img + slope_in * cam.lens_to_mla_m
+            inside = dr.squared_norm(hit) <= cam.aperture_radius_m**2
+            slope_out = slope_in - hit / cam.focal_length_m
+            direction = dr.normalize(mi.Vector3f(slope_out.x, slope_out.y, 1.0))
+            origin = mi.Point3f(hit.x, hit.y, 0.0)
+            ray = self._ray(time, origin, direction, maxt=dr.select(inside, dr.largest(mi.Float), 0.0))
+            return ray, dr.select(inside & active, mi.Spectrum(1.0), mi.Spectrum(0.0))
+
+        def to_string(self):
+            return f"PlenopticSensor[camera={self.camera!r}]"
+
+    class PinholeSensor(_CameraSensor):
+        """Ideal central projection with OpenCV intrinsics, centre at the main-lens centre."""
+
+        def __init__(self, props):
+            _CameraSensor.__init__(self, props)
+            self.focal_px = float(props["focal_px"])
+            self.cx_px = float(props["cx_px"])
+            self.cy_px = float(props["cy_px"])
+
+        def sample_ray(self, time, wavelength_sample, position_sample, aperture_sample, active=True):
+            u, v, _ = self._film_pixels(position_sample)
+            direction = dr.normalize(
+                mi.Vector3f((u - self.cx_px) / self.focal_px, (v - self.cy_px) / self.focal_px, 1.0)
+            )
+            return self._ray(time, mi.Point3f(0.0), direction), mi.Spectrum(1.0)
+
+        def to_string(self):
+            return f"PinholeSensor[f={self.focal_px}, c=({self.cx_px}, {self.cy_px})]"
+
+    mi.register_sensor(PLENOPTIC, lambda props: PlenopticSensor(props))
+    mi.register_sensor(PINHOLE, lambda props: PinholeSensor(props))
