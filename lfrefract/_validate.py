@@ -16,11 +16,11 @@ __all__ = [
     "ParameterError",
     "as_points",
     "finite_float",
-    "positive_float",
-    "non_negative_float",
-    "positive_int",
-    "one_of",
     "finite_vector",
+    "non_negative_float",
+    "one_of",
+    "positive_float",
+    "positive_int",
     "reject_unknown_keys",
 ]
 

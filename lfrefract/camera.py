@@ -93,10 +93,7 @@ class MicrolensArray:
         """Lattice basis, shape (2, 2): columns are ``a1`` and ``a2`` in image-plane metres."""
         c, s = math.cos(self.rotation_rad), math.sin(self.rotation_rad)
         rot = np.array([[c, -s], [s, c]])
-        if self.grid == "hex":
-            unrotated = np.array([[1.0, 0.5], [0.0, _SQRT3 / 2.0]])
-        else:
-            unrotated = np.eye(2)
+        unrotated = np.array([[1.0, 0.5], [0.0, _SQRT3 / 2.0]]) if self.grid == "hex" else np.eye(2)
         return self.pitch_m * rot @ unrotated
 
     @property
@@ -329,9 +326,7 @@ class LightFieldCamera:
         """
         half_w, half_h = (s / 2.0 for s in self.sensor.size_m)
         corners = np.array([[-half_w, -half_h], [half_w, -half_h], [-half_w, half_h], [half_w, half_h]])
-        frac = np.linalg.solve(
-            self.mla.basis_m, (corners / self.micro_image_scale - np.asarray(self.mla.offset_m)).T
-        ).T
+        frac = np.linalg.solve(self.mla.basis_m, (corners / self.micro_image_scale - np.asarray(self.mla.offset_m)).T).T
         lo = np.floor(frac.min(axis=0)) - 1
         hi = np.ceil(frac.max(axis=0)) + 1
         ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="xy")
@@ -347,9 +342,7 @@ class LightFieldCamera:
         return self.sensor.image_plane_to_pixels(self.mla.centres_m(indices) * self.micro_image_scale)
 
     # ----------------------------------------------------------------- rays
-    def rays_through_lenses(
-        self, uv: np.ndarray, *, lens_offsets_m: np.ndarray | None = None
-    ) -> CapturedRays:
+    def rays_through_lenses(self, uv: np.ndarray, *, lens_offsets_m: np.ndarray | None = None) -> CapturedRays:
         """Trace light paths from raw-pixel positions out through the optics into the air.
 
         Each path starts at sensor point ``uv`` (continuous pixel coordinates), passes the
@@ -373,13 +366,9 @@ class LightFieldCamera:
         """
         uv_arr = as_points("uv", uv, 2)
         n = uv_arr.shape[0]
-        offsets = (
-            np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
-        )
+        offsets = np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
         if offsets.shape[0] != n:
-            raise ParameterError(
-                f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows"
-            )
+            raise ParameterError(f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows")
         f_mla = self.mla.focal_length_m
         sensor_img = self.sensor.pixels_to_image_plane(uv_arr)
         idx = self.mla.nearest_indices(sensor_img / self.micro_image_scale)
@@ -397,9 +386,7 @@ class LightFieldCamera:
         directions = np.concatenate([slope_out, np.ones((n, 1))], axis=1)
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
         origins = np.concatenate([hit_xy, np.zeros((n, 1))], axis=1)
-        return CapturedRays(
-            origins_cam=origins, directions_cam=directions, in_aperture=in_aperture, lens_indices=idx
-        )
+        return CapturedRays(origins_cam=origins, directions_cam=directions, in_aperture=in_aperture, lens_indices=idx)
 
     def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
         """The captured-ray model: from each pixel centre through its microlens centre.

@@ -72,6 +72,11 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
     arr = np.asarray(image)
     if not np.issubdtype(arr.dtype, np.floating) and not np.issubdtype(arr.dtype, np.integer):
         raise ParameterError(f"image must hold real numbers, got dtype {arr.dtype}")
+    finite = arr[np.isfinite(arr)] if np.issubdtype(arr.dtype, np.floating) else arr
+    if finite.size and np.max(np.abs(finite)) > np.finfo(np.float32).max:
+        raise ParameterError(
+            f"image holds finite values beyond float32's range, e.g. {float(np.max(np.abs(finite)))!r}"
+        )
     if arr.ndim == 2:
         channels = {"Y": np.ascontiguousarray(arr, dtype=np.float32)}
     elif arr.ndim == 3 and arr.shape[2] == 3:
@@ -121,16 +126,20 @@ def read_exr(path: str | os.PathLike, *, role: str | None = None) -> np.ndarray:
         magic = fh.read(4)
     if magic != b"\x76\x2f\x31\x01":
         raise FileFormatError(f"{str(path)!r} is not an OpenEXR file (magic bytes {magic!r})")
-    with OpenEXR.File(str(path)) as exr:
-        header = exr.header()
-        channels = exr.channels()
+    try:
+        with OpenEXR.File(str(path)) as exr:
+            # Copy inside the block: closing the file empties the mappings it returned.
+            header = dict(exr.header())
+            channels = {name: np.array(ch.pixels) for name, ch in exr.channels().items()}
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise FileFormatError(f"{str(path)!r} is not a readable OpenEXR file: {exc}") from None
     if role is not None and header.get(_ROLE_KEY) != role:
         raise FileFormatError(f"{str(path)!r} holds a {header.get(_ROLE_KEY)!r} image, expected {role!r}")
     names = sorted(channels)
     if names == ["RGB"] or names == ["Y"] or names == ["Z"]:
-        return np.asarray(channels[names[0]].pixels, dtype=np.float32)
+        return np.asarray(channels[names[0]], dtype=np.float32)
     if set("RGB") <= set(names):
-        return np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+        return np.stack([np.asarray(channels[c], dtype=np.float32) for c in "RGB"], axis=-1)
     raise FileFormatError(f"{str(path)!r} has channels {names}; expected RGB or a single Y channel")
 
 
@@ -158,6 +167,8 @@ def _finite_json(value: Any) -> Any:
 def write_json(path: str | os.PathLike, data: dict) -> Path:
     """Write a sidecar ``data`` (with ``schema_version`` added) as indented JSON, atomically."""
     path = Path(path)
+    if "schema_version" in data:
+        raise ParameterError(f"data must not set schema_version (got {data['schema_version']!r}); it is added here")
     payload = {"schema_version": SCHEMA_VERSION, **data}
     text = json.dumps(_finite_json(json.loads(json.dumps(payload, default=_json_default))), indent=2)
     tmp = _atomic_target(path)

@@ -51,13 +51,15 @@ class PinholeCamera:
         return np.array([[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]])
 
     @classmethod
-    def from_K(cls, K: np.ndarray, width_px: int, height_px: int) -> PinholeCamera:  # noqa: N803
+    def from_K(cls, K: np.ndarray, width_px: int, height_px: int) -> PinholeCamera:  # noqa: N802, N803
         """Build from an OpenCV intrinsic matrix with square pixels and no skew."""
         k = np.asarray(K, dtype=np.float64)
         if k.shape != (3, 3) or not np.allclose(k[[1, 2, 2, 2], [0, 0, 1, 2]], [0, 0, 0, 1]) or k[0, 1] != 0:
             raise ParameterError(f"K must be an upper-triangular OpenCV intrinsic matrix, got {k.tolist()}")
         if not math.isclose(k[0, 0], k[1, 1], rel_tol=1e-9):
-            raise ParameterError(f"K must have square pixels (fx == fy), got fx={k[0, 0]!r}, fy={k[1, 1]!r}")
+            raise ParameterError(
+                f"K must have square pixels (fx == fy), got fx={float(k[0, 0])!r}, fy={float(k[1, 1])!r}"
+            )
         return cls(focal_px=k[0, 0], cx_px=k[0, 2], cy_px=k[1, 2], width_px=width_px, height_px=height_px)
 
     def to_dict(self) -> dict:
@@ -109,8 +111,8 @@ def virtual_camera_for(camera: LightFieldCamera, *, pixels_per_lens: float = DEF
     positive_float("pixels_per_lens", pixels_per_lens)
     pixel_m = camera.mla.pitch_m / pixels_per_lens
     width_m, height_m = (s / camera.micro_image_scale for s in camera.sensor.size_m)
-    width = int(math.floor(width_m / pixel_m + 1e-9))
-    height = int(math.floor(height_m / pixel_m + 1e-9))
+    width = math.floor(width_m / pixel_m + 1e-9)
+    height = math.floor(height_m / pixel_m + 1e-9)
     return PinholeCamera(
         focal_px=camera.lens_to_mla_m / pixel_m,
         cx_px=(width - 1) / 2.0,

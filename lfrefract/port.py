@@ -37,9 +37,7 @@ from lfrefract._validate import (
 __all__ = ["FlatPort", "PortTrace", "fresnel_transmittance", "refract"]
 
 
-def refract(
-    directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: float
-) -> tuple[np.ndarray, np.ndarray]:
+def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: float) -> tuple[np.ndarray, np.ndarray]:
     """Refract unit directions at an interface (Snell's law, vector form).
 
     Parameters
@@ -72,6 +70,8 @@ def refract(
 def fresnel_transmittance(cos_i: np.ndarray, n_from: float, n_to: float) -> np.ndarray:
     """Unpolarised Fresnel power transmittance at a smooth interface, shape (N,); 0 under TIR."""
     cos_i = np.abs(np.asarray(cos_i, dtype=np.float64))
+    if n_from == n_to:
+        return np.ones_like(cos_i)
     eta = n_from / n_to
     sin2_t = eta**2 * (1.0 - cos_i**2)
     ok = sin2_t <= 1.0
@@ -201,13 +201,25 @@ class FlatPort:
 
     @classmethod
     def from_dict(cls, data: dict) -> FlatPort:
-        """Build from plain data in either radian or ``_deg`` form; unknown keys are an error."""
+        """Build from plain data in either radian or ``_deg`` form; unknown keys are an error.
+
+        Accepts the output of :meth:`to_dict`: its derived ``normal`` and ``total_tilt_deg`` must
+        then agree with the tilt angles.
+        """
+        data = dict(data)
+        derived = {k: data.pop(k) for k in ("normal", "total_tilt_deg") if k in data}
         keys = {"distance_m", "thickness_m", "n_air", "n_glass", "n_water"}
         if any(k.endswith("_deg") for k in data):
             reject_unknown_keys("port", data, keys | {"tilt_x_deg", "tilt_y_deg"})
-            return cls.from_degrees(**data)
-        reject_unknown_keys("port", data, keys | {"tilt_x_rad", "tilt_y_rad"})
-        return cls(**data)
+            port = cls.from_degrees(**data)
+        else:
+            reject_unknown_keys("port", data, keys | {"tilt_x_rad", "tilt_y_rad"})
+            port = cls(**data)
+        if "normal" in derived and not np.allclose(port.normal, derived["normal"], atol=1e-9):
+            raise ParameterError(
+                f"port.normal={derived['normal']!r} disagrees with the tilt angles ({port.normal.tolist()})"
+            )
+        return port
 
     def to_dict(self) -> dict:
         """Plain-data form for JSON sidecars, with the derived normal and tilt."""
@@ -308,7 +320,8 @@ class FlatPort:
             raise ParameterError(f"origins and directions must have the same shape, got {o.shape} and {d.shape}")
         norms = np.linalg.norm(d, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-6):
-            raise ParameterError(f"directions must be unit vectors, got a norm of {norms[np.argmax(np.abs(norms - 1.0))]!r}")
+            worst = float(norms[np.argmax(np.abs(norms - 1.0))])
+            raise ParameterError(f"directions must be unit vectors, got a norm of {worst!r}")
         n = self.normal
         faces = self.faces if into_water else [(off, b, a) for off, a, b in reversed(self.faces)]
         travel_normal = n if into_water else -n
@@ -336,6 +349,10 @@ class FlatPort:
             arr[bad] = np.nan
         transmittance[bad] = 0.0
         return PortTrace(
-            entry_points=entry, exit_points=point, directions=direction,
-            transmittance=transmittance, misses=misses, tir=tir & ~misses,
+            entry_points=entry,
+            exit_points=point,
+            directions=direction,
+            transmittance=transmittance,
+            misses=misses,
+            tir=tir & ~misses,
         )

@@ -44,7 +44,7 @@ def _f01() -> LightFieldCamera:
 def _tiny() -> LightFieldCamera:
     # A small camera with the Illum's character for tests: hexagonal MLA, 10 px per lens, MLA f/2,
     # main lens f/2.2 (image side above the MLA's), a 44 deg horizontal field, and micro-image
-    # centres up to 8 px away from their lens centres at the edge. 48 x 41 lenses on 480 x 360 px.
+    # centres up to 8 px away from their lens centres at the edge. 1907 lenses (about 46 x 41) on 480 x 360 px.
     return LightFieldCamera(
         name="tiny",
         focal_length_m=6e-3,

@@ -1,0 +1,148 @@
+"""Benchmark the plenoptic render against Mitsuba's own ``perspective`` sensor.
+
+For each camera preset, renders the embedded default scene (with its port) twice at the same
+pixel count, spp and band size: once with the plenoptic sensor, once with Mitsuba's
+``perspective`` sensor covering the same field. Each render runs in a fresh process so its peak
+memory (max RSS) is its own. Prints seconds, Msamples/s, peak memory and the ratio.
+
+    python benchmarks/bench_render.py                  # tiny and illum, 16 spp
+    python benchmarks/bench_render.py --cameras tiny --spp 64
+
+Targets (issue 2): ratio <= 1.1; full Illum at 16 spp in <= 30 s on the 2-core CI machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+
+def _worker(camera_name: str, sensor_kind: str, spp: int, band_pixels: int) -> dict:
+    from lfrefract import camera_preset
+    from simulator.backend import load_mitsuba, versions
+    from simulator.config import load_scene
+    from simulator.render import render_bands
+    from simulator.scene import build_scene
+    from simulator.sensor import plenoptic_sensor_dict
+
+    mi = load_mitsuba()
+    camera = camera_preset(camera_name)
+    config = load_scene().with_overrides(camera=camera)
+    scene = build_scene(mi, config)
+    width, height = camera.sensor.width_px, camera.sensor.height_px
+
+    if sensor_kind == "plenoptic":
+
+        def sensor_for_crop(crop):
+            return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop)
+
+    else:
+        # Mitsuba's camera looks along +z with +x left and +y up: OpenCV frame = diag(-1, -1, 1).
+        to_world = config.pose.matrix @ np.diag([-1.0, -1.0, 1.0, 1.0])
+        half_width = camera.sensor.size_m[0] / 2 / camera.micro_image_scale
+        fov_deg = math.degrees(2 * math.atan(half_width / camera.lens_to_mla_m))
+
+        def sensor_for_crop(crop):
+            x, y, w, h = crop
+            film = {
+                "type": "hdrfilm",
+                "width": width,
+                "height": height,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+                "crop_offset_x": x,
+                "crop_offset_y": y,
+                "crop_width": w,
+                "crop_height": h,
+            }
+            return {
+                "type": "perspective",
+                "fov": fov_deg,
+                "fov_axis": "x",
+                "to_world": mi.ScalarTransform4f(to_world.tolist()),
+                "film": film,
+                "sampler": {"type": "independent", "sample_count": spp},
+            }
+
+    start = time.perf_counter()
+    image = render_bands(
+        mi, scene, sensor_for_crop, width, height, spp=spp, seed=0, max_band_pixels=band_pixels, progress=False
+    )
+    seconds = time.perf_counter() - start
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {
+        "camera": camera_name,
+        "sensor": sensor_kind,
+        "pixels": width * height,
+        "spp": spp,
+        "seconds": seconds,
+        "msamples_per_s": width * height * spp / seconds / 1e6,
+        "peak_rss_mb": peak_mb,
+        "mean_radiance": float(np.mean(image)),
+        **versions(),
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--cameras", nargs="+", default=["tiny", "illum"])
+    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--band-pixels", type=int, default=None, help="default: simulator.render's")
+    parser.add_argument("--worker", nargs=2, metavar=("CAMERA", "SENSOR"), help=argparse.SUPPRESS)
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON too")
+    args = parser.parse_args()
+    from simulator.render import DEFAULT_MAX_BAND_PIXELS
+
+    band_pixels = args.band_pixels or DEFAULT_MAX_BAND_PIXELS
+    if args.worker:
+        print(json.dumps(_worker(args.worker[0], args.worker[1], args.spp, band_pixels)))
+        return 0
+
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {__import__('os').cpu_count()} cores, "
+        f"python {platform.python_version()}"
+    )
+    print(f"scene: embedded default (port tilted 20 deg), spp {args.spp}, band {band_pixels / 1e6:.1f} Mpx")
+    print(f"{'camera':8} {'sensor':12} {'pixels':>11} {'seconds':>9} {'Msample/s':>10} {'peak MB':>9} {'ratio':>6}")
+    results = []
+    for name in args.cameras:
+        row = {}
+        for kind in ("perspective", "plenoptic"):
+            cmd = [
+                sys.executable,
+                __file__,
+                "--worker",
+                name,
+                kind,
+                "--spp",
+                str(args.spp),
+                "--band-pixels",
+                str(band_pixels),
+            ]
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
+            row[kind] = json.loads(proc.stdout.strip().splitlines()[-1])
+        ratio = row["plenoptic"]["seconds"] / row["perspective"]["seconds"]
+        for kind in ("perspective", "plenoptic"):
+            r = row[kind]
+            shown = f"{ratio:6.2f}" if kind == "plenoptic" else ""
+            print(
+                f"{name:8} {kind:12} {r['pixels']:>11,} {r['seconds']:9.2f} {r['msamples_per_s']:10.2f} "
+                f"{r['peak_rss_mb']:9.0f} {shown:>6}"
+            )
+        results.append({"camera": name, "ratio": ratio, **row})
+    if args.json:
+        print(json.dumps(results, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,454 @@
+"""Scene configuration: TOML files in ``scenes/`` parsed into frozen, validated dataclasses.
+
+A scene file has these tables (every length in metres, angles only in ``*_deg`` fields)::
+
+    name = "..."                      # optional label
+    [camera]                          # preset = "tiny" | "f01" | "illum", or every field of
+    preset = "tiny"                   #   LightFieldCamera.to_dict() (with [camera.mla], [camera.sensor])
+    [camera.pose]                     # optional; camera-to-world, default identity
+    rotation_xyz_deg = [0, 0, 0]
+    position_m = [0, 0, 0]
+    [port]                            # optional; no [port] table means no port (camera in water)
+    distance_m = 0.02                 # see lfrefract.FlatPort
+    thickness_m = 0.005
+    tilt_x_deg = 20.0
+    [render]
+    spp = 16
+    seed = 0
+    [[light]]                         # type = "point" | "constant"
+    [[object]]                        # type = "textured_plane" | "chessboard" | "disc" | "bowl"
+                                      #        | "figurine" | "mesh"
+
+Objects are placed in the world frame by ``position_m`` and ``rotation_xyz_deg``; in their
+local frame +x is right, +y down and +z away from a camera with identity pose (OpenCV), so an
+unrotated plane faces that camera with its texture upright. Unknown keys are errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset
+from lfrefract._validate import (
+    ParameterError,
+    finite_vector,
+    non_negative_float,
+    positive_float,
+    positive_int,
+    reject_unknown_keys,
+)
+from lfrefract.pose import rotation_from_euler_xyz
+
+__all__ = [
+    "OBJECT_TYPES",
+    "Bowl",
+    "Chessboard",
+    "ConstantLight",
+    "Disc",
+    "Figurine",
+    "MeshFile",
+    "Placement",
+    "PointLight",
+    "RenderSettings",
+    "SceneConfig",
+    "TexturedPlane",
+    "default_scene_path",
+    "embedded_scenes",
+    "load_scene",
+    "parse_scene",
+]
+
+
+def _rgb(name: str, value: Any) -> tuple[float, float, float]:
+    """A colour given as one number or three; every entry finite and >= 0."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = (value, value, value)
+    rgb = finite_vector(name, value, 3)
+    for i, c in enumerate(rgb):
+        non_negative_float(f"{name}[{i}]", c)
+    return rgb
+
+
+def _albedo(name: str, value: Any) -> tuple[float, float, float]:
+    rgb = _rgb(name, value)
+    if max(rgb) > 1.0:
+        raise ParameterError(f"{name} is a reflectance and must lie in [0, 1], got {value!r}")
+    return rgb
+
+
+@dataclass(frozen=True, kw_only=True)
+class Placement:
+    """Where an object sits: local-to-world rotation (extrinsic x-y-z Euler, degrees) and centre."""
+
+    position_m: tuple[float, float, float]
+    rotation_xyz_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", finite_vector("position_m", self.position_m, 3))
+        object.__setattr__(self, "rotation_xyz_deg", finite_vector("rotation_xyz_deg", self.rotation_xyz_deg, 3))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """Homogeneous 4x4 local-to-world matrix."""
+        m = np.eye(4)
+        m[:3, :3] = rotation_from_euler_xyz(tuple(math.radians(a) for a in self.rotation_xyz_deg))
+        m[:3, 3] = self.position_m
+        return m
+
+    def to_world(self, points_local: np.ndarray) -> np.ndarray:
+        """Local points (N, 3) to world points (N, 3)."""
+        m = self.matrix
+        return np.asarray(points_local, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TexturedPlane:
+    """A rectangle with a seeded multi-scale random texture (for stereo), in local z = 0."""
+
+    placement: Placement
+    size_m: tuple[float, float]
+    texture_px: int = 512
+    texture_seed: int = 0
+
+    def __post_init__(self) -> None:
+        size = finite_vector("size_m", self.size_m, 2)
+        for i, s in enumerate(size):
+            positive_float(f"size_m[{i}]", s)
+        object.__setattr__(self, "size_m", size)
+        positive_int("texture_px", self.texture_px)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Chessboard:
+    """A chessboard target with a white margin, in local z = 0; ``squares`` = (columns, rows)."""
+
+    placement: Placement
+    squares: tuple[int, int]
+    square_size_m: float
+    margin_squares: float = 1.0
+    texels_per_square: int = 16
+
+    def __post_init__(self) -> None:
+        if len(tuple(self.squares)) != 2:
+            raise ParameterError(f"squares must be (columns, rows), got {self.squares!r}")
+        for i, n in enumerate(self.squares):
+            if positive_int(f"squares[{i}]", n) < 2:
+                raise ParameterError(f"squares[{i}] must be at least 2, got {n!r}")
+        object.__setattr__(self, "squares", tuple(int(n) for n in self.squares))
+        positive_float("square_size_m", self.square_size_m)
+        non_negative_float("margin_squares", self.margin_squares)
+        positive_int("texels_per_square", self.texels_per_square)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Disc:
+    """A flat disc in local z = 0: a diffuse target, or a light if ``radiance`` is non-zero.
+
+    A luminous disc emits from its -z face (towards a camera with identity pose) only.
+    """
+
+    placement: Placement
+    radius_m: float
+    reflectance: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    radiance: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        positive_float("radius_m", self.radius_m)
+        object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Bowl:
+    """A thin-walled bowl opening towards -z (towards a camera with identity pose)."""
+
+    placement: Placement
+    radius_m: float
+    depth_m: float
+    thickness_m: float = 0.004
+    reflectance: tuple[float, float, float] = (0.7, 0.45, 0.3)
+
+    def __post_init__(self) -> None:
+        positive_float("radius_m", self.radius_m)
+        positive_float("depth_m", self.depth_m)
+        positive_float("thickness_m", self.thickness_m)
+        object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Figurine:
+    """An organic, figurine-like closed shape standing along -y (up), ``height_m`` tall."""
+
+    placement: Placement
+    height_m: float
+    seed: int = 0
+    reflectance: tuple[float, float, float] = (0.35, 0.6, 0.4)
+
+    def __post_init__(self) -> None:
+        positive_float("height_m", self.height_m)
+        object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+
+
+@dataclass(frozen=True, kw_only=True)
+class MeshFile:
+    """A user mesh from an OBJ or PLY file, scaled uniformly then placed."""
+
+    placement: Placement
+    path: Path
+    scale: float = 1.0
+    reflectance: tuple[float, float, float] = (0.7, 0.7, 0.7)
+
+    def __post_init__(self) -> None:
+        path = Path(self.path)
+        if path.suffix.lower() not in (".obj", ".ply"):
+            raise ParameterError(f"mesh path must end in .obj or .ply, got {str(path)!r}")
+        if not path.is_file():
+            raise ParameterError(f"mesh path {str(path)!r} does not exist")
+        object.__setattr__(self, "path", path)
+        positive_float("scale", self.scale)
+        object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+
+
+@dataclass(frozen=True, kw_only=True)
+class PointLight:
+    """An isotropic point light in the water; ``intensity_w_sr`` is radiant intensity (RGB)."""
+
+    position_m: tuple[float, float, float]
+    intensity_w_sr: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", finite_vector("position_m", self.position_m, 3))
+        object.__setattr__(self, "intensity_w_sr", _rgb("intensity_w_sr", self.intensity_w_sr))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConstantLight:
+    """Uniform radiance from every direction (an environment; used for white images).
+
+    Behind a port its light reaches objects only through the glass, so it is meant for scenes
+    without a port; :func:`parse_scene` rejects it together with a port.
+    """
+
+    radiance: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
+
+
+@dataclass(frozen=True, kw_only=True)
+class RenderSettings:
+    """Samples per pixel and the seed of the sampler."""
+
+    spp: int = 16
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        positive_int("render.spp", self.spp)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
+            raise ParameterError(f"render.seed must be an integer in [0, 2**31), got {self.seed!r}")
+
+
+SceneObject = TexturedPlane | Chessboard | Disc | Bowl | Figurine | MeshFile
+Light = PointLight | ConstantLight
+
+OBJECT_TYPES: dict[str, type] = {
+    "textured_plane": TexturedPlane,
+    "chessboard": Chessboard,
+    "disc": Disc,
+    "bowl": Bowl,
+    "figurine": Figurine,
+    "mesh": MeshFile,
+}
+LIGHT_TYPES: dict[str, type] = {"point": PointLight, "constant": ConstantLight}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneConfig:
+    """A whole scene: camera, pose, optional port, lights, objects and render settings."""
+
+    camera: LightFieldCamera
+    pose: Pose = field(default_factory=Pose)
+    port: FlatPort | None = None
+    lights: tuple[Light, ...] = ()
+    objects: tuple[SceneObject, ...] = ()
+    render: RenderSettings = field(default_factory=RenderSettings)
+    name: str = "scene"
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        if self.port is not None and any(isinstance(light, ConstantLight) for light in self.lights):
+            raise ParameterError(
+                "a constant (environment) light cannot light a scene behind a port: the glass would "
+                "shadow it; use point lights in the water, or remove [port]"
+            )
+        if not self.lights:
+            raise ParameterError("the scene has no [[light]]: it would render black")
+
+    def with_overrides(self, **changes: Any) -> SceneConfig:
+        """A copy with some fields replaced (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        """Plain data for the sidecar (tuples as lists, paths as strings)."""
+
+        def plain(value: Any) -> Any:
+            if dataclasses.is_dataclass(value) and not isinstance(value, type):
+                if hasattr(value, "to_dict"):
+                    return value.to_dict()
+                out = {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+                kind = {v: k for k, v in {**OBJECT_TYPES, **LIGHT_TYPES}.items()}.get(type(value))
+                return {"type": kind, **out} if kind else out
+            if isinstance(value, (tuple, list)):
+                return [plain(v) for v in value]
+            if isinstance(value, Path):
+                return str(value)
+            return value
+
+        return {
+            "name": self.name,
+            "source": self.source,
+            "camera": self.camera.to_dict(),
+            "pose": self.pose.to_dict(),
+            "port": None if self.port is None else self.port.to_dict(),
+            "lights": plain(self.lights),
+            "objects": plain(self.objects),
+            "render": plain(self.render),
+        }
+
+
+def _build(cls: type, table: dict, where: str, base_dir: Path) -> Any:
+    """Instantiate a config dataclass from a TOML table, with placement and path handling."""
+    table = dict(table)
+    names = {f.name for f in dataclasses.fields(cls)}
+    kwargs: dict[str, Any] = {}
+    if "placement" in names:
+        place = {k: table.pop(k) for k in ("position_m", "rotation_xyz_deg") if k in table}
+        if "position_m" not in place:
+            raise ParameterError(f"{where}: missing key 'position_m'")
+        kwargs["placement"] = Placement(**place)
+        names.discard("placement")
+    reject_unknown_keys(where, table, names)
+    for key, value in table.items():
+        if key == "path":
+            value = (base_dir / value).resolve()
+        elif isinstance(value, list):
+            value = tuple(value)
+        kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
+    except TypeError as exc:  # a required key is missing
+        missing = sorted(
+            f.name
+            for f in dataclasses.fields(cls)
+            if f.name not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        )
+        raise ParameterError(f"{where}: missing key(s) {missing}") from exc
+
+
+def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path) -> tuple:
+    if not isinstance(data, list):
+        raise ParameterError(f"[[{where}]] must be an array of tables, got {data!r}")
+    out = []
+    for i, table in enumerate(data):
+        label = f"{where}[{i}]"
+        if not isinstance(table, dict) or "type" not in table:
+            raise ParameterError(f"{label} needs a 'type', one of {sorted(kinds)}")
+        table = dict(table)
+        kind = table.pop("type")
+        if kind not in kinds:
+            raise ParameterError(f"{label}.type must be one of {sorted(kinds)}, got {kind!r}")
+        out.append(_build(kinds[kind], table, f"{label} ({kind})", base_dir))
+    return tuple(out)
+
+
+def _camera(table: dict) -> tuple[LightFieldCamera, Pose]:
+    table = dict(table)
+    pose = Pose.from_dict(table.pop("pose")) if "pose" in table else Pose()
+    if "preset" in table:
+        reject_unknown_keys("camera", table, {"preset"})
+        return camera_preset(table["preset"]), pose
+    return LightFieldCamera.from_dict(table), pose
+
+
+def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>") -> SceneConfig:
+    """Build a :class:`SceneConfig` from parsed TOML data.
+
+    Parameters
+    ----------
+    data : dict
+        The TOML document as a dict.
+    base_dir : path-like
+        Directory that relative mesh paths are resolved against.
+    source : str
+        Where the data came from, recorded in the config.
+
+    Raises
+    ------
+    ParameterError
+        For unknown keys or types, missing keys, and invalid values; the message names them.
+    """
+    base = Path(base_dir)
+    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object"})
+    if "camera" not in data:
+        raise ParameterError("scene: missing [camera] table")
+    camera, pose = _camera(data["camera"])
+    port = FlatPort.from_dict(data["port"]) if "port" in data else None
+    render = _build(RenderSettings, data.get("render", {}), "render", base)
+    return SceneConfig(
+        name=str(data.get("name", Path(source).stem)),
+        source=source,
+        camera=camera,
+        pose=pose,
+        port=port,
+        lights=_typed_entries(data.get("light", []), LIGHT_TYPES, "light", base),
+        objects=_typed_entries(data.get("object", []), OBJECT_TYPES, "object", base),
+        render=render,
+    )
+
+
+def load_scene(path: str | Path | None = None) -> SceneConfig:
+    """Load a scene TOML file; ``None`` loads the embedded default scene.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ParameterError
+        If the file is not valid TOML or describes an invalid scene.
+    """
+    p = default_scene_path() if path is None else Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"scene file {str(p)!r} does not exist")
+    try:
+        data = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"scene file {str(p)!r} is not valid TOML: {exc}") from None
+    return parse_scene(data, base_dir=p.parent, source=str(p))
+
+
+def scenes_dir() -> Path:
+    """The directory of embedded scenes: ``scenes/`` of a source tree, or its copy in a wheel."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "scenes", here / "scenes"):
+        if (candidate / "default.toml").is_file():
+            return candidate
+    raise FileNotFoundError(f"no embedded scenes found beside {str(here)!r}")
+
+
+def embedded_scenes() -> dict[str, Path]:
+    """Embedded scene names (file stems) and their files."""
+    return {p.stem: p for p in sorted(scenes_dir().glob("*.toml"))}
+
+
+def default_scene_path() -> Path:
+    """Path of the embedded default scene (``scenes/default.toml``)."""
+    return scenes_dir() / "default.toml"

@@ -1,0 +1,68 @@
+"""PNG figures of a render for people: raw (whole and a native-resolution crop), ideal, depth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib as mpl
+import numpy as np
+
+from lfrefract import LightFieldCamera
+
+mpl.use("Agg")
+import matplotlib.pyplot as plt
+
+__all__ = ["display_rgb", "write_all"]
+
+#: Longest side of the downsampled whole-raw preview, pixels.
+PREVIEW_MAX_SIDE_PX = 1600
+#: Side of the native-resolution raw crop, in micro-images.
+CROP_MICRO_IMAGES = 24
+
+
+def display_rgb(image: np.ndarray, *, white: float | None = None) -> np.ndarray:
+    """Linear radiance (H, W, 3) to display sRGB-ish uint8: scale to ``white``, clip, gamma 2.2.
+
+    ``white`` defaults to the 99.5th percentile of the finite values.
+    """
+    img = np.nan_to_num(np.asarray(image, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    if white is None:
+        white = float(np.percentile(img, 99.5)) or 1.0
+    return (np.clip(img / white, 0.0, 1.0) ** (1.0 / 2.2) * 255.0 + 0.5).astype(np.uint8)
+
+
+def _downsample(img: np.ndarray, max_side: int) -> np.ndarray:
+    step = int(np.ceil(max(img.shape[:2]) / max_side))
+    if step <= 1:
+        return img
+    h, w = (img.shape[0] // step) * step, (img.shape[1] // step) * step
+    return img[:h, :w].reshape(h // step, step, w // step, step, -1).mean(axis=(1, 3))
+
+
+def write_all(
+    folder: Path, *, raw: np.ndarray, ideal: np.ndarray, depth_m: np.ndarray, camera: LightFieldCamera
+) -> list[Path]:
+    """Write ``raw.png``, ``raw_crop.png``, ``ideal.png`` and ``depth.png`` into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    white = float(np.percentile(raw, 99.5)) or 1.0
+    written = []
+    plt.imsave(folder / "raw.png", display_rgb(_downsample(raw, PREVIEW_MAX_SIDE_PX), white=white))
+    written.append(folder / "raw.png")
+    half = int(CROP_MICRO_IMAGES * camera.micro_image_pitch_px / 2)
+    cy, cx = raw.shape[0] // 2, raw.shape[1] // 2
+    crop = raw[max(0, cy - half) : cy + half, max(0, cx - half) : cx + half]
+    plt.imsave(folder / "raw_crop.png", display_rgb(crop, white=white))
+    written.append(folder / "raw_crop.png")
+    plt.imsave(folder / "ideal.png", display_rgb(ideal))
+    written.append(folder / "ideal.png")
+    fig, ax = plt.subplots(figsize=(6, 6 * depth_m.shape[0] / depth_m.shape[1] + 0.6), dpi=120)
+    finite = np.isfinite(depth_m)
+    shown = np.where(finite, depth_m, np.nan)
+    im = ax.imshow(shown, cmap="viridis")
+    ax.set_title("ground-truth depth (camera-frame z, m); white: no surface")
+    ax.set_axis_off()
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="z [m]")
+    fig.savefig(folder / "depth.png", bbox_inches="tight")
+    plt.close(fig)
+    written.append(folder / "depth.png")
+    return written

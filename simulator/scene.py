@@ -1,0 +1,306 @@
+"""Turn a :class:`~simulator.config.SceneConfig` into a Mitsuba scene, and check its geometry.
+
+The world frame is the config's; the camera frame is OpenCV's (``lfrefract``). The port is
+attached to the camera: its faces are built in the camera frame and moved by the camera pose.
+Each face is a large rectangle carrying the refract-only interface BSDF
+(:mod:`simulator.interface`). A rectangle's normal points into the medium its BSDF calls
+``ext_ior``: towards the camera for the air-side face, into the water for the water-side face.
+
+Lighting is direct only: the path length is limited so that a camera path crosses the port
+faces (delta interactions) and then takes next-event estimation at the first diffuse surface.
+The raw and the ideal image are therefore lit identically, and the port changes only the
+geometry of the rays and the radiometric factor of :class:`lfrefract.PortTrace`.
+"""
+
+from __future__ import annotations
+
+import functools
+from types import ModuleType
+
+import numpy as np
+
+from lfrefract import FlatPort, LightFieldCamera, ParameterError
+from simulator import assets
+from simulator.config import (
+    Bowl,
+    Chessboard,
+    ConstantLight,
+    Disc,
+    Figurine,
+    MeshFile,
+    PointLight,
+    SceneConfig,
+    SceneObject,
+    TexturedPlane,
+)
+from simulator.interface import INTERFACE
+
+__all__ = [
+    "PORT_FACE_SIZE_M",
+    "build_scene",
+    "check_geometry",
+    "object_sample_points",
+    "port_faces",
+]
+
+#: Side of the square port faces, metres: far larger than any camera footprint on the port.
+PORT_FACE_SIZE_M = 20.0
+
+_TWO_PI = 2.0 * np.pi
+
+
+def _frame_matrix(origin: np.ndarray, z_axis: np.ndarray, half_size: float) -> np.ndarray:
+    """4x4 matrix mapping Mitsuba's unit rectangle ([-1, 1]^2, normal +z) onto a plane."""
+    z = z_axis / np.linalg.norm(z_axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = half_size * x, half_size * y, z, origin
+    return m
+
+
+def port_faces(port: FlatPort) -> list[dict]:
+    """Faces of the port in the camera frame, from the camera outwards.
+
+    Returns
+    -------
+    list of dict
+        Each with ``matrix`` (4x4, camera frame, rectangle normal = side of ``ext_ior``),
+        ``int_ior`` and ``ext_ior``.
+    """
+    n = port.normal
+    faces = []
+    for i, (offset, n_before, n_after) in enumerate(port.faces):
+        centre = np.array([0.0, 0.0, offset / n[2]])  # where the optical axis meets the face
+        last = i == len(port.faces) - 1 and len(port.faces) > 1
+        if last:  # water-side face of a slab: normal into the water, glass behind it
+            normal, ext, inner = n, n_after, n_before
+        else:  # camera-side face (or the only one): normal towards the camera
+            normal, ext, inner = -n, n_before, n_after
+        faces.append({"matrix": _frame_matrix(centre, normal, PORT_FACE_SIZE_M / 2), "int_ior": inner, "ext_ior": ext})
+    return faces
+
+
+@functools.lru_cache(maxsize=8)
+def _random_texture(size_px: int, seed: int) -> np.ndarray:
+    """Seeded texture, cached: the raw and the ideal scene of a job share it (about 1 s per Mpx)."""
+    texture = assets.random_texture(size_px=size_px, seed=seed)
+    texture.flags.writeable = False
+    return texture
+
+
+def _texture(mi: ModuleType, image: np.ndarray, *, nearest: bool) -> dict:
+    return {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)),
+        "raw": True,
+        "filter_type": "nearest" if nearest else "bilinear",
+        "wrap_mode": "clamp",
+    }
+
+
+def _diffuse(reflectance) -> dict:
+    value = reflectance if isinstance(reflectance, dict) else {"type": "rgb", "value": list(reflectance)}
+    return {"type": "twosided", "material": {"type": "diffuse", "reflectance": value}}
+
+
+def _mesh(mi: ModuleType, name: str, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, bsdf: dict):
+    import drjit as dr
+
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    mesh = mi.Mesh(name, len(vertices), len(faces), props, has_vertex_normals=True)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = dr.ravel(mi.Point3f(np.asarray(vertices, dtype=np.float32).T))
+    params["vertex_normals"] = dr.ravel(mi.Normal3f(np.asarray(normals, dtype=np.float32).T))
+    params["faces"] = dr.ravel(mi.Vector3u(np.asarray(faces, dtype=np.uint32).T))
+    params.update()
+    return mesh
+
+
+def _plane_matrix(placement_matrix: np.ndarray, width: float, height: float) -> np.ndarray:
+    return placement_matrix @ np.diag([width / 2.0, height / 2.0, 1.0, 1.0])
+
+
+def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if isinstance(obj, Bowl):
+        v, f, n = assets.bowl_mesh(radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
+    else:
+        v, f, n = assets.figurine_mesh(height_m=obj.height_m, seed=obj.seed)
+    rot = obj.placement.matrix[:3, :3]
+    return obj.placement.to_world(v), f, n @ rot.T
+
+
+def _object_dict(mi: ModuleType, obj: SceneObject, index: int):
+    name = f"object_{index}"
+    if isinstance(obj, TexturedPlane):
+        tex = _random_texture(obj.texture_px, obj.texture_seed)
+        return {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, *obj.size_m).tolist()),
+            "bsdf": _diffuse(_texture(mi, tex, nearest=False)),
+        }
+    if isinstance(obj, Chessboard):
+        kw = {"squares": obj.squares, "margin_squares": obj.margin_squares}
+        tex = assets.chessboard_texture(texels_per_square=obj.texels_per_square, **kw)
+        w, h = assets.chessboard_size_m(square_size_m=obj.square_size_m, **kw)
+        return {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, w, h).tolist()),
+            "bsdf": _diffuse(_texture(mi, tex, nearest=True)),
+        }
+    if isinstance(obj, Disc):
+        # Mitsuba's disk faces +z and area lights emit on that side only: turn it (180 deg about
+        # local x) to face -z, towards a camera with identity pose.
+        m = obj.placement.matrix @ np.diag([obj.radius_m, -obj.radius_m, -1.0, 1.0])
+        out = {"type": "disk", "to_world": mi.ScalarTransform4f(m.tolist()), "bsdf": _diffuse(obj.reflectance)}
+        if max(obj.radiance) > 0:
+            out["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(obj.radiance)}}
+        return out
+    if isinstance(obj, (Bowl, Figurine)):
+        v, f, n = _mesh_in_world(obj)
+        return _mesh(mi, name, v, f, n, _diffuse(obj.reflectance))
+    if isinstance(obj, MeshFile):
+        m = obj.placement.matrix @ np.diag([obj.scale, obj.scale, obj.scale, 1.0])
+        return {
+            "type": obj.path.suffix.lower()[1:],
+            "filename": str(obj.path),
+            "to_world": mi.ScalarTransform4f(m.tolist()),
+            "bsdf": _diffuse(obj.reflectance),
+        }
+    raise TypeError(f"unknown scene object {obj!r}")
+
+
+def max_depth(port: FlatPort | None) -> int:
+    """Path length giving direct lighting at the first surface behind ``port``'s faces."""
+    return 2 + (0 if port is None else len(port.faces))
+
+
+def build_scene(mi: ModuleType, config: SceneConfig, *, with_port: bool = True):
+    """Load the Mitsuba scene for ``config``.
+
+    Parameters
+    ----------
+    mi : module
+        Mitsuba with a variant set (:func:`simulator.backend.load_mitsuba`).
+    config : SceneConfig
+    with_port : bool
+        False builds the same scene without the port, for the ideal image and depth.
+
+    Returns
+    -------
+    mitsuba.Scene
+        Without a sensor of its own: render it with an explicit ``sensor=``.
+    """
+    port = config.port if with_port else None
+    depth = max_depth(port)
+    scene: dict = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": depth, "rr_depth": depth + 1, "hide_emitters": False},
+    }
+    if port is not None:
+        pose = config.pose.matrix
+        for i, face in enumerate(port_faces(port)):
+            scene[f"port_face_{i}"] = {
+                "type": "rectangle",
+                "to_world": mi.ScalarTransform4f((pose @ face["matrix"]).tolist()),
+                "bsdf": {"type": INTERFACE, "int_ior": face["int_ior"], "ext_ior": face["ext_ior"]},
+            }
+    for i, light in enumerate(config.lights):
+        if isinstance(light, PointLight):
+            scene[f"light_{i}"] = {
+                "type": "point",
+                "position": list(light.position_m),
+                "intensity": {"type": "rgb", "value": list(light.intensity_w_sr)},
+            }
+        elif isinstance(light, ConstantLight):
+            scene[f"light_{i}"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(light.radiance)}}
+    for i, obj in enumerate(config.objects):
+        scene[f"object_{i}"] = _object_dict(mi, obj, i)
+    return mi.load_dict(scene)
+
+
+# --------------------------------------------------------------------------- geometry checks
+def object_sample_points(obj: SceneObject) -> np.ndarray:
+    """World points (N, 3) on an object's extent, used to check which side of the port it is on.
+
+    Planes and discs give their outline, procedural meshes their vertices, and mesh files their
+    placement centre (their extent is only known to Mitsuba).
+    """
+    if isinstance(obj, (TexturedPlane, Chessboard)):
+        if isinstance(obj, TexturedPlane):
+            w, h = obj.size_m
+        else:
+            w, h = assets.chessboard_size_m(
+                squares=obj.squares, square_size_m=obj.square_size_m, margin_squares=obj.margin_squares
+            )
+        local = np.array([[-w, -h, 0], [w, -h, 0], [w, h, 0], [-w, h, 0]]) / 2.0
+        return obj.placement.to_world(local)
+    if isinstance(obj, Disc):
+        ang = np.linspace(0.0, _TWO_PI, 32, endpoint=False)
+        local = obj.radius_m * np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], axis=1)
+        return obj.placement.to_world(local)
+    if isinstance(obj, (Bowl, Figurine)):
+        return _mesh_in_world(obj)[0]
+    return obj.placement.to_world(np.zeros((1, 3)))
+
+
+def _captured_sample(camera: LightFieldCamera, count: int = 64) -> np.ndarray:
+    w, h = camera.sensor.width_px, camera.sensor.height_px
+    uu, vv = np.meshgrid(np.linspace(0, w - 1, count), np.linspace(0, h - 1, count))
+    return np.stack([uu.ravel(), vv.ravel()], axis=1)
+
+
+def check_geometry(config: SceneConfig) -> dict:
+    """Check that the scene is physically possible; return figures for the sidecar.
+
+    Raises
+    ------
+    ParameterError
+        If the port cuts the main-lens aperture, an object or light reaches the camera side of
+        the port's water face, or every captured ray is totally internally reflected.
+
+    Returns
+    -------
+    dict
+        ``tir_fraction`` and ``port_clearance_m`` (None without a port).
+    """
+    port, camera, pose = config.port, config.camera, config.pose
+    if port is None:
+        return {"tir_fraction": None, "port_clearance_m": None}
+    clearance = port.clearance_m(camera.aperture_radius_m)
+    if clearance <= 0.0:
+        raise ParameterError(
+            f"port.distance_m={port.distance_m!r} with tilt {np.degrees(port.total_tilt_rad):.2f} deg cuts the "
+            f"main-lens aperture (radius {camera.aperture_radius_m:.4g} m)"
+        )
+    rays = camera.captured_rays(_captured_sample(camera))
+    trace = port.trace_from_air(rays.origins_cam[rays.in_aperture], rays.directions_cam[rays.in_aperture])
+    if not np.any(trace.valid):
+        raise ParameterError(
+            f"every captured ray is totally internally reflected by the port (n_air={port.n_air}, "
+            f"n_glass={port.n_glass}, n_water={port.n_water}, tilt {np.degrees(port.total_tilt_rad):.2f} deg)"
+        )
+    water_face = port.distance_m + port.thickness_m
+    n = port.normal
+
+    def on_water_side(points_world: np.ndarray) -> np.ndarray:
+        return pose.to_camera(points_world) @ n > water_face
+
+    for i, obj in enumerate(config.objects):
+        pts = object_sample_points(obj)
+        bad = ~on_water_side(pts)
+        if np.any(bad):
+            p = pose.to_camera(pts[bad][:1])[0]
+            raise ParameterError(
+                f"object[{i}] ({type(obj).__name__}) reaches the camera side of the port: camera-frame point "
+                f"{np.round(p, 4).tolist()} m has n.X = {p @ n:.4f} m <= {water_face:.4f} m (water face)"
+            )
+    for i, light in enumerate(config.lights):
+        if isinstance(light, PointLight) and not on_water_side(np.asarray([light.position_m]))[0]:
+            raise ParameterError(
+                f"light[{i}] at position_m={list(light.position_m)} is not in the water (beyond the port)"
+            )
+    return {"tir_fraction": float(np.mean(trace.tir)), "port_clearance_m": float(clearance)}

@@ -1,0 +1,256 @@
+"""File I/O: float EXR images, JSON sidecars with a schema version, atomic output directories."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lfrefract import ParameterError
+from lfrefract.io import SCHEMA_VERSION, FileFormatError, read_exr, read_json, staged_directory, write_exr, write_json
+
+SPECIAL = np.array([0.0, -0.0, 1.5, np.inf, -np.inf, np.nan, 1e-45, -3.4e38, 65504.0, 1e-8], dtype=np.float32)
+# Non-canonical NaN payloads (quiet, negative, signalling) must survive too.
+PAYLOADS = np.array([0x7FC00001, 0xFFC12345, 0x7F800001], dtype=np.uint32).view(np.float32)
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32).view(np.uint32)
+
+
+def special_image(shape) -> np.ndarray:
+    rng = np.random.default_rng(3)
+    img = rng.normal(scale=100.0, size=shape).astype(np.float32)
+    flat = img.reshape(-1)
+    values = np.concatenate([SPECIAL, PAYLOADS])
+    flat[: len(values)] = values
+    return img
+
+
+def only_entry(directory: Path) -> list[str]:
+    return sorted(p.name for p in directory.iterdir())
+
+
+# =============================================================================== EXR
+@pytest.mark.parametrize("shape", [(7, 11), (5, 9, 3), (1, 1), (1, 13, 3)])
+def test_exr_round_trip_is_bit_exact(tmp_path, shape):
+    img = special_image(shape) if np.prod(shape) >= 13 else np.full(shape, np.inf, dtype=np.float32)
+    path = write_exr(tmp_path / "sub" / "img.exr", img, role="depth")
+    assert path == tmp_path / "sub" / "img.exr"
+    back = read_exr(path, role="depth")
+    assert back.dtype == np.float32
+    assert back.shape == shape
+    np.testing.assert_array_equal(bits(back), bits(img))
+    # Reading without a role check gives the same image; nothing else is left in the directory.
+    np.testing.assert_array_equal(bits(read_exr(path)), bits(img))
+    assert only_entry(tmp_path / "sub") == ["img.exr"]
+
+
+def test_exr_stores_float32_of_other_real_types(tmp_path):
+    f64 = np.array([[1.0 / 3.0, 1e30, -2.5]])
+    write_exr(tmp_path / "a.exr", f64, role="raw")
+    np.testing.assert_array_equal(bits(read_exr(tmp_path / "a.exr")), bits(f64.astype(np.float32)))
+    ints = np.arange(12, dtype=np.int32).reshape(3, 4)
+    write_exr(tmp_path / "b.exr", ints, role="raw")
+    np.testing.assert_array_equal(read_exr(tmp_path / "b.exr"), ints.astype(np.float32))
+
+
+def test_exr_overwrites_atomically(tmp_path):
+    path = tmp_path / "img.exr"
+    write_exr(path, np.zeros((2, 2)), role="raw")
+    write_exr(path, np.ones((3, 3)), role="ideal")
+    np.testing.assert_array_equal(read_exr(path, role="ideal"), np.ones((3, 3), dtype=np.float32))
+    assert only_entry(tmp_path) == ["img.exr"]
+
+
+def test_exr_role_mismatch(tmp_path):
+    path = write_exr(tmp_path / "d.exr", np.zeros((2, 3)), role="depth")
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} holds a 'depth' image, expected 'ideal'")):
+        read_exr(path, role="ideal")
+
+
+def test_exr_missing_file(tmp_path):
+    path = tmp_path / "nope.exr"
+    with pytest.raises(FileFormatError, match=re.escape(f"no such file: {str(path)!r}")):
+        read_exr(path)
+    # A directory is not a file either.
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_exr(tmp_path)
+
+
+def test_exr_not_an_exr_file(tmp_path):
+    path = tmp_path / "fake.exr"
+    path.write_bytes(b"P6\n2 2\n255\n" + bytes(12))
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} is not an OpenEXR file")):
+        read_exr(path)
+    empty = tmp_path / "empty.exr"
+    empty.write_bytes(b"")
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(empty)!r} is not an OpenEXR file")):
+        read_exr(empty)
+
+
+@pytest.mark.parametrize("keep", [40, 0.5])
+def test_exr_truncated_file(tmp_path, keep):
+    good = write_exr(tmp_path / "good.exr", special_image((16, 16)), role="raw").read_bytes()
+    path = tmp_path / "cut.exr"
+    path.write_bytes(good[: keep if isinstance(keep, int) else int(len(good) * keep)])
+    with pytest.raises(FileFormatError, match=re.escape(repr(str(path)))):
+        read_exr(path)
+
+
+@pytest.mark.parametrize(
+    ("image", "pattern"),
+    [
+        (np.zeros((4, 4, 4)), "image must have shape (H, W) or (H, W, 3), got (4, 4, 4)"),
+        (np.zeros(5), "image must have shape (H, W) or (H, W, 3), got (5,)"),
+        (np.zeros((2, 2), dtype=complex), "image must hold real numbers, got dtype complex128"),
+        (np.array([["a", "b"]]), "image must hold real numbers, got dtype <U1"),
+    ],
+)
+def test_exr_bad_images_write_nothing(tmp_path, image, pattern):
+    with pytest.raises(ParameterError, match=re.escape(pattern)):
+        write_exr(tmp_path / "bad.exr", image, role="raw")
+    assert only_entry(tmp_path) == []
+
+
+# =============================================================================== JSON
+def test_json_round_trip_with_schema_version(tmp_path):
+    data = {
+        "camera": {"name": "tiny", "focal_length_m": 6e-3, "offset_m": (1e-6, -2e-6)},
+        "K": np.array([[120.0, 0.0, 45.5], [0.0, 120.0, 34.0], [0.0, 0.0, 1.0]]),
+        "count": np.int64(7),
+        "flag": np.bool_(True),
+        "scale": np.float32(0.5),
+        "where": tmp_path / "x.exr",
+        "depth_far": float("inf"),
+    }
+    path = write_json(tmp_path / "meta" / "side.json", data)
+    back = read_json(path)
+    assert back["schema_version"] == SCHEMA_VERSION
+    assert back["camera"] == {"name": "tiny", "focal_length_m": 6e-3, "offset_m": [1e-6, -2e-6]}
+    assert back["K"] == [[120.0, 0.0, 45.5], [0.0, 120.0, 34.0], [0.0, 0.0, 1.0]]
+    assert back["count"] == 7
+    assert back["flag"] is True
+    assert back["scale"] == 0.5
+    assert back["where"] == str(tmp_path / "x.exr")
+    # Non-finite numbers are written as strings so the file stays standard JSON.
+    assert back["depth_far"] == "inf"
+
+    def no_constants(name):
+        raise AssertionError(f"non-standard JSON constant {name}")
+
+    json.loads(path.read_text(), parse_constant=no_constants)
+    assert only_entry(tmp_path / "meta") == ["side.json"]
+
+
+def test_json_wrong_or_missing_schema_version(tmp_path):
+    newer = tmp_path / "newer.json"
+    newer.write_text(json.dumps({"schema_version": SCHEMA_VERSION + 1, "x": 1}))
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(newer)!r} has schema_version {SCHEMA_VERSION + 1}")):
+        read_json(newer)
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps({"x": 1}))
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(bare)!r} has schema_version None")):
+        read_json(bare)
+    as_text = tmp_path / "text.json"
+    as_text.write_text(json.dumps({"schema_version": str(SCHEMA_VERSION)}))
+    with pytest.raises(FileFormatError, match="has schema_version '1'"):
+        read_json(as_text)
+    listing = tmp_path / "list.json"
+    listing.write_text("[1, 2]")
+    with pytest.raises(FileFormatError, match="has schema_version None"):
+        read_json(listing)
+
+
+def test_json_missing_and_malformed(tmp_path):
+    with pytest.raises(FileFormatError, match=re.escape(f"no such file: {str(tmp_path / 'a.json')!r}")):
+        read_json(tmp_path / "a.json")
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"schema_version": 1,')
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(broken)!r} is not valid JSON")):
+        read_json(broken)
+
+
+def test_json_unserialisable_value_writes_nothing(tmp_path):
+    with pytest.raises(TypeError, match="cannot write object to JSON"):
+        write_json(tmp_path / "x.json", {"thing": object()})
+    assert only_entry(tmp_path) == []
+
+
+# =============================================================================== staged directories
+def test_staged_directory_success(tmp_path):
+    out = tmp_path / "run"
+    with staged_directory(out) as stage:
+        assert stage.parent == tmp_path
+        assert not out.exists()  # nothing visible until the block finishes
+        (stage / "a.txt").write_text("a")
+    assert only_entry(out) == ["a.txt"]
+    assert only_entry(tmp_path) == ["run"]
+
+
+def write_then_fail(out: Path, exc: BaseException, **kwargs) -> None:
+    """Write a file into a staged ``out`` and raise ``exc`` before the block ends."""
+    with staged_directory(out, **kwargs) as stage:
+        (stage / "new.txt").write_text("new")
+        raise exc
+
+
+def test_staged_directory_leaves_nothing_when_the_block_raises(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="boom"):
+        write_then_fail(out, RuntimeError("boom"))
+    assert only_entry(tmp_path) == []
+    # Also for exceptions that are not Exceptions (Ctrl-C).
+    with pytest.raises(KeyboardInterrupt):
+        write_then_fail(out, KeyboardInterrupt())
+    assert only_entry(tmp_path) == []
+
+
+def test_staged_directory_refuses_a_non_empty_directory(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    with (
+        pytest.raises(FileExistsError, match=re.escape(f"output directory {str(out)!r} is not empty")),
+        staged_directory(out),
+    ):
+        pytest.fail("the block must not run")
+    assert (out / "old.txt").read_text() == "old"
+    assert only_entry(tmp_path) == ["run"]
+
+
+def test_staged_directory_overwrite_replaces(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    with staged_directory(out, overwrite=True) as stage:
+        (stage / "new.txt").write_text("new")
+        assert (out / "old.txt").exists()  # the old output stays until the new one is complete
+    assert only_entry(out) == ["new.txt"]
+    assert only_entry(tmp_path) == ["run"]
+
+
+def test_staged_directory_overwrite_keeps_old_output_on_failure(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    with pytest.raises(KeyError):
+        write_then_fail(out, KeyError("x"), overwrite=True)
+    assert only_entry(out) == ["old.txt"]
+    assert only_entry(tmp_path) == ["run"]
+
+
+def test_staged_directory_accepts_empty_and_refuses_a_file(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with staged_directory(empty) as stage:
+        (stage / "x").write_text("x")
+    assert only_entry(empty) == ["x"]
+    file_out = tmp_path / "file"
+    file_out.write_text("not a dir")
+    with pytest.raises(FileExistsError, match="exists and is not a directory"), staged_directory(file_out):
+        pytest.fail("the block must not run")
+    assert file_out.read_text() == "not a dir"

@@ -1,0 +1,529 @@
+"""Vector refraction, Fresnel transmittance and the flat port.
+
+Expected values come from Snell's law in angle form, textbook Fresnel equations, slab optics and
+hand-computed normals, never from re-running the code under test.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+from scipy.optimize import minimize_scalar
+
+from lfrefract import FlatPort, ParameterError, fresnel_transmittance, refract
+from tests.tolerances import (
+    FLOAT64_ANGLE_DEG,
+    FLOAT64_ANGLE_RAD,
+    FLOAT64_GEOMETRY_M,
+    FLOAT64_UNIT,
+    FRESNEL_NEAR_GRAZING,
+    QUOTED_TILT_DEG,
+)
+
+indices = st.floats(min_value=1.0, max_value=2.5, allow_nan=False)
+raw_vectors = hnp.arrays(np.float64, (3,), elements=st.floats(-1.0, 1.0, allow_nan=False))
+raw_batches = hnp.arrays(np.float64, (24, 3), elements=st.floats(-1.0, 1.0, allow_nan=False))
+
+
+def unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def perpendicular_unit(n: np.ndarray, azimuth: float) -> np.ndarray:
+    """A unit vector perpendicular to the unit vector ``n``, at ``azimuth`` about it."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = unit(np.cross(n, helper))
+    e2 = np.cross(n, e1)
+    return math.cos(azimuth) * e1 + math.sin(azimuth) * e2
+
+
+def direction_at(n: np.ndarray, theta: float, azimuth: float) -> np.ndarray:
+    """Unit direction at angle ``theta`` from the unit normal ``n``."""
+    return math.cos(theta) * n + math.sin(theta) * perpendicular_unit(n, azimuth)
+
+
+def distance_point_to_line(point, line_point, line_dir) -> np.ndarray:
+    """Distance of points (N, 3) from lines through ``line_point`` along unit ``line_dir``."""
+    return np.linalg.norm(np.cross(np.asarray(point) - np.asarray(line_point), line_dir), axis=-1)
+
+
+# =============================================================================== refract
+@settings(max_examples=200)
+@given(normal=raw_vectors, dirs=raw_batches, n1=indices, n2=indices)
+def test_refract_snell_invariants_and_tir(normal, dirs, n1, n2):
+    assume(np.linalg.norm(normal) > 0.1)
+    nrm = unit(normal)
+    keep = np.linalg.norm(dirs, axis=1) > 0.1
+    assume(keep.sum() >= 4)
+    d = unit(dirs[keep])
+    d[d @ nrm < 0] *= -1.0  # orient along the travel, as refract requires
+    cos1 = d @ nrm
+    sin1 = np.linalg.norm(np.cross(d, nrm), axis=1)
+    would_be_sin_t = n1 / n2 * sin1
+    # Stay away from the critical angle itself, where round-off decides the flag.
+    assume(np.all(np.abs(would_be_sin_t - 1.0) > 1e-9))
+    assume(np.all(cos1 > 1e-6))
+
+    out, tir = refract(d, nrm, n1, n2)
+
+    assert out.shape == d.shape
+    assert tir.shape == (d.shape[0],)
+    np.testing.assert_array_equal(tir, would_be_sin_t > 1.0)
+    assert np.all(np.isnan(out[tir]))
+
+    t = out[~tir]
+    di = d[~tir]
+    # Unit length.
+    np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1.0, rtol=0, atol=FLOAT64_UNIT)
+    # Snell: n1 sin(theta1) = n2 sin(theta2).
+    sin2 = np.linalg.norm(np.cross(t, nrm), axis=1)
+    np.testing.assert_allclose(n1 * sin1[~tir], n2 * sin2, rtol=0, atol=FLOAT64_UNIT * max(n1, n2))
+    # Coplanar: incident, normal and refracted directions span a plane.
+    np.testing.assert_allclose(
+        np.einsum("ij,ij->i", di, np.cross(np.broadcast_to(nrm, t.shape), t)), 0.0, atol=FLOAT64_UNIT
+    )
+    # Transmitted, not reflected: continues across the interface on the same side of the normal.
+    assert np.all(t @ nrm > 0.0)
+    tangential_in = di - (di @ nrm)[:, None] * nrm
+    tangential_out = t - (t @ nrm)[:, None] * nrm
+    assert np.all(np.einsum("ij,ij->i", tangential_in, tangential_out) >= -FLOAT64_UNIT)
+
+
+def test_refract_known_angle_air_to_glass():
+    # 30 deg in air into glass of 1.5: sin(theta_t) = 0.5 / 1.5 = 1/3.
+    n = np.array([0.0, 0.0, 1.0])
+    d = np.array([[math.sin(math.radians(30)), 0.0, math.cos(math.radians(30))]])
+    out, tir = refract(d, n, 1.0, 1.5)
+    expected = np.array([1.0 / 3.0, 0.0, math.sqrt(1.0 - 1.0 / 9.0)])
+    assert not tir[0]
+    np.testing.assert_allclose(out[0], expected, rtol=0, atol=FLOAT64_UNIT)
+
+
+def test_refract_per_ray_normals_and_normal_incidence():
+    normals = unit(np.array([[0.0, 0.0, 1.0], [1.0, 1.0, 1.0], [0.0, -1.0, 2.0]]))
+    out, tir = refract(normals, normals, 1.0, 1.7)
+    assert not tir.any()
+    np.testing.assert_allclose(out, normals, rtol=0, atol=FLOAT64_UNIT)
+
+
+def test_refract_tir_exactly_past_the_critical_angle():
+    # Glass 1.5 to air: critical angle asin(1/1.5) = 41.81 deg.
+    critical = math.degrees(math.asin(1.0 / 1.5))
+    n = np.array([0.0, 0.0, 1.0])
+    angles = np.radians([0.0, 20.0, critical - 0.01, critical + 0.01, 60.0, 89.0])
+    d = np.stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)], axis=1)
+    out, tir = refract(d, n, 1.5, 1.0)
+    np.testing.assert_array_equal(tir, [False, False, False, True, True, True])
+    assert np.all(np.isnan(out[tir]))
+    assert np.all(np.isfinite(out[~tir]))
+
+
+# =============================================================================== Fresnel
+@given(n1=indices, n2=indices)
+def test_fresnel_normal_incidence(n1, n2):
+    t = fresnel_transmittance(np.array([1.0, -1.0]), n1, n2)
+    expected = 1.0 - ((n1 - n2) / (n1 + n2)) ** 2
+    np.testing.assert_allclose(t, expected, rtol=0, atol=FLOAT64_UNIT)
+
+
+@given(n=indices, cos_i=st.floats(min_value=1e-3, max_value=1.0))
+def test_fresnel_equal_indices_transmit_everything(n, cos_i):
+    np.testing.assert_allclose(fresnel_transmittance(np.array([cos_i]), n, n), 1.0, rtol=0, atol=FLOAT64_UNIT)
+
+
+@given(n1=indices, n2=indices, theta_deg=st.floats(min_value=1.0, max_value=89.0))
+def test_fresnel_matches_angle_form_and_reciprocity(n1, n2, theta_deg):
+    theta_i = math.radians(theta_deg)
+    sin_t = n1 / n2 * math.sin(theta_i)
+    assume(sin_t < 1.0 - 1e-6)
+    assume(abs(n1 - n2) > 1e-6)  # the angle form is 0/0 for equal indices
+    theta_t = math.asin(sin_t)
+    # Textbook angle form of the Fresnel reflectances (a different formula from the code's).
+    rs = math.sin(theta_i - theta_t) ** 2 / math.sin(theta_i + theta_t) ** 2
+    rp = math.tan(theta_i - theta_t) ** 2 / math.tan(theta_i + theta_t) ** 2
+    expected = 1.0 - 0.5 * (rs + rp)
+    forward = fresnel_transmittance(np.array([math.cos(theta_i)]), n1, n2)[0]
+    backward = fresnel_transmittance(np.array([math.cos(theta_t)]), n2, n1)[0]
+    assert forward == pytest.approx(expected, abs=FRESNEL_NEAR_GRAZING)
+    assert backward == pytest.approx(forward, abs=FRESNEL_NEAR_GRAZING)  # Stokes reciprocity
+
+
+def test_fresnel_zero_under_tir_and_positive_below():
+    critical = math.asin(1.0 / 1.5)
+    cos_i = np.cos([critical - 1e-3, critical + 1e-3, math.radians(70.0)])
+    t = fresnel_transmittance(cos_i, 1.5, 1.0)
+    assert t[0] > 0.0
+    np.testing.assert_array_equal(t[1:], 0.0)
+
+
+# =============================================================================== FlatPort geometry
+@pytest.mark.parametrize(
+    ("tilt_x_deg", "tilt_y_deg", "expected"),
+    [
+        (0.0, 0.0, (0.0, 0.0, 1.0)),
+        (30.0, 0.0, (0.0, -0.5, math.sqrt(3.0) / 2.0)),
+        (-30.0, 0.0, (0.0, 0.5, math.sqrt(3.0) / 2.0)),
+        (0.0, 30.0, (0.5, 0.0, math.sqrt(3.0) / 2.0)),
+        (30.0, 30.0, (math.sqrt(3.0) / 4.0, -0.5, 0.75)),
+        (45.0, -60.0, (-math.sqrt(3.0) / 2.0 * math.sqrt(0.5), -math.sqrt(0.5), 0.5 * math.sqrt(0.5))),
+    ],
+)
+def test_normal_from_tilt_angles(tilt_x_deg, tilt_y_deg, expected):
+    port = FlatPort.from_degrees(distance_m=0.05, tilt_x_deg=tilt_x_deg, tilt_y_deg=tilt_y_deg)
+    np.testing.assert_allclose(port.normal, expected, rtol=0, atol=FLOAT64_UNIT)
+    assert port.total_tilt_rad == pytest.approx(math.acos(expected[2]), abs=FLOAT64_ANGLE_RAD)
+    normal, d = port.plane
+    np.testing.assert_array_equal(normal, port.normal)
+    assert d == 0.05
+
+
+def test_from_normal_reference_port():
+    # The reference implementation's port normal, 59.2 mm away (DESIGN.md).
+    raw = np.array([0.0085, 0.5004, 1.0])
+    port = FlatPort.from_normal(raw, distance_m=59.2e-3, thickness_m=3e-3, n_water=1.33)
+    norm = math.sqrt(0.0085**2 + 0.5004**2 + 1.0)
+    np.testing.assert_allclose(port.normal, raw / norm, rtol=0, atol=FLOAT64_UNIT)
+    tilt_x_deg = math.degrees(port.tilt_x_rad)
+    assert tilt_x_deg == pytest.approx(-math.degrees(math.asin(0.5004 / norm)), abs=FLOAT64_ANGLE_DEG)
+    assert tilt_x_deg == pytest.approx(-26.6, abs=QUOTED_TILT_DEG)
+    assert math.degrees(port.tilt_y_rad) == pytest.approx(math.degrees(math.atan2(0.0085, 1.0)), abs=FLOAT64_ANGLE_DEG)
+    assert math.degrees(port.total_tilt_rad) == pytest.approx(26.6, abs=QUOTED_TILT_DEG)
+    assert port.thickness_m == 3e-3
+    assert port.n_water == 1.33
+    # Round trip through the degree form of a config file.
+    again = FlatPort.from_degrees(distance_m=59.2e-3, tilt_x_deg=tilt_x_deg, tilt_y_deg=math.degrees(port.tilt_y_rad))
+    np.testing.assert_allclose(again.normal, raw / norm, rtol=0, atol=FLOAT64_UNIT)
+
+
+@given(
+    normal=raw_vectors.filter(lambda v: np.linalg.norm(v) > 0.1 and v[2] > 0.05 * np.linalg.norm(v)),
+    scale=st.floats(min_value=1e-3, max_value=1e3),
+)
+def test_from_normal_round_trip(normal, scale):
+    port = FlatPort.from_normal(normal * scale, distance_m=0.1)
+    np.testing.assert_allclose(port.normal, unit(normal), rtol=0, atol=FLOAT64_UNIT)
+
+
+def test_faces_and_radiance_scale():
+    port = FlatPort(distance_m=0.05, thickness_m=0.01, n_air=1.0, n_glass=1.5, n_water=1.333)
+    assert port.faces == [(0.05, 1.0, 1.5), (pytest.approx(0.06, abs=FLOAT64_GEOMETRY_M), 1.5, 1.333)]
+    single = FlatPort(distance_m=0.05, n_air=1.0, n_water=1.333)
+    assert single.faces == [(0.05, 1.0, 1.333)]
+    assert port.radiance_scale == pytest.approx((1.0 / 1.333) ** 2, rel=1e-15)
+
+
+def test_clearance_matches_sampled_aperture_rim():
+    port = FlatPort.from_degrees(distance_m=0.03, tilt_x_deg=25.0, tilt_y_deg=-10.0)
+    radius = 0.004
+    n = port.normal
+
+    def z_face(phi):
+        # z of the air face above the rim point of the lens plane z = 0 at angle phi.
+        return (0.03 - radius * (n[0] * np.cos(phi) + n[1] * np.sin(phi))) / n[2]
+
+    # Numerical minimum over the rim: coarse search, then a bounded scalar minimisation.
+    phi = np.linspace(0.0, 2.0 * np.pi, 3601)
+    best = phi[np.argmin(z_face(phi))]
+    step = phi[1] - phi[0]
+    res = minimize_scalar(z_face, bounds=(best - step, best + step), method="bounded", options={"xatol": 1e-10})
+    assert port.clearance_m(radius) == pytest.approx(res.fun, abs=FLOAT64_GEOMETRY_M)
+    # Sanity: the minimum is below the face's height on the axis.
+    assert res.fun < 0.03 / n[2]
+
+
+# =============================================================================== tracing
+def test_equal_indices_leave_rays_unchanged():
+    port = FlatPort.from_degrees(
+        distance_m=0.05,
+        thickness_m=0.01,
+        tilt_x_deg=20.0,
+        tilt_y_deg=-15.0,
+        n_air=1.33,
+        n_glass=1.33,
+        n_water=1.33,
+    )
+    rng = np.random.default_rng(1)
+    origins = np.concatenate([rng.uniform(-0.003, 0.003, (50, 2)), np.zeros((50, 1))], axis=1)
+    dirs = unit(np.concatenate([rng.uniform(-0.4, 0.4, (50, 2)), np.ones((50, 1))], axis=1))
+    tr = port.trace_from_air(origins, dirs)
+    assert tr.valid.all()
+    np.testing.assert_allclose(tr.directions, dirs, rtol=0, atol=FLOAT64_UNIT)
+    n = port.normal
+    np.testing.assert_allclose(tr.entry_points @ n, 0.05, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.exit_points @ n, 0.06, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(distance_point_to_line(tr.exit_points, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(distance_point_to_line(tr.entry_points, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.transmittance, 1.0, rtol=0, atol=FLOAT64_UNIT)
+
+
+@settings(max_examples=150)
+@given(
+    thickness=st.sampled_from([0.0, 0.004, 0.02]),
+    tilt_x=st.floats(-35.0, 35.0),
+    tilt_y=st.floats(-35.0, 35.0),
+    origin_xy=hnp.arrays(np.float64, (2,), elements=st.floats(-0.003, 0.003)),
+    theta=st.floats(0.0, 50.0),
+    azimuth=st.floats(0.0, 2.0 * math.pi),
+)
+def test_air_water_round_trip_is_reversible(thickness, tilt_x, tilt_y, origin_xy, theta, azimuth):
+    port = FlatPort.from_degrees(
+        distance_m=0.05,
+        thickness_m=thickness,
+        tilt_x_deg=tilt_x,
+        tilt_y_deg=tilt_y,
+        n_air=1.0,
+        n_glass=1.5,
+        n_water=1.333,
+    )
+    n = port.normal
+    origin = np.array([origin_xy[0], origin_xy[1], 0.0])
+    d = direction_at(np.array([0.0, 0.0, 1.0]), math.radians(theta), azimuth)
+    assume(d @ n > 0.05)
+
+    fwd = port.trace_from_air(origin, d)
+    assert fwd.valid[0]
+    w = fwd.directions[0]
+    # Parallel faces: n_air sin(theta_air) = n_water sin(theta_water), the glass drops out.
+    sin_air = np.linalg.norm(np.cross(d, n))
+    sin_water = np.linalg.norm(np.cross(w, n))
+    assert 1.0 * sin_air == pytest.approx(1.333 * sin_water, abs=FLOAT64_UNIT)
+    assert fwd.entry_points[0] @ n == pytest.approx(0.05, abs=FLOAT64_GEOMETRY_M)
+    assert fwd.exit_points[0] @ n == pytest.approx(0.05 + thickness, abs=FLOAT64_GEOMETRY_M)
+    assert distance_point_to_line(fwd.entry_points[0], origin, d) == pytest.approx(0.0, abs=FLOAT64_GEOMETRY_M)
+
+    # Light from a point in the water along the reversed ray comes back along the air ray.
+    water_point = fwd.exit_points[0] + 0.3 * w
+    back = port.trace_from_water(water_point, -w)
+    assert back.valid[0]
+    np.testing.assert_allclose(back.directions[0], -d, rtol=0, atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(back.entry_points[0], fwd.exit_points[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(back.exit_points[0], fwd.entry_points[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
+    assert distance_point_to_line(origin, back.exit_points[0], back.directions[0]) == pytest.approx(
+        0.0, abs=FLOAT64_GEOMETRY_M
+    )
+    # Fresnel transmittance is reciprocal.
+    assert back.transmittance[0] == pytest.approx(fwd.transmittance[0], abs=FLOAT64_UNIT)
+
+
+@pytest.mark.parametrize("thickness", [0.0, 0.01])
+@pytest.mark.parametrize(("tilt_x", "tilt_y"), [(0.0, 0.0), (26.6, 0.5), (-10.0, 40.0)])
+def test_normal_incidence_is_undeviated(thickness, tilt_x, tilt_y):
+    port = FlatPort.from_degrees(
+        distance_m=0.06,
+        thickness_m=thickness,
+        tilt_x_deg=tilt_x,
+        tilt_y_deg=tilt_y,
+        n_air=1.0,
+        n_glass=1.5,
+        n_water=1.333,
+    )
+    n = port.normal
+    tr = port.trace_from_air(np.zeros(3), n)
+    np.testing.assert_allclose(tr.directions[0], n, rtol=0, atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(tr.entry_points[0], 0.06 * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.exit_points[0], (0.06 + thickness) * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
+
+    def r(a, b):
+        return ((a - b) / (a + b)) ** 2
+
+    expected_t = (1 - r(1.0, 1.5)) * (1 - r(1.5, 1.333)) if thickness > 0 else 1 - r(1.0, 1.333)
+    assert tr.transmittance[0] == pytest.approx(expected_t, abs=FLOAT64_UNIT)
+
+
+@given(
+    theta_deg=st.floats(0.0, 80.0),
+    azimuth=st.floats(0.0, 2.0 * math.pi),
+    tilt_x=st.floats(-30.0, 30.0),
+    thickness=st.floats(1e-4, 0.03),
+    n_glass=st.floats(1.2, 2.0),
+)
+def test_slab_lateral_shift_matches_textbook(theta_deg, azimuth, tilt_x, thickness, n_glass):
+    port = FlatPort.from_degrees(
+        distance_m=0.05, thickness_m=thickness, tilt_x_deg=tilt_x, n_air=1.0, n_glass=n_glass, n_water=1.0
+    )
+    n = port.normal
+    theta = math.radians(theta_deg)
+    d = direction_at(n, theta, azimuth)
+    tr = port.trace_from_air(np.zeros(3), d)
+    assert tr.valid[0]
+    # Same medium on both sides: the ray leaves parallel to itself, shifted sideways by
+    # t sin(theta - theta_t) / cos(theta_t).
+    theta_t = math.asin(math.sin(theta) / n_glass)
+    shift = thickness * math.sin(theta - theta_t) / math.cos(theta_t)
+    np.testing.assert_allclose(tr.directions[0], d, rtol=0, atol=FLOAT64_UNIT)
+    assert distance_point_to_line(tr.exit_points[0], np.zeros(3), d) == pytest.approx(shift, abs=FLOAT64_GEOMETRY_M)
+
+
+def test_rays_parallel_or_away_or_starting_beyond_the_port_miss():
+    port = FlatPort.from_degrees(distance_m=0.05, thickness_m=0.005, tilt_x_deg=20.0)
+    n = port.normal
+    along_face = np.array([1.0, 0.0, 0.0])  # exactly perpendicular to n = (0, -sin 20, cos 20)
+    assert along_face @ n == 0.0
+    origins = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.2 * n])
+    dirs = np.stack([n, along_face, -n, n])
+    tr = port.trace_from_air(origins, dirs)
+    np.testing.assert_array_equal(tr.misses, [False, True, True, True])
+    np.testing.assert_array_equal(tr.tir, [False, False, False, False])
+    np.testing.assert_array_equal(tr.valid, [True, False, False, False])
+    for arr in (tr.entry_points, tr.exit_points, tr.directions):
+        assert np.all(np.isfinite(arr[0]))
+        assert np.all(np.isnan(arr[1:]))
+    np.testing.assert_array_equal(tr.transmittance[1:], 0.0)
+
+    # From the water: light travelling away from the port (into the water) never reaches the camera.
+    back = port.trace_from_water(np.stack([0.2 * n, 0.2 * n]), np.stack([-n, n]))
+    np.testing.assert_array_equal(back.misses, [False, True])
+    assert np.all(np.isnan(back.directions[1]))
+
+
+@pytest.mark.parametrize("thickness", [0.0, 0.01])
+def test_tir_is_reported_not_dropped(thickness):
+    # Dense medium on the camera side, glass index matched, water lighter: critical angle 41.81 deg.
+    port = FlatPort(distance_m=0.05, thickness_m=thickness, n_air=1.5, n_glass=1.5, n_water=1.0)
+    n = port.normal
+    angles = [0.0, 30.0, 41.0, 42.5, 60.0, 80.0]
+    dirs = np.stack([direction_at(n, math.radians(a), 1.0) for a in angles])
+    tr = port.trace_from_air(np.zeros((len(angles), 3)), dirs)
+    expected_tir = np.array([1.5 * math.sin(math.radians(a)) > 1.0 for a in angles])
+    np.testing.assert_array_equal(expected_tir, [False, False, False, True, True, True])
+    assert tr.directions.shape == (len(angles), 3)
+    np.testing.assert_array_equal(tr.tir, expected_tir)
+    np.testing.assert_array_equal(tr.misses, False)
+    np.testing.assert_array_equal(tr.valid, ~expected_tir)
+    assert np.all(np.isnan(tr.directions[expected_tir]))
+    assert np.all(np.isnan(tr.exit_points[expected_tir]))
+    np.testing.assert_array_equal(tr.transmittance[expected_tir], 0.0)
+    assert np.all(tr.transmittance[~expected_tir] > 0.0)
+    # The surviving rays obey Snell across the port.
+    sin_out = np.linalg.norm(np.cross(tr.directions[~expected_tir], n), axis=1)
+    np.testing.assert_allclose(sin_out, 1.5 * np.sin(np.radians(angles))[~expected_tir], rtol=0, atol=FLOAT64_UNIT)
+
+
+def test_tir_inside_the_glass_from_the_water_side():
+    # Water denser than glass on the way out: TIR at the glass face the light reaches second.
+    port = FlatPort(distance_m=0.05, thickness_m=0.01, n_air=1.0, n_glass=1.2, n_water=1.6)
+    n = port.normal
+    # sin in water 0.8 -> sin in glass 1.0667 > 1: TIR at the first (water/glass) face.
+    # sin in water 0.7 -> sin in glass 0.933 -> sin in air 1.12 > 1: TIR at the second face.
+    # sin in water 0.5 -> 0.667 -> 0.8: transmitted.
+    sines = np.array([0.8, 0.7, 0.5])
+    dirs = np.stack([direction_at(-n, math.asin(s), 0.2) for s in sines])
+    tr = port.trace_from_water(np.tile(0.2 * n, (3, 1)), dirs)
+    np.testing.assert_array_equal(tr.tir, [True, True, False])
+    np.testing.assert_array_equal(tr.misses, False)
+    sin_air = np.linalg.norm(np.cross(tr.directions[2], n))
+    assert sin_air == pytest.approx(1.6 * 0.5, abs=FLOAT64_UNIT)
+
+
+# =============================================================================== bad input
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"distance_m": 0.05, "thickness_m": -0.001}, "port.thickness_m must be non-negative, got -0.001"),
+        ({"distance_m": float("nan")}, "port.distance_m must be finite, got nan"),
+        ({"distance_m": 0.0}, "port.distance_m must be positive, got 0.0"),
+        ({"distance_m": -0.05}, "port.distance_m must be positive, got -0.05"),
+        ({"distance_m": 0.05, "n_glass": 0.0}, "port.n_glass must be positive, got 0.0"),
+        ({"distance_m": 0.05, "n_water": float("inf")}, "port.n_water must be finite, got inf"),
+        ({"distance_m": 0.05, "tilt_x_rad": float("nan")}, "port.tilt_x_rad must be finite, got nan"),
+        ({"distance_m": "0.05"}, "port.distance_m must be a real number, got '0.05'"),
+    ],
+)
+def test_bad_port_parameters(kwargs, pattern):
+    with pytest.raises(ParameterError, match=re.escape(pattern)):
+        FlatPort(**kwargs)
+
+
+@pytest.mark.parametrize(("tilt_x", "tilt_y"), [(90.0, 0.0), (0.0, 90.0), (120.0, 0.0), (0.0, -135.0)])
+def test_port_behind_the_camera(tilt_x, tilt_y):
+    with pytest.raises(ParameterError, match="behind the camera") as info:
+        FlatPort.from_degrees(distance_m=0.05, tilt_x_deg=tilt_x, tilt_y_deg=tilt_y)
+    assert "tilt_x_rad" in str(info.value)
+    assert repr(math.radians(tilt_x)) in str(info.value)
+
+
+def test_bad_tilt_degrees_are_named():
+    with pytest.raises(ParameterError, match=re.escape("port.tilt_y_deg must be finite, got nan")):
+        FlatPort.from_degrees(distance_m=0.05, tilt_y_deg=float("nan"))
+
+
+@pytest.mark.parametrize(
+    ("normal", "pattern"),
+    [
+        ((0.0, 0.0, 0.0), "normal must be a finite non-zero 3-vector"),
+        ((0.0, float("nan"), 1.0), "normal must be a finite non-zero 3-vector"),
+        ((0.0, 1.0), "normal must be a finite non-zero 3-vector"),
+        ((0.0, 0.5, -1.0), "points towards the camera"),
+        ((1.0, 0.0, 0.0), "points towards the camera"),
+    ],
+)
+def test_bad_normals(normal, pattern):
+    with pytest.raises(ParameterError, match=pattern):
+        FlatPort.from_normal(normal, distance_m=0.05)
+
+
+def test_from_dict_forms_and_unknown_keys():
+    deg = FlatPort.from_dict({"distance_m": 0.05, "tilt_x_deg": 30.0, "n_water": 1.34})
+    np.testing.assert_allclose(deg.normal, (0.0, -0.5, math.sqrt(3.0) / 2.0), rtol=0, atol=FLOAT64_UNIT)
+    assert deg.n_water == 1.34
+    rad = FlatPort.from_dict({"distance_m": 0.05, "tilt_y_rad": math.pi / 6})
+    np.testing.assert_allclose(rad.normal, (0.5, 0.0, math.sqrt(3.0) / 2.0), rtol=0, atol=FLOAT64_UNIT)
+
+    with pytest.raises(ParameterError, match=r"unknown key\(s\) in port: \['tilt_z_deg'\]"):
+        FlatPort.from_dict({"distance_m": 0.05, "tilt_z_deg": 3.0})
+    with pytest.raises(ParameterError, match=r"unknown key\(s\) in port: \['thickness'\]"):
+        FlatPort.from_dict({"distance_m": 0.05, "thickness": 0.01})
+    # Mixing degrees and radians is ambiguous and refused.
+    with pytest.raises(ParameterError, match="tilt_y_rad"):
+        FlatPort.from_dict({"distance_m": 0.05, "tilt_x_deg": 3.0, "tilt_y_rad": 0.1})
+
+
+def test_to_dict_reports_normal_and_tilt():
+    port = FlatPort.from_degrees(distance_m=0.05, thickness_m=0.002, tilt_x_deg=30.0)
+    data = port.to_dict()
+    np.testing.assert_allclose(data["normal"], (0.0, -0.5, math.sqrt(3.0) / 2.0), rtol=0, atol=FLOAT64_UNIT)
+    assert data["total_tilt_deg"] == pytest.approx(30.0, abs=FLOAT64_ANGLE_DEG)
+    assert data["tilt_x_rad"] == pytest.approx(math.pi / 6, abs=FLOAT64_ANGLE_RAD)
+    assert data["distance_m"] == 0.05
+    assert data["thickness_m"] == 0.002
+
+
+@pytest.mark.parametrize(
+    ("origins", "directions", "pattern"),
+    [
+        (np.zeros((2, 3)), np.tile([0.0, 0.0, 2.0], (2, 1)), "directions must be unit vectors, got a norm of"),
+        (np.zeros((2, 3)), np.tile([0.0, 0.0, 1.0], (3, 1)), "must have the same shape, got (2, 3) and (3, 3)"),
+        (np.zeros((2, 2)), np.tile([0.0, 0.0, 1.0], (2, 1)), "origins must have shape (N, 3), got shape (2, 2)"),
+        (np.zeros(3), [[0.0, float("nan"), 1.0]], "directions must be finite, got a row [0.0, nan, 1.0]"),
+        ([[0.0, 0.0, float("inf")]], [0.0, 0.0, 1.0], "origins must be finite"),
+    ],
+)
+def test_bad_rays(origins, directions, pattern):
+    port = FlatPort(distance_m=0.05)
+    with pytest.raises(ParameterError, match=re.escape(pattern)) as from_air:
+        port.trace_from_air(origins, directions)
+    with pytest.raises(ParameterError, match=re.escape(pattern)):
+        port.trace_from_water(origins, directions)
+    if "norm" in pattern:
+        assert "2.0" in str(from_air.value)
+
+
+def test_bad_aperture_radius_for_clearance():
+    with pytest.raises(ParameterError, match=re.escape("aperture_radius_m must be positive, got -1.0")):
+        FlatPort(distance_m=0.05).clearance_m(-1.0)
+
+
+def test_from_dict_reads_to_dict_back():
+    port = FlatPort.from_degrees(distance_m=0.0592, thickness_m=0.003, tilt_x_deg=-26.6, tilt_y_deg=0.5, n_water=1.33)
+    data = port.to_dict()
+    assert FlatPort.from_dict(data) == port
+    # A sidecar whose derived normal disagrees with its tilt angles is refused, not repaired.
+    with pytest.raises(ParameterError, match=re.escape("port.normal=[0.0, 0.0, 1.0] disagrees with the tilt angles")):
+        FlatPort.from_dict({**data, "normal": [0.0, 0.0, 1.0]})

@@ -1,0 +1,86 @@
+"""Ground truth: depth maps against analytic planes, chessboard corners in the ideal image."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from lfrefract import PinholeCamera, Pose
+from simulator import assets, groundtruth
+from simulator.scene import build_scene
+from tests.simulator.scenes import port, scene
+from tests.tolerances import DEPTH_FLOAT32_RELATIVE, IDEAL_CHESSBOARD_RMS_PX
+
+pytestmark = pytest.mark.render
+
+BIG = PinholeCamera(focal_px=520.0, cx_px=199.5, cy_px=149.5, width_px=400, height_px=300)
+
+
+def test_depth_of_slanted_plane_matches_plane_equation(mi):
+    rotation = (20.0, -25.0, 0.0)
+    plane = {
+        "type": "textured_plane",
+        "position_m": [0.02, -0.01, 0.5],
+        "rotation_xyz_deg": list(rotation),
+        "size_m": [3.0, 3.0],
+        "texture_px": 64,
+    }
+    config = scene(port=port(20.0), objects=[plane])
+    depth = groundtruth.depth_map(mi, build_scene(mi, config, with_port=False), BIG, Pose())
+    obj = config.objects[0]
+    normal = obj.placement.matrix[:3, 2]
+    centre = np.asarray(obj.placement.position_m)
+    d = BIG.pixel_directions()
+    expected_z = (normal @ centre) / (d @ normal) * d[:, 2]
+    assert np.all(np.isfinite(depth))
+    np.testing.assert_allclose(depth.ravel(), expected_z, rtol=DEPTH_FLOAT32_RELATIVE)
+
+
+def test_depth_is_inf_where_nothing_is_hit(mi):
+    small = {"type": "disc", "position_m": [0.0, 0.0, 0.3], "radius_m": 0.01}
+    config = scene(port=None, objects=[small])
+    depth = groundtruth.depth_map(mi, build_scene(mi, config, with_port=False), BIG, Pose())
+    assert np.isinf(depth[0, 0])
+    assert depth[0, 0] > 0
+    assert depth[150, 200] == pytest.approx(0.3, rel=DEPTH_FLOAT32_RELATIVE)
+
+
+def test_chessboard_corners_in_ideal_image_at_pinhole_projection(mi):
+    """Pins texture orientation, object placement, K and the pixel-centre convention at once."""
+    board = {
+        "type": "chessboard",
+        "position_m": [0.01, 0.005, 0.45],
+        "rotation_xyz_deg": [15.0, -20.0, 5.0],
+        "squares": [8, 6],
+        "square_size_m": 0.025,
+    }
+    config = scene(port=port(25.0), objects=[board])
+    truth = groundtruth.compute(mi, config, BIG, spp=64, seed=0, progress=False)
+    gray = (np.clip(truth.ideal.mean(axis=2) / truth.ideal.max(), 0, 1) * 255).astype(np.uint8)
+    found, corners = cv2.findChessboardCorners(gray, (7, 5))
+    assert found
+    corners = cv2.cornerSubPix(
+        gray, corners, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
+    ).reshape(-1, 2)
+    obj = config.objects[0]
+    local = assets.chessboard_inner_corners(squares=(8, 6), square_size_m=0.025, margin_squares=obj.margin_squares)
+    world = obj.placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))
+    expected = BIG.project(world)
+    # OpenCV may report the grid from either end; compare with the matching order.
+    rms = min(np.sqrt(np.mean(np.sum((corners - e) ** 2, axis=1))) for e in (expected, expected[::-1]))
+    assert rms < IDEAL_CHESSBOARD_RMS_PX
+
+
+def test_lens_table_lists_every_micro_image_on_the_sensor(tiny):
+    table = groundtruth.lens_table(tiny)
+    centres = table["micro_image_centre_px"]
+    assert len(centres) == len(table["lens_index"]) == len(table["lens_centre_m"])
+    assert centres[:, 0].min() >= -0.5
+    assert centres[:, 0].max() <= tiny.sensor.width_px - 0.5
+    assert centres[:, 1].min() >= -0.5
+    assert centres[:, 1].max() <= tiny.sensor.height_px - 0.5
+    # Every pixel's own lens (well inside the sensor) is in the table.
+    uv = np.stack(np.meshgrid(np.arange(20, 460, 7), np.arange(20, 340, 7)), axis=-1).reshape(-1, 2)
+    own = {tuple(i) for i in tiny.lens_indices_for_pixels(uv)}
+    assert own <= {tuple(i) for i in table["lens_index"]}

@@ -1,0 +1,175 @@
+"""Render jobs: reproducibility, the files written, the CLI, and bad input that writes nothing."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from lfrefract import ParameterError
+from lfrefract.io import read_exr, read_json
+from simulator import cli
+from simulator.config import RenderSettings, load_scene, parse_scene
+from simulator.job import render_job
+from simulator.render import render_bands
+from simulator.scene import build_scene, check_geometry
+from simulator.sensor import plenoptic_sensor_dict
+from tests.simulator.scenes import port, scene
+
+PLANE = {"type": "textured_plane", "position_m": [0.0, 0.0, 0.5], "size_m": [1.0, 1.0], "texture_px": 128}
+
+
+def _raw(mi, config, seed, band_pixels=60_000):
+    cam = config.camera
+    return render_bands(
+        mi,
+        build_scene(mi, config),
+        lambda crop: plenoptic_sensor_dict(mi, cam, config.pose, spp=4, crop=crop),
+        cam.sensor.width_px,
+        cam.sensor.height_px,
+        spp=4,
+        seed=seed,
+        max_band_pixels=band_pixels,
+        progress=False,
+    )
+
+
+@pytest.mark.render
+def test_same_seed_is_bit_identical_and_another_seed_is_not(mi):
+    config = scene(port=port(20.0), objects=[PLANE])
+    a, b, c = _raw(mi, config, 5), _raw(mi, config, 5), _raw(mi, config, 6)
+    assert a.tobytes() == b.tobytes()
+    assert not np.array_equal(a, c)
+    assert np.mean(a) > 0.01  # the image is not black
+
+
+@pytest.mark.render
+def test_render_job_writes_every_file_with_its_parameters(tmp_path):
+    out = tmp_path / "run"
+    config = load_scene("scenes/white.toml").with_overrides(render=RenderSettings(spp=8, seed=3))
+    result = render_job(config, out, progress=False)
+    names = {p.name for p in out.iterdir()}
+    assert {"raw.exr", "ideal.exr", "depth.exr", "lenses.npz", "meta.json", "previews"} <= names
+    meta = read_json(out / "meta.json")
+    cam = config.camera
+    assert read_exr(out / "raw.exr", role="raw").shape == (cam.sensor.height_px, cam.sensor.width_px, 3)
+    ideal = meta["ideal"]
+    assert read_exr(out / "ideal.exr", role="ideal").shape == (ideal["height_px"], ideal["width_px"], 3)
+    depth = read_exr(out / "depth.exr", role="depth")
+    assert np.all(np.isinf(depth))  # nothing but the environment
+    assert meta["render"]["seed"] == config.render.seed
+    assert meta["render"]["spp"] == config.render.spp
+    assert meta["render"]["mitsuba"] == "3.9.1"
+    assert meta["render"]["variant"] == "llvm_ad_rgb"
+    assert meta["camera"] == cam.to_dict()
+    assert meta["port"] is None
+    assert json.loads((out / "meta.json").read_text()) == {"schema_version": 1, **result.metadata}
+    lenses = np.load(out / "lenses.npz")
+    assert len(lenses["lens_index"]) == meta["derived"]["lens_count"]
+    assert {p.name for p in (out / "previews").iterdir()} == {"raw.png", "raw_crop.png", "ideal.png", "depth.png"}
+
+
+@pytest.mark.render
+def test_cli_renders_default_scene(tmp_path, capsys):
+    out = tmp_path / "default"
+    assert cli.main(["render", "--out", str(out), "--spp", "2", "--quiet", "--no-previews"]) == 0
+    meta = read_json(out / "meta.json")
+    assert meta["scene"]["name"] == "default"
+    assert meta["render"]["spp"] == 2
+    assert math.isclose(meta["port"]["total_tilt_deg"], 20.0)
+    assert "rendered 'default'" in capsys.readouterr().out
+
+
+def test_cli_refuses_non_empty_output(tmp_path, capsys):
+    (tmp_path / "keep.txt").write_text("mine")
+    assert cli.main(["render", "white", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+
+
+BAD_SCENES = {
+    "tir-only": (
+        {"port": {"distance_m": 0.02, "tilt_x_deg": 70.0, "n_air": 1.5, "n_glass": 1.5, "n_water": 1.0}},
+        "totally internally reflected",
+    ),
+    "port-behind-camera": ({"port": {"distance_m": 0.02, "tilt_x_deg": 95.0}}, "behind the camera"),
+    "port-cuts-lens": ({"port": {"distance_m": 0.0005, "tilt_x_deg": 60.0}}, "cuts the main-lens aperture"),
+    "negative-size": ({"object": [PLANE | {"size_m": [-1.0, 1.0]}]}, "size_m[0] must be positive, got -1.0"),
+    "nan-distance": ({"port": {"distance_m": float("nan")}}, "port.distance_m must be finite, got nan"),
+    "unknown-key": ({"object": [PLANE | {"colour": 1}]}, "unknown key(s) in object[0] (textured_plane): ['colour']"),
+    "unknown-object": ({"object": [{"type": "teapot", "position_m": [0, 0, 1]}]}, "got 'teapot'"),
+    "missing-mesh": ({"object": [{"type": "mesh", "position_m": [0, 0, 1], "path": "nowhere.obj"}]}, "does not exist"),
+    "object-in-air": ({"object": [PLANE | {"position_m": [0.0, 0.0, 0.01]}]}, "reaches the camera side of the port"),
+    "light-in-air": (
+        {"light": [{"type": "point", "position_m": [0, 0, 0.005], "intensity_w_sr": 1}]},
+        "is not in the water",
+    ),
+    "negative-pitch": (
+        {
+            "camera": {
+                "focal_length_m": 0.006,
+                "lens_to_mla_m": 0.006,
+                "f_number": 2.2,
+                "mla": {"grid": "hex", "pitch_m": -1e-4, "focal_length_m": 2e-4},
+                "sensor": {"width_px": 10, "height_px": 10, "pixel_pitch_m": 1e-5},
+            }
+        },
+        "mla.pitch_m must be positive, got -0.0001",
+    ),
+    "zero-spp": ({"render": {"spp": 0, "seed": 0}}, "render.spp must be positive, got 0"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SCENES))
+def test_bad_scenes_are_rejected_by_name_and_write_nothing(tmp_path, case):
+    changes, message = BAD_SCENES[case]
+    data = {
+        "camera": {"preset": "tiny"},
+        "port": port(10.0),
+        "light": [{"type": "point", "position_m": [0.1, -0.2, 0.2], "intensity_w_sr": 0.3}],
+        "object": [PLANE],
+    } | changes
+    out = tmp_path / "out"
+
+    def parse_and_render():
+        render_job(parse_scene(data, base_dir=tmp_path), out, progress=False)
+
+    with pytest.raises(ParameterError) as err:
+        parse_and_render()
+    assert message in str(err.value)
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_scene_file_errors_name_the_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera\npreset = 'tiny'")
+    with pytest.raises(ParameterError, match=r"bad\.toml.*not valid TOML"):
+        load_scene(bad)
+    with pytest.raises(FileNotFoundError, match=r"missing\.toml"):
+        load_scene(tmp_path / "missing.toml")
+
+
+def test_failure_during_render_leaves_nothing(tmp_path, monkeypatch):
+    import simulator.job as job
+
+    def explode(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(job.groundtruth, "compute", explode)
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError, match="disk full"):
+        render_job(load_scene("scenes/white.toml"), out, progress=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tir_fraction_reported_for_partial_tir():
+    data = {
+        "camera": {"preset": "tiny"},
+        "port": {"distance_m": 0.02, "tilt_x_deg": 35.0, "n_air": 1.5, "n_glass": 1.5, "n_water": 1.0},
+        "light": [{"type": "point", "position_m": [0.0, 0.3, 0.4], "intensity_w_sr": 0.3}],
+    }
+    figures = check_geometry(parse_scene(data))
+    assert 0.0 < figures["tir_fraction"] < 1.0

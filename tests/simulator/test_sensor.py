@@ -1,0 +1,107 @@
+"""The Mitsuba sensors against the numpy camera models: two independent implementations agree."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lfrefract import LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry, camera_preset
+from simulator.sensor import pinhole_sensor_dict, plenoptic_sensor_dict
+from tests.tolerances import SENSOR_VS_NUMPY_DIRECTION, SENSOR_VS_NUMPY_ORIGIN_M
+
+CAMERAS = {
+    "tiny": camera_preset("tiny"),
+    "square-rotated-offset": LightFieldCamera(
+        focal_length_m=5e-3,
+        lens_to_mla_m=5.2e-3,  # focused closer than infinity
+        f_number=2.0,
+        mla=MicrolensArray(
+            grid="square", pitch_m=80e-6, focal_length_m=150e-6, rotation_rad=0.03, offset_m=(13e-6, -21e-6)
+        ),
+        sensor=SensorGeometry(width_px=200, height_px=150, pixel_pitch_m=8e-6),
+    ),
+    "hex-rotated": LightFieldCamera(
+        focal_length_m=9.993e-3,
+        lens_to_mla_m=9.993e-3,
+        f_number=2.0,
+        mla=MicrolensArray(grid="hex", pitch_m=20e-6, focal_length_m=36e-6, rotation_rad=-0.002, offset_m=(3e-6, 5e-6)),
+        sensor=SensorGeometry(width_px=1000, height_px=700, pixel_pitch_m=1.4e-6),
+    ),
+}
+POSE = Pose.from_euler_xyz_deg((5.0, -12.0, 3.0), (0.1, -0.2, 0.05))
+
+
+def _arrays(vec) -> np.ndarray:
+    return np.asarray(vec, dtype=np.float64).T
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
+@pytest.mark.parametrize("pose", [Pose(), POSE], ids=["identity", "posed"])
+def test_plenoptic_sensor_matches_numpy_rays(mi, name, pose):
+    camera = CAMERAS[name]
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, camera, pose, spp=1))
+    w, h = camera.sensor.width_px, camera.sensor.height_px
+    rng = np.random.default_rng(1)
+    n = 4000
+    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], size=(n, 2))
+    aperture = rng.uniform(0.0, 1.0, size=(n, 2))
+    position = mi.Point2f(((uv[:, 0] + 0.5) / w).astype(np.float32), ((uv[:, 1] + 0.5) / h).astype(np.float32))
+    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(aperture[:, 0], aperture[:, 1]))
+
+    expected = camera.rays_through_lenses(uv, lens_offsets_m=camera.mla.cell_offsets_m(aperture))
+    origins_world = pose.to_world(expected.origins_cam)
+    directions_world = expected.directions_cam @ np.asarray(pose.rotation).T
+    inside = _arrays(weight)[:, 0] > 0
+    # Paths within float32 round-off of the aperture rim may be classified either way.
+    rim = np.abs(np.linalg.norm(expected.origins_cam[:, :2], axis=1) - camera.aperture_radius_m) < 1e-8
+    assert np.array_equal(inside[~rim], expected.in_aperture[~rim])
+    assert 0.3 < inside.mean() < 0.95  # both vignetted and unvignetted paths are compared
+    ok = inside & expected.in_aperture
+    np.testing.assert_allclose(_arrays(ray.o)[ok], origins_world[ok], atol=SENSOR_VS_NUMPY_ORIGIN_M)
+    np.testing.assert_allclose(_arrays(ray.d)[ok], directions_world[ok], atol=SENSOR_VS_NUMPY_DIRECTION)
+    # Vignetted paths cost no traversal: they are given a zero-length ray.
+    assert np.all(np.asarray(ray.maxt)[~inside] == 0.0)
+
+
+def test_chief_rays_of_micro_image_centres_pass_through_lens_centre(mi, tiny):
+    """The aperture sample that maps to the lens centre, at micro-image centres: rays from (0,0,0)."""
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, tiny, Pose(), spp=1))
+    centres = tiny.micro_image_centres_px(tiny.lens_indices_on_sensor())
+    w, h = tiny.sensor.width_px, tiny.sensor.height_px
+    position = mi.Point2f((centres[:, 0] + 0.5) / w, (centres[:, 1] + 0.5) / h)
+    zero = np.zeros(len(centres), dtype=np.float32)
+    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(zero, zero))
+    assert np.all(_arrays(weight) > 0)
+    np.testing.assert_allclose(_arrays(ray.o), 0.0, atol=SENSOR_VS_NUMPY_ORIGIN_M)
+
+
+def test_pinhole_sensor_matches_opencv_projection(mi):
+    pinhole = PinholeCamera(focal_px=321.5, cx_px=101.25, cy_px=70.5, width_px=200, height_px=150)
+    sensor = mi.load_dict(pinhole_sensor_dict(mi, pinhole, POSE, spp=1))
+    rng = np.random.default_rng(2)
+    uv = rng.uniform([-0.5, -0.5], [199.5, 149.5], size=(2000, 2))
+    position = mi.Point2f((uv[:, 0] + 0.5) / 200, (uv[:, 1] + 0.5) / 150)
+    ray, _ = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(0.5, 0.5))
+    origins = np.broadcast_to(_arrays(ray.o), (len(uv), 3))
+    np.testing.assert_allclose(origins, np.tile(POSE.position_m, (len(uv), 1)), atol=SENSOR_VS_NUMPY_ORIGIN_M)
+    d_cam = _arrays(ray.d) @ np.asarray(POSE.rotation)
+    # Project a point along the ray with the OpenCV model: it lands on the sampled pixel.
+    np.testing.assert_allclose(pinhole.project(d_cam), uv, atol=SENSOR_VS_NUMPY_DIRECTION * pinhole.focal_px * 4)
+
+
+def test_band_crop_maps_back_to_full_film(mi, tiny):
+    """A sample in a crop window (band) gives the ray of the same full-film position."""
+    w, h = tiny.sensor.width_px, tiny.sensor.height_px
+    crop = (0, 100, w, 37)
+    full = mi.load_dict(plenoptic_sensor_dict(mi, tiny, Pose(), spp=1))
+    band = mi.load_dict(plenoptic_sensor_dict(mi, tiny, Pose(), spp=1, crop=crop))
+    rng = np.random.default_rng(3)
+    s = rng.uniform(0, 1, size=(500, 2))
+    full_pos = mi.Point2f(s[:, 0], (crop[1] + s[:, 1] * crop[3]) / h)
+    a = mi.Point2f(0.2, 0.7)
+    ray_full, _ = full.sample_ray(0.0, 0.5, full_pos, a)
+    ray_band, _ = band.sample_ray(0.0, 0.5, mi.Point2f(s[:, 0], s[:, 1]), a)
+    np.testing.assert_allclose(_arrays(ray_band.d), _arrays(ray_full.d), atol=SENSOR_VS_NUMPY_DIRECTION)
+    assert not math.isclose(float(np.asarray(ray_band.d)[1].mean()), 0.0, abs_tol=1e-3)  # not a trivial band

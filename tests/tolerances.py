@@ -1,0 +1,122 @@
+"""Every numeric tolerance used by the tests, in one place, each with its reason.
+
+Tests import these as ``from tests.tolerances import NAME``. A tolerance is the size of an error
+the test accepts; it is never a fudge factor that hides a wrong formula. Units are part of the
+name (``_M`` metres, ``_PX`` pixels, ``_RAD`` radians, ``_DEG`` degrees) or the quantity is
+dimensionless.
+"""
+
+# ----------------------------------------------------------------------------- round-off
+# Dimensionless quantities of order 1 (unit vectors, sines, dot products, Snell invariants)
+# computed with a handful of double-precision operations: eps = 2.2e-16, a few hundred ulps of
+# headroom for cancellation (e.g. sqrt(1 - cos^2) near grazing incidence).
+FLOAT64_UNIT = 1e-12
+
+# Metres; double-precision round-off on geometry of millimetre to metre scale (port distances
+# of 0.01-1 m, rays extended to a few hundred mm): 1 m * eps * a few hundred operations << 1e-12 m.
+FLOAT64_GEOMETRY_M = 1e-12
+
+# Radians; angles obtained by arcsin/arccos/atan2 of O(1) double-precision values. arccos loses
+# precision near 0 (sqrt(eps) ~ 1.5e-8), so it is only used where the angle is far from 0.
+FLOAT64_ANGLE_RAD = 1e-12
+
+# Dimensionless Fresnel transmittance compared with the textbook angle form near grazing or
+# critical incidence: cos(theta_t) = sqrt(1 - sin^2) is kept >= 1.4e-3 by the test, so an absolute
+# round-off of 1e-16 in sin^2 becomes ~4e-14 / 2e-6 ~ 5e-11 relative in cos(theta_t) and in the
+# reflectances; 1e-9 leaves a margin while a wrong polarisation term is off by > 1e-3.
+FRESNEL_NEAR_GRAZING = 1e-9
+
+# Degrees; the same round-off for angles converted to degrees (1e-12 rad * 57.3 deg/rad, rounded up).
+FLOAT64_ANGLE_DEG = 1e-10
+
+# Pixels; pixel coordinates up to ~1e4 px computed by a few multiply/divide steps from metres:
+# 1e4 * eps * 100 operations ~ 2e-10 px, rounded up.
+FLOAT64_PIXEL_PX = 1e-9
+
+# Relative round-off for derived scalars (f-numbers, scales, focal lengths in px) that come from
+# a few products and quotients of the parameters.
+FLOAT64_RELATIVE = 1e-12
+
+# ----------------------------------------------------------------------------- stated figures
+# Degrees; DESIGN.md quotes the reference port tilt as "about 26.6 deg" for the normal
+# proportional to (0.0085, 0.5004, 1); the exact value is 26.58..., so the quoted figure is
+# rounded to 0.1 deg and agrees within half of that.
+QUOTED_TILT_DEG = 0.05
+
+# Pixels per micro-image pitch; DESIGN.md quotes "about 14.3 px per lens" for the Illum (the exact
+# figure for its preset is 14.337): the quoted figure is rounded to 0.1 px.
+QUOTED_PX_PER_LENS = 0.05
+
+# Relative; DESIGN.md quotes "about 541 x 434 microlenses" for the Illum (from Lytro metadata,
+# whose MLA calibration differs slightly from the ideal preset lattice; the preset gives 539 x 433).
+QUOTED_LENS_COUNT_RELATIVE = 0.01
+
+# ----------------------------------------------------------------------------- discretisation
+# Relative error of a second moment of a lens cell estimated on a midpoint grid of N x N unit-square
+# samples (N = 300 in the test): the midpoint rule for a quadratic is off by 1 / (12 N^2) of the
+# scale, i.e. ~1e-6 relative; 1e-4 leaves room while still failing for any wrong cell shape
+# (hexagon vs square with the same pitch differ by 17 %, a hexagon of the wrong size by far more).
+CELL_MOMENT_RELATIVE = 1e-4
+
+# Fraction; share of samples that land in the inner, concentric half-size copy of the cell
+# (exactly 1/4 for a uniform map). With a 300 x 300 midpoint grid the boundary of the inner cell
+# cuts through ~3 * 300 samples out of 90000, so the count can be off by ~1e-2 at most; a
+# non-uniform map (e.g. polar sampling, which puts 1/2 of the samples there) is off by 0.25.
+CELL_INNER_FRACTION = 1e-2
+
+# Fraction of pixels; the share of the tiny preset's pixels whose captured ray passes the main-lens
+# aperture equals, analytically, (micro-image disc area) / (micro-image lattice cell area) = 0.7019.
+# Counting pixel centres inside discs of radius 4.55 px whose centres fall at every sub-pixel phase
+# (10.33 px pitch), plus partial micro-images along the sensor border (~5 % of the lenses), moves
+# the count by a few 1e-3 (0.7035 measured). 0.01 still fails for a disc radius off by 0.7 % or a
+# square instead of a hexagonal cell (0.608).
+VIGNETTING_FRACTION = 1e-2
+
+# ----------------------------------------------------------------------------- simulator
+# Metres; the Dr.Jit sensor computes in float32 on millimetre-scale values (aperture radius ~1 mm,
+# lens distances ~10 mm): eps32 * 10 mm * a few dozen operations ~ 3e-8 m (1.2e-8 measured).
+SENSOR_VS_NUMPY_ORIGIN_M = 1e-7
+
+# Dimensionless; float32 unit directions from a normalised slope vector (|slope| < 1): a few
+# eps32 = 1.2e-7 per component (1.0e-7 measured).
+SENSOR_VS_NUMPY_DIRECTION = 1e-6
+
+# Pixels; intensity centroids of micro-images in a 64 spp white image of the tiny camera. The
+# disc edge pixels are partially covered and estimated from 64 samples each, so the centroid
+# carries Monte Carlo noise: 0.020 px RMS and 0.059 px worst case measured over ~1800 lenses.
+MICRO_IMAGE_CENTRE_RMS_PX = 0.04
+MICRO_IMAGE_CENTRE_MAX_PX = 0.15
+
+# Pixels; the wrong model (micro-image centre straight below the lens centre) is off by
+# c * f_mla / f' / pixel_pitch, up to 8 px at the tiny sensor's corners: a test that found centres
+# within 2 px of it would have measured the wrong thing.
+NAIVE_CENTRE_MIN_ERROR_PX = 2.0
+
+# Pixels; intensity centroid of a fronto-parallel emissive disc (about 9 px across) in a 64 spp
+# ideal image against the pinhole projection of its centre: the disc's image is an exact disc,
+# anti-aliased by pixel-area integration; residual is MC noise on the ~60 edge pixels.
+IDEAL_TARGET_CENTROID_PX = 0.05
+
+# Pixels RMS; OpenCV corner detection with cornerSubPix on a 64 spp, 400 x 300 ideal image of a
+# chessboard with 16 x 16 texel squares, nearest-filtered: detector bias and aliasing at
+# ~13 px per square are about 0.05 px.
+IDEAL_CHESSBOARD_RMS_PX = 0.15
+
+# Relative; depth from Mitsuba's float32 ray intersection, compared with the analytic plane:
+# eps32 * a few operations.
+DEPTH_FLOAT32_RELATIVE = 1e-5
+
+# Fraction; raw pixels whose chief ray (traced through the port) lands well inside an emissive
+# disc see its radiance times the port's transmittance: the mean ratio is 1 up to the neighbouring
+# beam directions' slightly different Fresnel factors and MC noise. 0.9 still fails for any pixel
+# set that the port trace mispredicts (those are dark).
+RAW_TARGET_BRIGHT_MIN = 0.9
+
+# Radiance; raw pixels whose chief ray misses the disc by more than the beam width see nothing but
+# the black background.
+RAW_TARGET_DARK_MAX = 1e-6
+
+# Relative; median |raw / (L * T_fresnel * (n_air/n_water)^2) - 1| for pixels wholly inside their
+# micro-image looking at a uniform emitter behind a 30 deg port. The pixel's paths span about 1 deg
+# around its chief ray, over which T changes by < 0.1 %; no MC noise (constant radiance).
+PORT_RADIANCE_RELATIVE = 0.005
