@@ -1,12 +1,14 @@
 """Benchmark the plenoptic render against Mitsuba's own ``perspective`` sensor.
 
-For each camera preset, renders the embedded default scene (with its port) twice at the same
-pixel count, spp and band size: once with the plenoptic sensor, once with Mitsuba's
-``perspective`` sensor covering the same field. Each render runs in a fresh process so its peak
+For each camera preset, renders the embedded default scene (port tilted 20 deg) at the same
+pixel count, spp and band size: with the plenoptic sensor (the ``sensor`` port model: the sensor
+refracts its rays through the port) and with Mitsuba's ``perspective`` sensor covering the same
+field in the same glass-free scene and integrator; with ``--geometry`` also with the port as
+scene geometry (the reference model, crossed by Mitsuba's path tracer). Each render runs in a fresh process so its peak
 memory (max RSS) is its own. Prints seconds, Msamples/s, peak memory and the ratio.
 
     python benchmarks/bench_render.py                  # tiny and illum, 16 spp
-    python benchmarks/bench_render.py --cameras tiny --spp 64
+    python benchmarks/bench_render.py --cameras tiny --spp 64 --geometry
 
 Targets (issue 2): ratio <= 1.1; full Illum at 16 spp in <= 30 s on the 2-core CI machine.
 """
@@ -28,24 +30,27 @@ import numpy as np
 def _worker(camera_name: str, sensor_kind: str, spp: int, band_pixels: int) -> dict:
     from lfrefract import camera_preset
     from simulator.backend import load_mitsuba, versions
-    from simulator.config import load_scene
+    from simulator.config import RenderSettings, load_scene
     from simulator.render import render_bands
     from simulator.scene import build_scene
     from simulator.sensor import plenoptic_sensor_dict
 
     mi = load_mitsuba()
     camera = camera_preset(camera_name)
-    config = load_scene().with_overrides(camera=camera)
-    scene = build_scene(mi, config)
+    port_model = "geometry" if sensor_kind == "plenoptic-geometry" else "sensor"
+    config = load_scene().with_overrides(camera=camera, render=RenderSettings(spp=spp, port_model=port_model))
+    scene = build_scene(mi, config, port_geometry=port_model == "geometry")
     width, height = camera.sensor.width_px, camera.sensor.height_px
 
-    if sensor_kind == "plenoptic":
+    if sensor_kind.startswith("plenoptic"):
+        sensor_port = config.port if port_model == "sensor" else None
 
         def sensor_for_crop(crop):
-            return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop)
+            return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port)
 
     else:
         # Mitsuba's camera looks along +z with +x left and +y up: OpenCV frame = diag(-1, -1, 1).
+        # Same (glass-free) scene and integrator as the plenoptic sensor with its port model.
         to_world = config.pose.matrix @ np.diag([-1.0, -1.0, 1.0, 1.0])
         half_width = camera.sensor.size_m[0] / 2 / camera.micro_image_scale
         fov_deg = math.degrees(2 * math.atan(half_width / camera.lens_to_mla_m))
@@ -99,6 +104,9 @@ def main() -> int:
     parser.add_argument("--band-pixels", type=int, default=None, help="default: simulator.render's")
     parser.add_argument("--worker", nargs=2, metavar=("CAMERA", "SENSOR"), help=argparse.SUPPRESS)
     parser.add_argument("--json", action="store_true", help="print the figures as JSON too")
+    parser.add_argument(
+        "--geometry", action="store_true", help="also render with the port as scene geometry (the slow reference)"
+    )
     args = parser.parse_args()
     from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
@@ -112,11 +120,12 @@ def main() -> int:
         f"python {platform.python_version()}"
     )
     print(f"scene: embedded default (port tilted 20 deg), spp {args.spp}, band {band_pixels / 1e6:.1f} Mpx")
-    print(f"{'camera':8} {'sensor':12} {'pixels':>11} {'seconds':>9} {'Msample/s':>10} {'peak MB':>9} {'ratio':>6}")
+    print(f"{'camera':8} {'sensor':19} {'pixels':>12} {'seconds':>9} {'Msample/s':>10} {'peak MB':>9} {'ratio':>6}")
     results = []
     for name in args.cameras:
         row = {}
-        for kind in ("perspective", "plenoptic"):
+        kinds = ("perspective", "plenoptic", "plenoptic-geometry") if args.geometry else ("perspective", "plenoptic")
+        for kind in kinds:
             cmd = [
                 sys.executable,
                 __file__,
@@ -130,15 +139,15 @@ def main() -> int:
             ]
             proc = subprocess.run(cmd, capture_output=True, text=True, check=True)
             row[kind] = json.loads(proc.stdout.strip().splitlines()[-1])
-        ratio = row["plenoptic"]["seconds"] / row["perspective"]["seconds"]
-        for kind in ("perspective", "plenoptic"):
+        for kind in kinds:
             r = row[kind]
-            shown = f"{ratio:6.2f}" if kind == "plenoptic" else ""
+            ratio = r["seconds"] / row["perspective"]["seconds"]
+            shown = f"{ratio:6.2f}" if kind != "perspective" else ""
             print(
-                f"{name:8} {kind:12} {r['pixels']:>11,} {r['seconds']:9.2f} {r['msamples_per_s']:10.2f} "
+                f"{name:8} {kind:19} {r['pixels']:>12,} {r['seconds']:9.2f} {r['msamples_per_s']:10.2f} "
                 f"{r['peak_rss_mb']:9.0f} {shown:>6}"
             )
-        results.append({"camera": name, "ratio": ratio, **row})
+        results.append({"camera": name, **row})
     if args.json:
         print(json.dumps(results, indent=2))
     return 0

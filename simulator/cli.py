@@ -10,12 +10,13 @@ embedded default scene is rendered.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
 from lfrefract import PRESETS, ParameterError, camera_preset
 from lfrefract.io import FileFormatError
-from simulator.config import RenderSettings, embedded_scenes, load_scene
+from simulator.config import PORT_MODELS, embedded_scenes, load_scene
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
 __all__ = ["main"]
@@ -39,6 +40,9 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--camera", choices=sorted(PRESETS), help="camera preset replacing the scene's")
     render.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
     render.add_argument("--seed", type=int, help="sampler seed (default: the scene's)")
+    render.add_argument(
+        "--port-model", choices=list(PORT_MODELS), help="how the port is rendered (default: the scene's)"
+    )
     render.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant")
     render.add_argument("--band-pixels", type=int, default=DEFAULT_MAX_BAND_PIXELS, help="pixels per render band")
     render.add_argument("--overwrite", action="store_true", help="replace a non-empty output directory")
@@ -60,11 +64,10 @@ def main(argv: list[str] | None = None) -> int:
         changes = {}
         if args.camera:
             changes["camera"] = camera_preset(args.camera)
-        if args.spp is not None or args.seed is not None:
-            changes["render"] = RenderSettings(
-                spp=config.render.spp if args.spp is None else args.spp,
-                seed=config.render.seed if args.seed is None else args.seed,
-            )
+        given = {"spp": args.spp, "seed": args.seed, "port_model": args.port_model}
+        overrides = {key: value for key, value in given.items() if value is not None}
+        if overrides:
+            changes["render"] = dataclasses.replace(config.render, **overrides)
         if changes:
             config = config.with_overrides(**changes)
         from simulator.job import render_job

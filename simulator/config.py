@@ -15,6 +15,7 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
     [render]
     spp = 16
     seed = 0
+    port_model = "sensor"             # or "geometry" (see PORT_MODELS)
     [[light]]                         # type = "point" | "constant"
     [[object]]                        # type = "textured_plane" | "chessboard" | "disc" | "bowl"
                                       #        | "figurine" | "mesh"
@@ -40,6 +41,7 @@ from lfrefract._validate import (
     ParameterError,
     finite_vector,
     non_negative_float,
+    one_of,
     positive_float,
     positive_int,
     reject_unknown_keys,
@@ -48,6 +50,7 @@ from lfrefract.pose import rotation_from_euler_xyz
 
 __all__ = [
     "OBJECT_TYPES",
+    "PORT_MODELS",
     "Bowl",
     "Chessboard",
     "ConstantLight",
@@ -242,15 +245,24 @@ class ConstantLight:
         object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
 
 
+#: How the port is rendered. ``sensor``: the plenoptic sensor refracts its rays through the port's
+#: planes in closed form (the housing is part of the camera), so camera paths start in the water;
+#: ``geometry``: the glass is scene geometry with a refracting BSDF and Mitsuba's path tracer
+#: crosses it. Both are exact; ``geometry`` is the slower reference the tests compare against.
+PORT_MODELS = ("sensor", "geometry")
+
+
 @dataclass(frozen=True, kw_only=True)
 class RenderSettings:
-    """Samples per pixel and the seed of the sampler."""
+    """Samples per pixel, the seed of the sampler, and the port model (see :data:`PORT_MODELS`)."""
 
     spp: int = 16
     seed: int = 0
+    port_model: str = "sensor"
 
     def __post_init__(self) -> None:
         positive_int("render.spp", self.spp)
+        one_of("render.port_model", self.port_model, PORT_MODELS)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
             raise ParameterError(f"render.seed must be an integer in [0, 2**31), got {self.seed!r}")
 

@@ -18,7 +18,6 @@ import numpy as np
 from lfrefract import LightFieldCamera, PinholeCamera, Pose
 from simulator.config import SceneConfig
 from simulator.render import render_bands
-from simulator.scene import build_scene
 from simulator.sensor import pinhole_sensor_dict
 
 __all__ = ["GroundTruth", "compute", "depth_map", "lens_table"]
@@ -80,10 +79,25 @@ def depth_map(mi: ModuleType, scene, pinhole: PinholeCamera, pose: Pose) -> np.n
 
 
 def compute(
-    mi: ModuleType, config: SceneConfig, pinhole: PinholeCamera, *, spp: int, seed: int, progress: bool = True
+    mi: ModuleType, scene, config: SceneConfig, pinhole: PinholeCamera, *, spp: int, seed: int, progress: bool = True
 ) -> GroundTruth:
-    """Render the ideal image and trace the depth map and lens table for ``config``."""
-    scene = build_scene(mi, config, with_port=False)
+    """Render the ideal image and trace the depth map and lens table for ``config``.
+
+    Parameters
+    ----------
+    mi : module
+        Mitsuba with a variant set.
+    scene : mitsuba.Scene
+        ``config``'s scene built without the port (:func:`simulator.scene.build_scene` with
+        ``port_geometry=False``).
+    config : SceneConfig
+    pinhole : PinholeCamera
+        Geometry of the ideal image.
+    spp, seed : int
+        Samples per pixel and job seed of the ideal render.
+    progress : bool
+        Show a progress bar.
+    """
     ideal = render_bands(
         mi,
         scene,

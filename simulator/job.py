@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -14,10 +15,57 @@ from lfrefract.io import staged_directory, write_exr, write_json
 from simulator import backend, groundtruth, previews
 from simulator.config import SceneConfig
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
-from simulator.scene import build_scene, check_geometry, max_depth
+from simulator.scene import build_scene, check_geometry, integrator
 from simulator.sensor import plenoptic_sensor_dict
 
-__all__ = ["RenderResult", "render_job"]
+__all__ = ["RenderResult", "render_job", "render_raw"]
+
+
+def render_raw(
+    mi: ModuleType,
+    config: SceneConfig,
+    *,
+    glass_free_scene=None,
+    max_band_pixels: int = DEFAULT_MAX_BAND_PIXELS,
+    progress: bool = True,
+) -> np.ndarray:
+    """Render the raw lenslet image of ``config`` with its spp, seed and port model.
+
+    Parameters
+    ----------
+    mi : module
+        Mitsuba with a variant set.
+    config : SceneConfig
+    glass_free_scene : mitsuba.Scene, optional
+        ``config``'s scene without the port, if already built (the ``sensor`` port model renders
+        the raw image from it).
+    max_band_pixels : int
+        Band size bound.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W, 3)
+    """
+    camera = config.camera
+    if config.port is not None and config.render.port_model == "geometry":
+        scene, sensor_port = build_scene(mi, config, port_geometry=True), None
+    else:
+        scene = glass_free_scene if glass_free_scene is not None else build_scene(mi, config, port_geometry=False)
+        sensor_port = config.port
+    return render_bands(
+        mi,
+        scene,
+        lambda crop: plenoptic_sensor_dict(mi, camera, config.pose, spp=config.render.spp, crop=crop, port=sensor_port),
+        camera.sensor.width_px,
+        camera.sensor.height_px,
+        spp=config.render.spp,
+        seed=config.render.seed,
+        max_band_pixels=max_band_pixels,
+        progress=progress,
+        label="raw",
+    )
 
 
 @dataclass(frozen=True)
@@ -75,27 +123,16 @@ def render_job(
     camera: LightFieldCamera = config.camera
     pinhole = ideal if ideal is not None else virtual_camera_for(camera)
     spp, seed = config.render.spp, config.render.seed
+    port_geometry = config.port is not None and config.render.port_model == "geometry"
     with staged_directory(out_dir, overwrite=overwrite) as stage:
         mi = backend.load_mitsuba(variant)
-        scene = build_scene(mi, config, with_port=True)
+        glass_free = build_scene(mi, config, port_geometry=False)
         start = time.perf_counter()
-        raw = render_bands(
-            mi,
-            scene,
-            lambda crop: plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop),
-            camera.sensor.width_px,
-            camera.sensor.height_px,
-            spp=spp,
-            seed=seed,
-            max_band_pixels=max_band_pixels,
-            progress=progress,
-            label="raw",
-        )
+        raw = render_raw(mi, config, glass_free_scene=glass_free, max_band_pixels=max_band_pixels, progress=progress)
         raw_seconds = time.perf_counter() - start
-        del scene
         write_exr(stage / "raw.exr", raw, role="raw")
         start = time.perf_counter()
-        truth = groundtruth.compute(mi, config, pinhole, spp=spp, seed=seed, progress=progress)
+        truth = groundtruth.compute(mi, glass_free, config, pinhole, spp=spp, seed=seed, progress=progress)
         ideal_seconds = time.perf_counter() - start
         write_exr(stage / "ideal.exr", truth.ideal, role="ideal")
         write_exr(stage / "depth.exr", truth.depth_m, role="depth")
@@ -127,8 +164,9 @@ def render_job(
                 "seed": seed,
                 "band_seed": "(seed * 1000003 + band) mod 2**32",
                 "max_band_pixels": max_band_pixels,
-                "max_depth_raw": max_depth(config.port),
-                "max_depth_ideal": max_depth(None),
+                "port_model": config.render.port_model,
+                "integrator_raw": integrator(config.port if port_geometry else None),
+                "integrator_ideal": integrator(None),
                 "raw_seconds": raw_seconds,
                 "ideal_seconds": ideal_seconds,
                 "lfrefract": lfrefract.__version__,

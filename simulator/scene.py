@@ -6,10 +6,10 @@ Each face is a large rectangle carrying the refract-only interface BSDF
 (:mod:`simulator.interface`). A rectangle's normal points into the medium its BSDF calls
 ``ext_ior``: towards the camera for the air-side face, into the water for the water-side face.
 
-Lighting is direct only: the path length is limited so that a camera path crosses the port
-faces (delta interactions) and then takes next-event estimation at the first diffuse surface.
-The raw and the ideal image are therefore lit identically, and the port changes only the
-geometry of the rays and the radiometric factor of :class:`lfrefract.PortTrace`.
+Lighting is direct only: next-event estimation at the first diffuse surface (behind the port's
+faces when they are geometry). The raw and the ideal image are therefore lit identically, and the
+port changes only the geometry of the rays and the radiometric factor of
+:class:`lfrefract.PortTrace`.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ __all__ = [
     "PORT_FACE_SIZE_M",
     "build_scene",
     "check_geometry",
+    "integrator",
     "object_sample_points",
     "port_faces",
 ]
@@ -173,12 +174,20 @@ def _object_dict(mi: ModuleType, obj: SceneObject, index: int):
     raise TypeError(f"unknown scene object {obj!r}")
 
 
-def max_depth(port: FlatPort | None) -> int:
-    """Path length giving direct lighting at the first surface behind ``port``'s faces."""
-    return 2 + (0 if port is None else len(port.faces))
+def integrator(port: FlatPort | None) -> dict:
+    """Integrator for direct lighting at the first diffuse surface behind ``port``'s faces.
+
+    Without port geometry: Mitsuba's ``direct`` with next-event estimation only (one shadow ray
+    per sample; the scenes' lights are points and small luminous discs). With the port as
+    geometry: ``path``, cut after next-event estimation at the first surface behind its faces.
+    """
+    if port is None:
+        return {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}
+    depth = 2 + len(port.faces)
+    return {"type": "path", "max_depth": depth, "rr_depth": depth + 1, "hide_emitters": False}
 
 
-def build_scene(mi: ModuleType, config: SceneConfig, *, with_port: bool = True):
+def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
     """Load the Mitsuba scene for ``config``.
 
     Parameters
@@ -186,20 +195,18 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, with_port: bool = True):
     mi : module
         Mitsuba with a variant set (:func:`simulator.backend.load_mitsuba`).
     config : SceneConfig
-    with_port : bool
-        False builds the same scene without the port, for the ideal image and depth.
+    port_geometry : bool
+        Build the port's faces as geometry (the ``geometry`` port model). False builds the scene
+        without glass: for the ideal image and depth, and for the ``sensor`` port model, where
+        the plenoptic sensor refracts its rays through the port itself.
 
     Returns
     -------
     mitsuba.Scene
         Without a sensor of its own: render it with an explicit ``sensor=``.
     """
-    port = config.port if with_port else None
-    depth = max_depth(port)
-    scene: dict = {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": depth, "rr_depth": depth + 1, "hide_emitters": False},
-    }
+    port = config.port if port_geometry else None
+    scene: dict = {"type": "scene", "integrator": integrator(port)}
     if port is not None:
         pose = config.pose.matrix
         for i, face in enumerate(port_faces(port)):

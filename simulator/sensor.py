@@ -17,11 +17,12 @@ from types import ModuleType
 
 import numpy as np
 
-from lfrefract import LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry
+from lfrefract import FlatPort, LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry
 
 __all__ = ["pinhole_sensor_dict", "plenoptic_sensor_dict", "register"]
 
 PLENOPTIC = "lfsim_plenoptic"
+_PORT_FIELDS = ("distance_m", "thickness_m", "tilt_x_rad", "tilt_y_rad", "n_air", "n_glass", "n_water")
 PINHOLE = "lfsim_pinhole"
 
 
@@ -51,13 +52,21 @@ def plenoptic_sensor_dict(
     *,
     spp: int,
     crop: tuple[int, int, int, int] | None = None,
+    port: FlatPort | None = None,
 ) -> dict:
     """Mitsuba dict of the plenoptic sensor for ``camera`` at ``pose``.
 
-    ``crop`` is ``(x, y, width, height)`` in pixels for band rendering.
+    ``crop`` is ``(x, y, width, height)`` in pixels for band rendering. With ``port`` the sensor
+    refracts its rays through the port itself (the ``sensor`` port model): they leave from the
+    port's water face, weighted by the Fresnel transmittance and ``(n_air / n_water)^2``, and the
+    scene must not contain the glass too.
     """
     mla = camera.mla
+    port_props = {}
+    if port is not None:
+        port_props = {f"port_{key}": float(getattr(port, key)) for key in _PORT_FIELDS}
     return {
+        **port_props,
         "type": PLENOPTIC,
         "to_world": _to_world(mi, pose),
         "focal_length_m": camera.focal_length_m,
@@ -156,25 +165,59 @@ def register(mi: ModuleType) -> None:
                 ),
             )
             self.m_needs_sample_3 = True
+            self.port = None
+            if "port_distance_m" in props:
+                self.port = FlatPort(**{key: float(props[f"port_{key}"]) for key in _PORT_FIELDS})
+
+        def through_port(self, origin, direction):
+            """Refract camera-frame rays through the port's faces (Snell, vector form).
+
+            Returns the ray leaving the water face, the product of the faces' unpolarised Fresnel
+            transmittances times ``(n_air / n_water)^2``, and whether the ray got through (it
+            reaches the port and is not totally internally reflected).
+            """
+            port = self.port
+            n = mi.Vector3f(*port.normal.tolist())
+            passed = dr.dot(direction, n) > 0.0
+            weight = mi.Float(port.radiance_scale)
+            for offset, n_from, n_to in port.faces:
+                t = (offset - dr.dot(origin, n)) / dr.dot(direction, n)
+                origin = dr.fma(direction, t, origin)
+                cos_i = dr.dot(direction, n)
+                eta = n_from / n_to
+                sin2_t = eta * eta * (1.0 - cos_i * cos_i)
+                passed &= sin2_t <= 1.0
+                cos_t = dr.safe_sqrt(1.0 - sin2_t)
+                direction = dr.normalize(eta * direction + (cos_t - eta * cos_i) * n)
+                r_s = dr.square((n_from * cos_i - n_to * cos_t) / (n_from * cos_i + n_to * cos_t))
+                r_p = dr.square((n_from * cos_t - n_to * cos_i) / (n_from * cos_t + n_to * cos_i))
+                weight *= 1.0 - 0.5 * (r_s + r_p)
+            return origin, direction, dr.select(passed, weight, 0.0), passed
 
         def sample_lens_offset(self, aperture_sample):
-            """Image-plane offset from the lens centre (metres) for an aperture sample."""
+            """Image-plane offset from the lens centre (metres) for an aperture sample.
+
+            Uniform over the lattice cell: a square, or a regular hexagon split into three rhombi
+            spanned from the centre by vertices ``V[2k]`` and ``V[2k + 2]`` (``3 * s.x`` picks
+            ``k`` and the first coordinate). The rotated vertices are precomputed, so no
+            trigonometry runs per sample.
+            """
             mla = self.camera.mla
             c, s = math.cos(mla.rotation_rad), math.sin(mla.rotation_rad)
             if mla.grid == "square":
                 lx = (aperture_sample.x - 0.5) * mla.pitch_m
                 ly = (aperture_sample.y - 0.5) * mla.pitch_m
-            else:
-                scaled = 3.0 * aperture_sample.x
-                k = dr.minimum(dr.floor(scaled), 2.0)
-                a = scaled - k
-                b = aperture_sample.y
-                radius = mla.pitch_m / math.sqrt(3.0)
-                ang0 = math.pi / 6.0 + k * (2.0 * math.pi / 3.0)
-                ang1 = ang0 + 2.0 * math.pi / 3.0
-                lx = radius * (a * dr.cos(ang0) + b * dr.cos(ang1))
-                ly = radius * (a * dr.sin(ang0) + b * dr.sin(ang1))
-            return mi.Vector2f(c * lx - s * ly, s * lx + c * ly)
+                return mi.Vector2f(c * lx - s * ly, s * lx + c * ly)
+            radius = mla.pitch_m / math.sqrt(3.0)
+            vertices = []
+            for j in range(4):  # V[0], V[2], V[4], V[6] = V[0]
+                ang = mla.rotation_rad + math.pi / 6.0 + j * 2.0 * math.pi / 3.0
+                vertices.append(mi.Vector2f(radius * math.cos(ang), radius * math.sin(ang)))
+            scaled = 3.0 * aperture_sample.x
+            k = dr.minimum(dr.floor(scaled), 2.0)
+            first = dr.select(k == 0.0, vertices[0], dr.select(k == 1.0, vertices[1], vertices[2]))
+            second = dr.select(k == 0.0, vertices[1], dr.select(k == 1.0, vertices[2], vertices[3]))
+            return (scaled - k) * first + aperture_sample.y * second
 
         def nearest_lens_centre(self, point):
             """Image-plane centre of the lattice point nearest to ``point`` (Vector2f)."""
@@ -209,8 +252,12 @@ def register(mi: ModuleType) -> None:
             slope_out = slope_in - hit / cam.focal_length_m
             direction = dr.normalize(mi.Vector3f(slope_out.x, slope_out.y, 1.0))
             origin = mi.Point3f(hit.x, hit.y, 0.0)
+            weight = mi.Float(1.0)
+            if self.port is not None:
+                origin, direction, weight, passed = self.through_port(origin, direction)
+                inside &= passed
             ray = self._ray(time, origin, direction, maxt=dr.select(inside, dr.largest(mi.Float), 0.0))
-            return ray, dr.select(inside & active, mi.Spectrum(1.0), mi.Spectrum(0.0))
+            return ray, mi.Spectrum(dr.select(inside & active, weight, 0.0))
 
         def to_string(self):
             return f"PlenopticSensor[camera={self.camera!r}]"

@@ -120,3 +120,8 @@ RAW_TARGET_DARK_MAX = 1e-6
 # micro-image looking at a uniform emitter behind a 30 deg port. The pixel's paths span about 1 deg
 # around its chief ray, over which T changes by < 0.1 %; no MC noise (constant radiance).
 PORT_RADIANCE_RELATIVE = 0.005
+
+# Relative; median difference of per-micro-image mean radiance between the two port models at
+# 16 spp (different integrators, so independent noise; textured scene, point lights). Each lens
+# mean averages ~80 pixels x 16 samples of texture seen through a ~1 deg beam.
+PORT_MODELS_LENS_MEAN_RELATIVE = 0.01

@@ -27,7 +27,7 @@ def test_depth_of_slanted_plane_matches_plane_equation(mi):
         "texture_px": 64,
     }
     config = scene(port=port(20.0), objects=[plane])
-    depth = groundtruth.depth_map(mi, build_scene(mi, config, with_port=False), BIG, Pose())
+    depth = groundtruth.depth_map(mi, build_scene(mi, config, port_geometry=False), BIG, Pose())
     obj = config.objects[0]
     normal = obj.placement.matrix[:3, 2]
     centre = np.asarray(obj.placement.position_m)
@@ -40,7 +40,7 @@ def test_depth_of_slanted_plane_matches_plane_equation(mi):
 def test_depth_is_inf_where_nothing_is_hit(mi):
     small = {"type": "disc", "position_m": [0.0, 0.0, 0.3], "radius_m": 0.01}
     config = scene(port=None, objects=[small])
-    depth = groundtruth.depth_map(mi, build_scene(mi, config, with_port=False), BIG, Pose())
+    depth = groundtruth.depth_map(mi, build_scene(mi, config, port_geometry=False), BIG, Pose())
     assert np.isinf(depth[0, 0])
     assert depth[0, 0] > 0
     assert depth[150, 200] == pytest.approx(0.3, rel=DEPTH_FLOAT32_RELATIVE)
@@ -56,7 +56,9 @@ def test_chessboard_corners_in_ideal_image_at_pinhole_projection(mi):
         "square_size_m": 0.025,
     }
     config = scene(port=port(25.0), objects=[board])
-    truth = groundtruth.compute(mi, config, BIG, spp=64, seed=0, progress=False)
+    truth = groundtruth.compute(
+        mi, build_scene(mi, config, port_geometry=False), config, BIG, spp=64, seed=0, progress=False
+    )
     gray = (np.clip(truth.ideal.mean(axis=2) / truth.ideal.max(), 0, 1) * 255).astype(np.uint8)
     found, corners = cv2.findChessboardCorners(gray, (7, 5))
     assert found

@@ -12,28 +12,16 @@ from lfrefract import ParameterError
 from lfrefract.io import read_exr, read_json
 from simulator import cli
 from simulator.config import RenderSettings, load_scene, parse_scene
-from simulator.job import render_job
-from simulator.render import render_bands
-from simulator.scene import build_scene, check_geometry
-from simulator.sensor import plenoptic_sensor_dict
+from simulator.job import render_job, render_raw
+from simulator.scene import check_geometry
 from tests.simulator.scenes import port, scene
 
 PLANE = {"type": "textured_plane", "position_m": [0.0, 0.0, 0.5], "size_m": [1.0, 1.0], "texture_px": 128}
 
 
 def _raw(mi, config, seed, band_pixels=60_000):
-    cam = config.camera
-    return render_bands(
-        mi,
-        build_scene(mi, config),
-        lambda crop: plenoptic_sensor_dict(mi, cam, config.pose, spp=4, crop=crop),
-        cam.sensor.width_px,
-        cam.sensor.height_px,
-        spp=4,
-        seed=seed,
-        max_band_pixels=band_pixels,
-        progress=False,
-    )
+    config = config.with_overrides(render=RenderSettings(spp=4, seed=seed))
+    return render_raw(mi, config, max_band_pixels=band_pixels, progress=False)
 
 
 @pytest.mark.render

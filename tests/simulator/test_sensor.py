@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lfrefract import LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry, camera_preset
+from lfrefract import FlatPort, LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry, camera_preset
 from simulator.sensor import pinhole_sensor_dict, plenoptic_sensor_dict
 from tests.tolerances import SENSOR_VS_NUMPY_DIRECTION, SENSOR_VS_NUMPY_ORIGIN_M
 
@@ -105,3 +105,45 @@ def test_band_crop_maps_back_to_full_film(mi, tiny):
     ray_band, _ = band.sample_ray(0.0, 0.5, mi.Point2f(s[:, 0], s[:, 1]), a)
     np.testing.assert_allclose(_arrays(ray_band.d), _arrays(ray_full.d), atol=SENSOR_VS_NUMPY_DIRECTION)
     assert not math.isclose(float(np.asarray(ray_band.d)[1].mean()), 0.0, abs_tol=1e-3)  # not a trivial band
+
+
+@pytest.mark.parametrize("thickness_m", [0.0, 0.008])
+def test_plenoptic_sensor_refracts_through_port_like_numpy(mi, tiny, thickness_m):
+    """The ``sensor`` port model: rays leave the water face as lfrefract's port trace says."""
+    port = FlatPort.from_degrees(distance_m=0.015, thickness_m=thickness_m, tilt_x_deg=28.0, tilt_y_deg=-9.0)
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, tiny, POSE, spp=1, port=port))
+    w, h = tiny.sensor.width_px, tiny.sensor.height_px
+    rng = np.random.default_rng(4)
+    n = 4000
+    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], size=(n, 2))
+    aperture = rng.uniform(0.0, 1.0, size=(n, 2))
+    position = mi.Point2f(((uv[:, 0] + 0.5) / w).astype(np.float32), ((uv[:, 1] + 0.5) / h).astype(np.float32))
+    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(aperture[:, 0], aperture[:, 1]))
+
+    air = tiny.rays_through_lenses(uv, lens_offsets_m=tiny.mla.cell_offsets_m(aperture))
+    water = port.trace_from_air(air.origins_cam, air.directions_cam)
+    ok = air.in_aperture & water.valid & (_arrays(weight)[:, 0] > 0)
+    assert ok.mean() > 0.5
+    np.testing.assert_allclose(
+        _arrays(ray.o)[ok], POSE.to_world(water.exit_points[ok]), atol=10 * SENSOR_VS_NUMPY_ORIGIN_M
+    )
+    directions_world = water.directions @ np.asarray(POSE.rotation).T
+    np.testing.assert_allclose(_arrays(ray.d)[ok], directions_world[ok], atol=SENSOR_VS_NUMPY_DIRECTION)
+    expected_weight = water.transmittance * port.radiance_scale
+    np.testing.assert_allclose(_arrays(weight)[ok, 0], expected_weight[ok], rtol=SENSOR_VS_NUMPY_DIRECTION)
+    assert np.all(_arrays(weight)[~air.in_aperture] == 0.0)
+
+
+def test_plenoptic_sensor_reports_tir_as_zero_weight(mi, tiny):
+    """Paths the port totally internally reflects carry nothing and are not traced."""
+    port = FlatPort.from_degrees(distance_m=0.02, tilt_x_deg=35.0, n_air=1.5, n_glass=1.5, n_water=1.0)
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, tiny, Pose(), spp=1, port=port))
+    w, h = tiny.sensor.width_px, tiny.sensor.height_px
+    uv = np.stack(np.meshgrid(np.arange(0, w, 3), np.arange(0, h, 3)), axis=-1).reshape(-1, 2).astype(float)
+    position = mi.Point2f((uv[:, 0] + 0.5) / w, (uv[:, 1] + 0.5) / h)
+    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(0.0, 0.0))  # hex cell centre: chief rays
+    air = tiny.captured_rays(uv)
+    tir = port.trace_from_air(air.origins_cam, air.directions_cam).tir & air.in_aperture
+    assert 0.05 < tir.mean() < 0.95
+    assert np.all(_arrays(weight)[tir] == 0.0)
+    assert np.all(np.asarray(ray.maxt)[tir] == 0.0)

@@ -7,9 +7,9 @@ import pytest
 
 from lfrefract import virtual_camera_for
 from simulator import groundtruth
-from simulator.render import render_bands
+from simulator.config import PORT_MODELS, RenderSettings
+from simulator.job import render_raw
 from simulator.scene import build_scene
-from simulator.sensor import plenoptic_sensor_dict
 from tests.simulator.scenes import port, scene
 from tests.tolerances import (
     IDEAL_TARGET_CENTROID_PX,
@@ -40,18 +40,9 @@ def _target_scene(tilt_x_deg: float, tilt_y_deg: float):
     return scene(port=port(tilt_x_deg, tilt_y_deg), objects=[disc], spp=32)
 
 
-def _render_raw(mi, config):
-    cam = config.camera
-    return render_bands(
-        mi,
-        build_scene(mi, config),
-        lambda crop: plenoptic_sensor_dict(mi, cam, config.pose, spp=config.render.spp, crop=crop),
-        cam.sensor.width_px,
-        cam.sensor.height_px,
-        spp=config.render.spp,
-        seed=1,
-        progress=False,
-    ).mean(axis=2)
+def _render_raw(mi, config, port_model):
+    config = config.with_overrides(render=RenderSettings(spp=config.render.spp, seed=1, port_model=port_model))
+    return render_raw(mi, config, progress=False).mean(axis=2)
 
 
 def _distance_on_target_plane(origins, directions) -> np.ndarray:
@@ -65,7 +56,9 @@ def _distance_on_target_plane(origins, directions) -> np.ndarray:
 def test_target_in_ideal_image_at_pinhole_projection(mi, tilt_x_deg, tilt_y_deg):
     config = _target_scene(tilt_x_deg, tilt_y_deg)
     pinhole = virtual_camera_for(config.camera)
-    truth = groundtruth.compute(mi, config, pinhole, spp=64, seed=0, progress=False)
+    truth = groundtruth.compute(
+        mi, build_scene(mi, config, port_geometry=False), config, pinhole, spp=64, seed=0, progress=False
+    )
     image = truth.ideal.mean(axis=2)
     # A fronto-parallel disc projects to a disc centred on the projection of its centre.
     expected = pinhole.project(TARGET_CAM)[0]
@@ -80,9 +73,10 @@ def test_target_in_ideal_image_at_pinhole_projection(mi, tilt_x_deg, tilt_y_deg)
     assert truth.depth_m[v, u] == pytest.approx(TARGET_CAM[2], rel=1e-6)
 
 
-def test_target_in_raw_image_under_predicted_pixels(mi):
+@pytest.mark.parametrize("port_model", PORT_MODELS)
+def test_target_in_raw_image_under_predicted_pixels(mi, port_model):
     config = _target_scene(25.0, 10.0)
-    raw = _render_raw(mi, config)
+    raw = _render_raw(mi, config, port_model)
     cam, prt = config.camera, config.port
     rays = cam.captured_rays()
     trace = prt.trace_from_air(rays.origins_cam, rays.directions_cam)
@@ -104,11 +98,12 @@ def test_target_in_raw_image_under_predicted_pixels(mi):
     assert np.mean(values[straight] > 0.1 * RADIANCE * prt.radiance_scale) < 0.5
 
 
-def test_port_radiometry_matches_fresnel_and_index_scaling(mi):
+@pytest.mark.parametrize("port_model", PORT_MODELS)
+def test_port_radiometry_matches_fresnel_and_index_scaling(mi, port_model):
     """Behind the port a uniform emitter appears at radiance * T_fresnel * (n_air / n_water)^2."""
     wall = {"type": "disc", "position_m": [0.0, 0.0, 0.5], "radius_m": 2.0, "reflectance": 0.0, "radiance": RADIANCE}
     config = scene(port=port(30.0, 0.0), objects=[wall], spp=16)
-    raw = _render_raw(mi, config)
+    raw = _render_raw(mi, config, port_model)
     cam, prt = config.camera, config.port
     rays = cam.captured_rays()
     trace = prt.trace_from_air(rays.origins_cam, rays.directions_cam)

@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulator.config import load_scene
-from simulator.render import render_bands
-from simulator.scene import build_scene
-from simulator.sensor import plenoptic_sensor_dict
+from simulator.config import RenderSettings, load_scene
+from simulator.job import render_raw
 from tests.tolerances import (
     MICRO_IMAGE_CENTRE_MAX_PX,
     MICRO_IMAGE_CENTRE_RMS_PX,
@@ -33,20 +31,8 @@ def micro_image_centroids(raw: np.ndarray, predicted_px: np.ndarray, radius_px: 
 
 @pytest.fixture(scope="module")
 def white(mi):
-    config = load_scene("scenes/white.toml")
-    camera = config.camera
-    scene = build_scene(mi, config)
-    raw = render_bands(
-        mi,
-        scene,
-        lambda crop: plenoptic_sensor_dict(mi, camera, config.pose, spp=64, crop=crop),
-        camera.sensor.width_px,
-        camera.sensor.height_px,
-        spp=64,
-        seed=0,
-        progress=False,
-    )
-    return camera, raw.mean(axis=2)
+    config = load_scene("scenes/white.toml").with_overrides(render=RenderSettings(spp=64, seed=0))
+    return config.camera, render_raw(mi, config, progress=False).mean(axis=2)
 
 
 def test_micro_image_centres_match_model(white):
