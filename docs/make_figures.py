@@ -24,7 +24,7 @@ from lfrefract import camera_preset
 from lfrefract.io import read_exr, read_json
 from simulator.config import RenderSettings, embedded_scenes, load_scene
 from simulator.job import render_job
-from simulator.previews import display_rgb
+from simulator.previews import display_rgb, white_level
 
 FIGURES = Path(__file__).resolve().parent / "figures"
 
@@ -55,14 +55,14 @@ def main() -> None:
         lenses = np.load(Path(tmp) / "white" / "lenses.npz")
         meta = read_json(Path(tmp) / "scene" / "meta.json")
 
-    white_level = float(np.percentile(raw, 99.5))
+    level = white_level(raw)
     h, w = raw.shape[:2]
     half = int(12 * camera.micro_image_pitch_px)
     crop = _crop(raw, (h // 2, w // 2), half)
-    plt.imsave(FIGURES / "raw_crop.png", display_rgb(crop, white=white_level))
-    step = max(1, int(np.ceil(max(h, w) / 1200)))
+    plt.imsave(FIGURES / "raw_crop.png", display_rgb(crop, white=level))
+    step = max(1, int(np.ceil(max(h, w) / 800)))
     small = raw[: h // step * step, : w // step * step].reshape(h // step, step, w // step, step, 3).mean(axis=(1, 3))
-    plt.imsave(FIGURES / "raw_full.png", display_rgb(small, white=white_level))
+    plt.imsave(FIGURES / "raw_full.png", display_rgb(small, white=level))
     plt.imsave(FIGURES / "ideal.png", display_rgb(ideal))
 
     fig, ax = plt.subplots(figsize=(5.5, 5.0), dpi=110)
@@ -88,13 +88,15 @@ def main() -> None:
     sel = (np.abs(centres[:, 0] - corner[1]) < wh) & (np.abs(centres[:, 1] - corner[0]) < wh)
     ax.plot(centres[sel, 0], centres[sel, 1], "r+", ms=9, label="micro-image centre (model)")
     ax.plot(lens_px[sel, 0], lens_px[sel, 1], "c.", ms=5, label="below the lens centre")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.set_xlim(corner[1] - wh - 0.5, corner[1] + wh - 0.5)
+    ax.set_ylim(corner[0] + wh - 0.5, corner[0] - wh - 0.5)
+    ax.legend(loc="lower right", fontsize=8, framealpha=0.9)
     ax.set_title(f"white image, {args.camera}, near the top-left corner")
     fig.savefig(FIGURES / "white_crop.png", bbox_inches="tight")
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 3, figsize=(12, 4.2), dpi=100)
-    axes[0].imshow(display_rgb(_crop(raw, (h // 2, w // 2), int(6 * camera.micro_image_pitch_px)), white=white_level))
+    axes[0].imshow(display_rgb(_crop(raw, (h // 2, w // 2), int(6 * camera.micro_image_pitch_px)), white=level))
     axes[0].set_title("raw lenslet image (centre crop)")
     axes[1].imshow(display_rgb(ideal))
     axes[1].set_title("ideal refraction-free image")

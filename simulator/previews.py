@@ -12,7 +12,7 @@ from lfrefract import LightFieldCamera
 mpl.use("Agg")
 import matplotlib.pyplot as plt
 
-__all__ = ["display_rgb", "write_all"]
+__all__ = ["display_rgb", "white_level", "write_all"]
 
 #: Longest side of the downsampled whole-raw preview, pixels.
 PREVIEW_MAX_SIDE_PX = 1600
@@ -23,12 +23,22 @@ CROP_MICRO_IMAGES = 24
 def display_rgb(image: np.ndarray, *, white: float | None = None) -> np.ndarray:
     """Linear radiance (H, W, 3) to display sRGB-ish uint8: scale to ``white``, clip, gamma 2.2.
 
-    ``white`` defaults to the 99.5th percentile of the finite values.
+    ``white`` defaults to :func:`white_level` of the image.
     """
     img = np.nan_to_num(np.asarray(image, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     if white is None:
-        white = float(np.percentile(img, 99.5)) or 1.0
+        white = white_level(img)
     return (np.clip(img / white, 0.0, 1.0) ** (1.0 / 2.2) * 255.0 + 0.5).astype(np.uint8)
+
+
+def white_level(image: np.ndarray, *, max_samples: int = 1_000_000) -> float:
+    """99.5th percentile of the finite values (on a regular subsample of at most ``max_samples``
+    pixels, so a 41 Mpx raw needs no full-size copy); 1.0 for an image with nothing above 0."""
+    step = max(1, int(np.sqrt(image.shape[0] * image.shape[1] / max_samples)))
+    sample = np.asarray(image[::step, ::step], dtype=np.float32)
+    sample = sample[np.isfinite(sample)]
+    level = float(np.percentile(sample, 99.5)) if sample.size else 0.0
+    return level if level > 0.0 else 1.0
 
 
 def _downsample(img: np.ndarray, max_side: int) -> np.ndarray:
@@ -44,7 +54,7 @@ def write_all(
 ) -> list[Path]:
     """Write ``raw.png``, ``raw_crop.png``, ``ideal.png`` and ``depth.png`` into ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
-    white = float(np.percentile(raw, 99.5)) or 1.0
+    white = white_level(raw)
     written = []
     plt.imsave(folder / "raw.png", display_rgb(_downsample(raw, PREVIEW_MAX_SIDE_PX), white=white))
     written.append(folder / "raw.png")

@@ -37,18 +37,23 @@ def _arrays(vec) -> np.ndarray:
     return np.asarray(vec, dtype=np.float64).T
 
 
+def _sample_random_paths(mi, sensor, camera, *, seed: int, count: int = 4000):
+    """Sample ``count`` paths at random film and aperture positions; return their inputs and rays."""
+    w, h = camera.sensor.width_px, camera.sensor.height_px
+    rng = np.random.default_rng(seed)
+    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], size=(count, 2))
+    aperture = rng.uniform(0.0, 1.0, size=(count, 2))
+    position = mi.Point2f(((uv[:, 0] + 0.5) / w).astype(np.float32), ((uv[:, 1] + 0.5) / h).astype(np.float32))
+    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(aperture[:, 0], aperture[:, 1]))
+    return uv, aperture, ray, weight
+
+
 @pytest.mark.parametrize("name", sorted(CAMERAS))
 @pytest.mark.parametrize("pose", [Pose(), POSE], ids=["identity", "posed"])
 def test_plenoptic_sensor_matches_numpy_rays(mi, name, pose):
     camera = CAMERAS[name]
     sensor = mi.load_dict(plenoptic_sensor_dict(mi, camera, pose, spp=1))
-    w, h = camera.sensor.width_px, camera.sensor.height_px
-    rng = np.random.default_rng(1)
-    n = 4000
-    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], size=(n, 2))
-    aperture = rng.uniform(0.0, 1.0, size=(n, 2))
-    position = mi.Point2f(((uv[:, 0] + 0.5) / w).astype(np.float32), ((uv[:, 1] + 0.5) / h).astype(np.float32))
-    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(aperture[:, 0], aperture[:, 1]))
+    uv, aperture, ray, weight = _sample_random_paths(mi, sensor, camera, seed=1)
 
     expected = camera.rays_through_lenses(uv, lens_offsets_m=camera.mla.cell_offsets_m(aperture))
     origins_world = pose.to_world(expected.origins_cam)
@@ -112,13 +117,7 @@ def test_plenoptic_sensor_refracts_through_port_like_numpy(mi, tiny, thickness_m
     """The ``sensor`` port model: rays leave the water face as lfrefract's port trace says."""
     port = FlatPort.from_degrees(distance_m=0.015, thickness_m=thickness_m, tilt_x_deg=28.0, tilt_y_deg=-9.0)
     sensor = mi.load_dict(plenoptic_sensor_dict(mi, tiny, POSE, spp=1, port=port))
-    w, h = tiny.sensor.width_px, tiny.sensor.height_px
-    rng = np.random.default_rng(4)
-    n = 4000
-    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], size=(n, 2))
-    aperture = rng.uniform(0.0, 1.0, size=(n, 2))
-    position = mi.Point2f(((uv[:, 0] + 0.5) / w).astype(np.float32), ((uv[:, 1] + 0.5) / h).astype(np.float32))
-    ray, weight = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(aperture[:, 0], aperture[:, 1]))
+    uv, aperture, ray, weight = _sample_random_paths(mi, sensor, tiny, seed=4)
 
     air = tiny.rays_through_lenses(uv, lens_offsets_m=tiny.mla.cell_offsets_m(aperture))
     water = port.trace_from_air(air.origins_cam, air.directions_cam)
