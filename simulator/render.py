@@ -81,4 +81,7 @@ def render_bands(
             out[y0 : y0 + h] = np.asarray(image, dtype=np.float32)[:, :, :3]
             del image, sensor
             bar.update(h)
+    import drjit as dr
+
+    dr.flush_malloc_cache()  # hand the band buffers back before the caller writes files
     return out
