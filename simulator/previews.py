@@ -49,6 +49,16 @@ def _downsample(img: np.ndarray, max_side: int) -> np.ndarray:
     return img[:h, :w].reshape(h // step, step, w // step, step, -1).mean(axis=(1, 3))
 
 
+#: Smallest side of a preview of a small image (the tiny camera's ideal image is 92 x 69 px).
+PREVIEW_MIN_SIDE_PX = 400
+
+
+def _enlarge(img: np.ndarray, min_side: int = PREVIEW_MIN_SIDE_PX) -> np.ndarray:
+    """Nearest-neighbour enlargement by a whole factor so the shorter side reaches ``min_side``."""
+    factor = int(np.ceil(min_side / min(img.shape[:2])))
+    return img if factor <= 1 else np.repeat(np.repeat(img, factor, axis=0), factor, axis=1)
+
+
 def write_all(
     folder: Path, *, raw: np.ndarray, ideal: np.ndarray, depth_m: np.ndarray, camera: LightFieldCamera
 ) -> list[Path]:
@@ -63,7 +73,7 @@ def write_all(
     crop = raw[max(0, cy - half) : cy + half, max(0, cx - half) : cx + half]
     plt.imsave(folder / "raw_crop.png", display_rgb(crop, white=white))
     written.append(folder / "raw_crop.png")
-    plt.imsave(folder / "ideal.png", display_rgb(ideal))
+    plt.imsave(folder / "ideal.png", _enlarge(display_rgb(ideal)))
     written.append(folder / "ideal.png")
     fig, ax = plt.subplots(figsize=(6, 6 * depth_m.shape[0] / depth_m.shape[1] + 0.6), dpi=120)
     finite = np.isfinite(depth_m)

@@ -12,6 +12,7 @@ LIGHTS = [
 
 def scene(
     *,
+    base_dir=".",
     port: dict | None,
     objects: list[dict],
     lights: list[dict] | None = None,
@@ -19,7 +20,10 @@ def scene(
     seed: int = 0,
     camera: str = "tiny",
 ) -> SceneConfig:
-    """A scene with the given port table (None: no port), objects and (default) point lights."""
+    """A scene with the given port table (None: no port), objects and (default) point lights.
+
+    Relative mesh paths are resolved against ``base_dir``.
+    """
     data = {
         "camera": {"preset": camera},
         "render": {"spp": spp, "seed": seed},
@@ -28,7 +32,7 @@ def scene(
     }
     if port is not None:
         data["port"] = port
-    return parse_scene(data, source="<test>")
+    return parse_scene(data, base_dir=base_dir, source="<test>")
 
 
 def port(tilt_x_deg: float = 0.0, tilt_y_deg: float = 0.0, thickness_m: float = 0.006) -> dict:

@@ -86,3 +86,26 @@ def test_lens_table_lists_every_micro_image_on_the_sensor(tiny):
     uv = np.stack(np.meshgrid(np.arange(20, 460, 7), np.arange(20, 340, 7)), axis=-1).reshape(-1, 2)
     own = {tuple(i) for i in tiny.lens_indices_for_pixels(uv)}
     assert own <= {tuple(i) for i in table["lens_index"]}
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_user_mesh_is_placed_and_scaled(mi, tmp_path, suffix):
+    """A user mesh file (a 2 x 2 square, scaled to 0.2 m and placed at z = 0.4 m) lands in the depth map."""
+    vertices = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    path = tmp_path / f"square{suffix}"
+    if suffix == ".ply":
+        assets.write_ply(path, vertices, faces)
+    else:
+        lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+        path.write_text("\n".join(lines) + "\n")
+    mesh = {"type": "mesh", "path": path.name, "position_m": [0.05, 0.0, 0.4], "scale": 0.1}
+    config = scene(port=None, objects=[mesh], base_dir=tmp_path)
+    depth = groundtruth.depth_map(mi, build_scene(mi, config, port_geometry=False), BIG, Pose())
+    hit = np.isfinite(depth)
+    np.testing.assert_allclose(depth[hit], 0.4, rtol=DEPTH_FLOAT32_RELATIVE)
+    # The square spans x in [-0.05, 0.15] m at z = 0.4 m: its image columns follow from K.
+    cols = np.flatnonzero(hit.any(axis=0))
+    expected = BIG.project(np.array([[-0.05, 0.0, 0.4], [0.15, 0.0, 0.4]]))[:, 0]
+    assert abs(cols.min() - expected[0]) <= 1
+    assert abs(cols.max() - expected[1]) <= 1
