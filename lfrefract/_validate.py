@@ -22,6 +22,7 @@ __all__ = [
     "positive_float",
     "positive_int",
     "reject_unknown_keys",
+    "require_keys",
 ]
 
 
@@ -103,3 +104,10 @@ def reject_unknown_keys(where: str, data: dict, allowed: set[str] | frozenset[st
     unknown = sorted(set(data) - set(allowed))
     if unknown:
         raise ParameterError(f"unknown key(s) in {where}: {unknown}; allowed: {sorted(allowed)}")
+
+
+def require_keys(where: str, data: dict, required: set[str] | frozenset[str]) -> None:
+    """Raise if ``data`` lacks any of ``required``; ``where`` names the table or object."""
+    missing = sorted(set(required) - set(data))
+    if missing:
+        raise ParameterError(f"missing key(s) in {where}: {missing}")

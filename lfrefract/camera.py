@@ -35,6 +35,7 @@ from lfrefract._validate import (
     positive_float,
     positive_int,
     reject_unknown_keys,
+    require_keys,
 )
 
 __all__ = [
@@ -332,7 +333,7 @@ class LightFieldCamera:
         ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="xy")
         idx = np.stack([ii.ravel(), jj.ravel()], axis=1)
         centres = self.mla.centres_m(idx) * self.micro_image_scale
-        # A centre exactly on the border of the pixel area counts as on the sensor.
+        # A centre counts as on the sensor when it lies within the outermost pixel centres.
         pitch = self.sensor.pixel_pitch_m
         inside = (np.abs(centres[:, 0]) <= half_w - pitch / 2) & (np.abs(centres[:, 1]) <= half_h - pitch / 2)
         return idx[inside].astype(np.int64)
@@ -431,10 +432,13 @@ class LightFieldCamera:
         """Inverse of :meth:`to_dict`; unknown keys are an error."""
         data = dict(data)
         reject_unknown_keys("camera", data, {"name", "focal_length_m", "lens_to_mla_m", "f_number", "mla", "sensor"})
+        require_keys("camera", data, {"focal_length_m", "lens_to_mla_m", "f_number", "mla", "sensor"})
         mla = dict(data.pop("mla"))
         reject_unknown_keys("camera.mla", mla, {"grid", "pitch_m", "focal_length_m", "rotation_rad", "offset_m"})
+        require_keys("camera.mla", mla, {"grid", "pitch_m", "focal_length_m"})
         sensor = dict(data.pop("sensor"))
         reject_unknown_keys("camera.sensor", sensor, {"width_px", "height_px", "pixel_pitch_m"})
+        require_keys("camera.sensor", sensor, {"width_px", "height_px", "pixel_pitch_m"})
         if "offset_m" in mla:
             mla["offset_m"] = tuple(mla["offset_m"])
         return cls(mla=MicrolensArray(**mla), sensor=SensorGeometry(**sensor), **data)

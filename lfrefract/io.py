@@ -133,6 +133,9 @@ def read_exr(path: str | os.PathLike, *, role: str | None = None) -> np.ndarray:
             channels = {name: np.array(ch.pixels) for name, ch in exr.channels().items()}
     except (RuntimeError, ValueError, OSError) as exc:
         raise FileFormatError(f"{str(path)!r} is not a readable OpenEXR file: {exc}") from None
+    version = header.get(_SCHEMA_KEY)
+    if version is not None and version != str(SCHEMA_VERSION):
+        raise FileFormatError(f"{str(path)!r} has schema version {version!r}, this lfrefract reads {SCHEMA_VERSION}")
     if role is not None and header.get(_ROLE_KEY) != role:
         raise FileFormatError(f"{str(path)!r} holds a {header.get(_ROLE_KEY)!r} image, expected {role!r}")
     names = sorted(channels)
@@ -207,13 +210,22 @@ def staged_directory(out_dir: str | os.PathLike, *, overwrite: bool = False) -> 
     Raises
     ------
     FileExistsError
-        If ``out_dir`` exists, is not empty and ``overwrite`` is False.
+        If ``out_dir`` exists and is not empty, unless ``overwrite`` is given and it is an
+        earlier output of this package (it holds a readable ``meta.json`` sidecar): a directory
+        of anything else is never deleted.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"output {str(out)!r} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"output directory {str(out)!r} is not empty (pass overwrite to replace it)")
+    if out.is_dir() and any(out.iterdir()):
+        if not overwrite:
+            raise FileExistsError(f"output directory {str(out)!r} is not empty (pass overwrite to replace it)")
+        try:
+            read_json(out / "meta.json")
+        except FileFormatError:
+            raise FileExistsError(
+                f"output directory {str(out)!r} is not empty and holds no lfrefract meta.json: refusing to replace it"
+            ) from None
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     try:

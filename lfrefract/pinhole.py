@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfrefract._validate import ParameterError, as_points, finite_float, positive_float, positive_int
+from lfrefract._validate import ParameterError, as_points, finite_float, positive_float, positive_int, require_keys
 from lfrefract.camera import LightFieldCamera
 
 __all__ = ["DEFAULT_PIXELS_PER_LENS", "PinholeCamera", "virtual_camera_for"]
@@ -69,7 +69,8 @@ class PinholeCamera:
     @classmethod
     def from_dict(cls, data: dict) -> PinholeCamera:
         """Inverse of :meth:`to_dict`."""
-        return cls.from_K(np.asarray(data["K"]), int(data["width_px"]), int(data["height_px"]))
+        require_keys("pinhole", data, {"K", "width_px", "height_px"})
+        return cls.from_K(np.asarray(data["K"]), data["width_px"], data["height_px"])
 
     def project(self, points_cam: np.ndarray) -> np.ndarray:
         """Project camera-frame points (N, 3) to pixels (N, 2); points with z <= 0 give NaN."""

@@ -29,9 +29,11 @@ from lfrefract._validate import (
     ParameterError,
     as_points,
     finite_float,
+    finite_vector,
     non_negative_float,
     positive_float,
     reject_unknown_keys,
+    require_keys,
 )
 
 __all__ = ["FlatPort", "PortTrace", "fresnel_transmittance", "refract"]
@@ -58,8 +60,16 @@ def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: fl
     """
     d = np.asarray(directions, dtype=np.float64)
     nrm = np.broadcast_to(np.asarray(normals, dtype=np.float64), d.shape)
-    eta = n_from / n_to
     cos_i = np.sum(d * nrm, axis=1)
+    if np.any(cos_i < -1e-12):
+        raise ParameterError(
+            f"normals must be oriented along the travel (normals . directions >= 0), got {float(cos_i.min())!r}"
+        )
+    return _refract(d, nrm, cos_i, n_from / n_to)
+
+
+def _refract(d: np.ndarray, nrm: np.ndarray, cos_i: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Snell's law for unit ``d`` (N, 3), normals ``nrm`` along the travel, ``eta = n_from / n_to``."""
     sin2_t = eta**2 * np.maximum(0.0, 1.0 - cos_i**2)
     tir = sin2_t > 1.0
     cos_t = np.sqrt(np.where(tir, np.nan, 1.0 - sin2_t))
@@ -87,11 +97,11 @@ class PortTrace:
 
     Attributes
     ----------
-    entry_points : ndarray, shape (N, 3)
+    entry_points_cam : ndarray, shape (N, 3)
         Where each ray meets the first face it crosses.
-    exit_points : ndarray, shape (N, 3)
-        Where it leaves the last face (equal to ``entry_points`` for a single interface).
-    directions : ndarray, shape (N, 3)
+    exit_points_cam : ndarray, shape (N, 3)
+        Where it leaves the last face (equal to ``entry_points_cam`` for a single interface).
+    directions_cam : ndarray, shape (N, 3)
         Unit directions after the last face.
     transmittance : ndarray, shape (N,)
         Product of the unpolarised Fresnel transmittances of the faces (0 where invalid).
@@ -103,9 +113,9 @@ class PortTrace:
     Invalid rays (``misses | tir``) have NaN points and directions.
     """
 
-    entry_points: np.ndarray
-    exit_points: np.ndarray
-    directions: np.ndarray
+    entry_points_cam: np.ndarray
+    exit_points_cam: np.ndarray
+    directions_cam: np.ndarray
     transmittance: np.ndarray
     misses: np.ndarray
     tir: np.ndarray
@@ -208,6 +218,7 @@ class FlatPort:
         """
         data = dict(data)
         derived = {k: data.pop(k) for k in ("normal", "total_tilt_deg") if k in data}
+        require_keys("port", data, {"distance_m"})
         keys = {"distance_m", "thickness_m", "n_air", "n_glass", "n_water"}
         if any(k.endswith("_deg") for k in data):
             reject_unknown_keys("port", data, keys | {"tilt_x_deg", "tilt_y_deg"})
@@ -215,10 +226,19 @@ class FlatPort:
         else:
             reject_unknown_keys("port", data, keys | {"tilt_x_rad", "tilt_y_rad"})
             port = cls(**data)
-        if "normal" in derived and not np.allclose(port.normal, derived["normal"], atol=1e-9):
-            raise ParameterError(
-                f"port.normal={derived['normal']!r} disagrees with the tilt angles ({port.normal.tolist()})"
-            )
+        if "normal" in derived:
+            normal = finite_vector("port.normal", derived["normal"], 3)
+            if not np.allclose(port.normal, normal, atol=1e-9):
+                raise ParameterError(
+                    f"port.normal={list(normal)} disagrees with the tilt angles ({port.normal.tolist()})"
+                )
+        if "total_tilt_deg" in derived:
+            tilt = finite_float("port.total_tilt_deg", derived["total_tilt_deg"])
+            if not math.isclose(tilt, math.degrees(port.total_tilt_rad), abs_tol=1e-9):
+                raise ParameterError(
+                    f"port.total_tilt_deg={tilt!r} disagrees with the tilt angles "
+                    f"({math.degrees(port.total_tilt_rad)!r})"
+                )
         return port
 
     def to_dict(self) -> dict:
@@ -279,49 +299,51 @@ class FlatPort:
         return (self.distance_m - reach) / n[2]
 
     # ----------------------------------------------------------------- tracing
-    def trace_from_air(self, origins: np.ndarray, directions: np.ndarray) -> PortTrace:
+    def trace_from_air(self, origins_cam: np.ndarray, directions_cam: np.ndarray) -> PortTrace:
         """Trace rays that start on the camera side out through the port into the water.
 
         Parameters
         ----------
-        origins : array_like, shape (N, 3)
+        origins_cam : array_like, shape (N, 3)
             Ray origins, camera frame, metres, on the camera side of the port.
-        directions : array_like, shape (N, 3)
-            Unit directions.
+        directions_cam : array_like, shape (N, 3)
+            Unit directions, camera frame.
 
         Returns
         -------
         PortTrace
-            ``directions`` are the water-side directions; ``exit_points`` lie on the water face.
+            ``directions_cam`` are the water-side directions; ``exit_points_cam`` lie on the water face.
         """
-        return self._trace(origins, directions, into_water=True)
+        return self._trace(origins_cam, directions_cam, into_water=True)
 
-    def trace_from_water(self, points: np.ndarray, directions: np.ndarray) -> PortTrace:
+    def trace_from_water(self, points_cam: np.ndarray, directions_cam: np.ndarray) -> PortTrace:
         """Trace light that travels from the water towards the camera back into the air.
 
         Parameters
         ----------
-        points : array_like, shape (N, 3)
+        points_cam : array_like, shape (N, 3)
             Points in the water (or on the water-side face), camera frame, metres.
-        directions : array_like, shape (N, 3)
-            Unit directions of travel, towards the port (``n . d < 0``).
+        directions_cam : array_like, shape (N, 3)
+            Unit directions of travel, camera frame, towards the port (``n . d < 0``).
 
         Returns
         -------
         PortTrace
-            ``directions`` are the air-side directions; ``exit_points`` lie on the air face.
+            ``directions_cam`` are the air-side directions; ``exit_points_cam`` lie on the air face.
         """
-        return self._trace(points, directions, into_water=False)
+        return self._trace(points_cam, directions_cam, into_water=False)
 
-    def _trace(self, origins: np.ndarray, directions: np.ndarray, *, into_water: bool) -> PortTrace:
-        o = as_points("origins", origins, 3)
-        d = as_points("directions", directions, 3)
+    def _trace(self, origins_cam: np.ndarray, directions_cam: np.ndarray, *, into_water: bool) -> PortTrace:
+        o = as_points("origins_cam", origins_cam, 3)
+        d = as_points("directions_cam", directions_cam, 3)
         if o.shape != d.shape:
-            raise ParameterError(f"origins and directions must have the same shape, got {o.shape} and {d.shape}")
+            raise ParameterError(
+                f"origins_cam and directions_cam must have the same shape, got {o.shape} and {d.shape}"
+            )
         norms = np.linalg.norm(d, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-6):
             worst = float(norms[np.argmax(np.abs(norms - 1.0))])
-            raise ParameterError(f"directions must be unit vectors, got a norm of {worst!r}")
+            raise ParameterError(f"directions_cam must be unit vectors, got a norm of {worst!r}")
         n = self.normal
         faces = self.faces if into_water else [(off, b, a) for off, a, b in reversed(self.faces)]
         travel_normal = n if into_water else -n
@@ -342,16 +364,16 @@ class FlatPort:
                     entry = point.copy()
                 cos_i = direction @ travel_normal
                 transmittance *= fresnel_transmittance(cos_i, n_from, n_to)
-                direction, tir_here = refract(direction, travel_normal, n_from, n_to)
+                direction, tir_here = _refract(direction, travel_normal, cos_i, n_from / n_to)
                 tir |= tir_here
         bad = misses | tir
         for arr in (entry, point, direction):
             arr[bad] = np.nan
         transmittance[bad] = 0.0
         return PortTrace(
-            entry_points=entry,
-            exit_points=point,
-            directions=direction,
+            entry_points_cam=entry,
+            exit_points_cam=point,
+            directions_cam=direction,
             transmittance=transmittance,
             misses=misses,
             tir=tir & ~misses,

@@ -134,8 +134,8 @@ def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return obj.placement.to_world(v), f, n @ rot.T
 
 
-def _object_dict(mi: ModuleType, obj: SceneObject, index: int):
-    name = f"object_{index}"
+def _object_dict(mi: ModuleType, config: SceneConfig, index: int):
+    obj = config.objects[index]
     if isinstance(obj, TexturedPlane):
         tex = _random_texture(obj.texture_px, obj.texture_seed)
         return {
@@ -162,16 +162,32 @@ def _object_dict(mi: ModuleType, obj: SceneObject, index: int):
         return out
     if isinstance(obj, (Bowl, Figurine)):
         v, f, n = _mesh_in_world(obj)
-        return _mesh(mi, name, v, f, n, _diffuse(obj.reflectance))
+        return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance))
     if isinstance(obj, MeshFile):
-        m = obj.placement.matrix @ np.diag([obj.scale, obj.scale, obj.scale, 1.0])
-        return {
-            "type": obj.path.suffix.lower()[1:],
-            "filename": str(obj.path),
-            "to_world": mi.ScalarTransform4f(m.tolist()),
-            "bsdf": _diffuse(obj.reflectance),
-        }
+        return _load_mesh_file(mi, config, index)
     raise TypeError(f"unknown scene object {obj!r}")
+
+
+def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int):
+    """Load a user OBJ/PLY mesh and check every vertex against the port (its extent is only
+    known once loaded)."""
+    import drjit as dr
+
+    obj = config.objects[index]
+    m = obj.placement.matrix @ np.diag([obj.scale, obj.scale, obj.scale, 1.0])
+    spec = {
+        "type": obj.path.suffix.lower()[1:],
+        "filename": str(obj.path),
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+        "bsdf": _diffuse(obj.reflectance),
+    }
+    try:
+        shape = mi.load_dict(spec)
+    except RuntimeError as exc:
+        raise ParameterError(f"object[{index}] (mesh): cannot load {str(obj.path)!r}: {exc}") from None
+    vertices = np.asarray(dr.unravel(mi.Point3f, mi.traverse(shape)["vertex_positions"]), dtype=np.float64).T
+    _require_water_side(config, vertices, f"object[{index}] (mesh {obj.path.name})")
+    return shape
 
 
 def integrator(port: FlatPort | None) -> dict:
@@ -224,8 +240,8 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
             }
         elif isinstance(light, ConstantLight):
             scene[f"light_{i}"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(light.radiance)}}
-    for i, obj in enumerate(config.objects):
-        scene[f"object_{i}"] = _object_dict(mi, obj, i)
+    for i in range(len(config.objects)):
+        scene[f"object_{i}"] = _object_dict(mi, config, i)
     return mi.load_dict(scene)
 
 
@@ -234,7 +250,7 @@ def object_sample_points(obj: SceneObject) -> np.ndarray:
     """World points (N, 3) on an object's extent, used to check which side of the port it is on.
 
     Planes and discs give their outline, procedural meshes their vertices, and mesh files their
-    placement centre (their extent is only known to Mitsuba).
+    placement centre (their vertices are checked when Mitsuba loads them).
     """
     if isinstance(obj, (TexturedPlane, Chessboard)):
         if isinstance(obj, TexturedPlane):
@@ -260,6 +276,22 @@ def _captured_sample(camera: LightFieldCamera, count: int = 64) -> np.ndarray:
     return np.stack([uu.ravel(), vv.ravel()], axis=1)
 
 
+def _require_water_side(config: SceneConfig, points_world: np.ndarray, what: str) -> None:
+    """Raise unless every world point lies beyond the port's water face (no port: no-op)."""
+    port = config.port
+    if port is None:
+        return
+    water_face = port.distance_m + port.thickness_m
+    points_cam = config.pose.to_camera(points_world)
+    bad = points_cam @ port.normal <= water_face
+    if np.any(bad):
+        p = points_cam[bad][0]
+        raise ParameterError(
+            f"{what} reaches the camera side of the port: camera-frame point {np.round(p, 4).tolist()} m has "
+            f"n.X = {p @ port.normal:.4f} m <= {water_face:.4f} m (water face); objects and lights must be in the water"
+        )
+
+
 def check_geometry(config: SceneConfig) -> dict:
     """Check that the scene is physically possible; return figures for the sidecar.
 
@@ -274,7 +306,7 @@ def check_geometry(config: SceneConfig) -> dict:
     dict
         ``tir_fraction`` and ``port_clearance_m`` (None without a port).
     """
-    port, camera, pose = config.port, config.camera, config.pose
+    port, camera = config.port, config.camera
     if port is None:
         return {"tir_fraction": None, "port_clearance_m": None}
     clearance = port.clearance_m(camera.aperture_radius_m)
@@ -286,28 +318,15 @@ def check_geometry(config: SceneConfig) -> dict:
     rays = camera.captured_rays(_captured_sample(camera))
     trace = port.trace_from_air(rays.origins_cam[rays.in_aperture], rays.directions_cam[rays.in_aperture])
     if not np.any(trace.valid):
+        why = "totally internally reflected" if np.any(trace.tir) else "turned away from"
         raise ParameterError(
-            f"every captured ray is totally internally reflected by the port (n_air={port.n_air}, "
-            f"n_glass={port.n_glass}, n_water={port.n_water}, tilt {np.degrees(port.total_tilt_rad):.2f} deg)"
+            f"every captured ray is {why} by the port (n_air={port.n_air}, n_glass={port.n_glass}, "
+            f"n_water={port.n_water}, tilt {np.degrees(port.total_tilt_rad):.2f} deg): "
+            f"{int(trace.tir.sum())} TIR, {int(trace.misses.sum())} never reach it"
         )
-    water_face = port.distance_m + port.thickness_m
-    n = port.normal
-
-    def on_water_side(points_world: np.ndarray) -> np.ndarray:
-        return pose.to_camera(points_world) @ n > water_face
-
     for i, obj in enumerate(config.objects):
-        pts = object_sample_points(obj)
-        bad = ~on_water_side(pts)
-        if np.any(bad):
-            p = pose.to_camera(pts[bad][:1])[0]
-            raise ParameterError(
-                f"object[{i}] ({type(obj).__name__}) reaches the camera side of the port: camera-frame point "
-                f"{np.round(p, 4).tolist()} m has n.X = {p @ n:.4f} m <= {water_face:.4f} m (water face)"
-            )
+        _require_water_side(config, object_sample_points(obj), f"object[{i}] ({type(obj).__name__})")
     for i, light in enumerate(config.lights):
-        if isinstance(light, PointLight) and not on_water_side(np.asarray([light.position_m]))[0]:
-            raise ParameterError(
-                f"light[{i}] at position_m={list(light.position_m)} is not in the water (beyond the port)"
-            )
+        if isinstance(light, PointLight):
+            _require_water_side(config, np.asarray([light.position_m]), f"light[{i}] (point)")
     return {"tir_fraction": float(np.mean(trace.tir)), "port_clearance_m": float(clearance)}

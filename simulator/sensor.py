@@ -22,11 +22,22 @@ from lfrefract import FlatPort, LightFieldCamera, MicrolensArray, PinholeCamera,
 __all__ = ["pinhole_sensor_dict", "plenoptic_sensor_dict", "register"]
 
 PLENOPTIC = "lfsim_plenoptic"
-_PORT_FIELDS = ("distance_m", "thickness_m", "tilt_x_rad", "tilt_y_rad", "n_air", "n_glass", "n_water")
+_CAMERA_PROPS = (
+    "focal_length_m",
+    "lens_to_mla_m",
+    "f_number",
+    "mla_pitch_m",
+    "mla_focal_length_m",
+    "mla_rotation_rad",
+    "mla_offset_x_m",
+    "mla_offset_y_m",
+    "pixel_pitch_m",
+)
+_PORT_PROPS = ("distance_m", "thickness_m", "tilt_x_rad", "tilt_y_rad", "n_air", "n_glass", "n_water")
 PINHOLE = "lfsim_pinhole"
 
 
-def _film(mi: ModuleType, width: int, height: int, crop: tuple[int, int, int, int] | None) -> dict:
+def _film(width: int, height: int, crop: tuple[int, int, int, int] | None) -> dict:
     film = {
         "type": "hdrfilm",
         "width": width,
@@ -64,10 +75,11 @@ def plenoptic_sensor_dict(
     mla = camera.mla
     port_props = {}
     if port is not None:
-        port_props = {f"port_{key}": float(getattr(port, key)) for key in _PORT_FIELDS}
+        port_props = {f"port_{key}": float(getattr(port, key)) for key in _PORT_PROPS}
     return {
         **port_props,
         "type": PLENOPTIC,
+        "camera_name": camera.name,
         "to_world": _to_world(mi, pose),
         "focal_length_m": camera.focal_length_m,
         "lens_to_mla_m": camera.lens_to_mla_m,
@@ -79,7 +91,7 @@ def plenoptic_sensor_dict(
         "mla_offset_x_m": mla.offset_m[0],
         "mla_offset_y_m": mla.offset_m[1],
         "pixel_pitch_m": camera.sensor.pixel_pitch_m,
-        "film": _film(mi, camera.sensor.width_px, camera.sensor.height_px, crop),
+        "film": _film(camera.sensor.width_px, camera.sensor.height_px, crop),
         "sampler": {"type": "independent", "sample_count": int(spp)},
     }
 
@@ -99,7 +111,7 @@ def pinhole_sensor_dict(
         "focal_px": pinhole.focal_px,
         "cx_px": pinhole.cx_px,
         "cy_px": pinhole.cy_px,
-        "film": _film(mi, pinhole.width_px, pinhole.height_px, crop),
+        "film": _film(pinhole.width_px, pinhole.height_px, crop),
         "sampler": {"type": "independent", "sample_count": int(spp)},
     }
 
@@ -141,33 +153,66 @@ def register(mi: ModuleType) -> None:
 
         Each sample picks a point in the pixel (film sample) and a point on the aperture of the
         microlens whose micro-image holds it (aperture sample, uniform over the lattice cell).
-        The path is bent by the thin microlens and the thin main lens. Paths that miss the
-        main-lens aperture get zero weight and a zero-length ray, so they cost no traversal.
-        The weight is 1 otherwise: pixel values are mean radiance, like Mitsuba's cameras.
+        The path is bent by the thin microlens and the thin main lens, and, with a port, refracted
+        through the port's faces. Paths that miss the main-lens aperture or the port, or are
+        totally internally reflected, get zero weight and a zero-length ray, so they cost no
+        traversal. Otherwise the weight is 1 (times the port's transmittance): pixel values are
+        mean radiance, like Mitsuba's cameras.
+
+        The parameters are validated by building the lfrefract types from the properties, but
+        every quantity used per sample (micro-image scale, aperture radius, lattice, port normal,
+        faces, radiance scale) is derived here again from the raw properties, so that this is an
+        independent implementation of the model that the tests compare with numpy's.
         """
 
         def __init__(self, props):
             _CameraSensor.__init__(self, props)
-            size = self.film().size()
+            width, height = self.film().size()
+            raw = {key: float(props[key]) for key in _CAMERA_PROPS}
+            grid = str(props["grid"])
             self.camera = LightFieldCamera(
-                focal_length_m=float(props["focal_length_m"]),
-                lens_to_mla_m=float(props["lens_to_mla_m"]),
-                f_number=float(props["f_number"]),
+                name=str(props["camera_name"]),
+                focal_length_m=raw["focal_length_m"],
+                lens_to_mla_m=raw["lens_to_mla_m"],
+                f_number=raw["f_number"],
                 mla=MicrolensArray(
-                    grid=str(props["grid"]),
-                    pitch_m=float(props["mla_pitch_m"]),
-                    focal_length_m=float(props["mla_focal_length_m"]),
-                    rotation_rad=float(props["mla_rotation_rad"]),
-                    offset_m=(float(props["mla_offset_x_m"]), float(props["mla_offset_y_m"])),
+                    grid=grid,
+                    pitch_m=raw["mla_pitch_m"],
+                    focal_length_m=raw["mla_focal_length_m"],
+                    rotation_rad=raw["mla_rotation_rad"],
+                    offset_m=(raw["mla_offset_x_m"], raw["mla_offset_y_m"]),
                 ),
-                sensor=SensorGeometry(
-                    width_px=int(size[0]), height_px=int(size[1]), pixel_pitch_m=float(props["pixel_pitch_m"])
-                ),
+                sensor=SensorGeometry(width_px=int(width), height_px=int(height), pixel_pitch_m=raw["pixel_pitch_m"]),
             )
             self.m_needs_sample_3 = True
-            self.port = None
+            self._f = raw["focal_length_m"]
+            self._f_prime = raw["lens_to_mla_m"]
+            self._f_mla = raw["mla_focal_length_m"]
+            self._pitch_px_m = raw["pixel_pitch_m"]
+            self._scale = (self._f_prime + self._f_mla) / self._f_prime
+            self._aperture_r2 = (self._f / (2.0 * raw["f_number"])) ** 2
+            self._offset = (raw["mla_offset_x_m"], raw["mla_offset_y_m"])
+            c, s = math.cos(raw["mla_rotation_rad"]), math.sin(raw["mla_rotation_rad"])
+            p = raw["mla_pitch_m"]
+            a2 = (0.5 * p, 0.5 * math.sqrt(3.0) * p) if grid == "hex" else (0.0, p)
+            # Lattice vectors a1 = R (p, 0), a2 = R a2_unrotated, and the inverse of [a1 a2].
+            self._a1 = (c * p, s * p)
+            self._a2 = (c * a2[0] - s * a2[1], s * a2[0] + c * a2[1])
+            det = self._a1[0] * self._a2[1] - self._a2[0] * self._a1[1]
+            self._inv = ((self._a2[1] / det, -self._a2[0] / det), (-self._a1[1] / det, self._a1[0] / det))
+            self._grid, self._rot_cs, self._pitch = grid, (c, s), p
+            self._port = None
             if "port_distance_m" in props:
-                self.port = FlatPort(**{key: float(props[f"port_{key}"]) for key in _PORT_FIELDS})
+                port = {key: float(props[f"port_{key}"]) for key in _PORT_PROPS}
+                FlatPort(**port)  # validation only
+                tx, ty = port["tilt_x_rad"], port["tilt_y_rad"]
+                normal = (math.sin(ty) * math.cos(tx), -math.sin(tx), math.cos(ty) * math.cos(tx))
+                d, t = port["distance_m"], port["thickness_m"]
+                if t > 0.0:
+                    faces = [(d, port["n_air"], port["n_glass"]), (d + t, port["n_glass"], port["n_water"])]
+                else:
+                    faces = [(d, port["n_air"], port["n_water"])]
+                self._port = (normal, faces, (port["n_air"] / port["n_water"]) ** 2)
 
         def through_port(self, origin, direction):
             """Refract camera-frame rays through the port's faces (Snell, vector form).
@@ -176,11 +221,11 @@ def register(mi: ModuleType) -> None:
             transmittances times ``(n_air / n_water)^2``, and whether the ray got through (it
             reaches the port and is not totally internally reflected).
             """
-            port = self.port
-            n = mi.Vector3f(*port.normal.tolist())
+            normal, faces, radiance_scale = self._port
+            n = mi.Vector3f(*normal)
             passed = dr.dot(direction, n) > 0.0
-            weight = mi.Float(port.radiance_scale)
-            for offset, n_from, n_to in port.faces:
+            weight = mi.Float(radiance_scale)
+            for offset, n_from, n_to in faces:
                 t = (offset - dr.dot(origin, n)) / dr.dot(direction, n)
                 origin = dr.fma(direction, t, origin)
                 cos_i = dr.dot(direction, n)
@@ -202,16 +247,16 @@ def register(mi: ModuleType) -> None:
             ``k`` and the first coordinate). The rotated vertices are precomputed, so no
             trigonometry runs per sample.
             """
-            mla = self.camera.mla
-            c, s = math.cos(mla.rotation_rad), math.sin(mla.rotation_rad)
-            if mla.grid == "square":
-                lx = (aperture_sample.x - 0.5) * mla.pitch_m
-                ly = (aperture_sample.y - 0.5) * mla.pitch_m
+            c, s = self._rot_cs
+            if self._grid == "square":
+                lx = (aperture_sample.x - 0.5) * self._pitch
+                ly = (aperture_sample.y - 0.5) * self._pitch
                 return mi.Vector2f(c * lx - s * ly, s * lx + c * ly)
-            radius = mla.pitch_m / math.sqrt(3.0)
+            radius = self._pitch / math.sqrt(3.0)
+            rotation = math.atan2(s, c)
             vertices = []
             for j in range(4):  # V[0], V[2], V[4], V[6] = V[0]
-                ang = mla.rotation_rad + math.pi / 6.0 + j * 2.0 * math.pi / 3.0
+                ang = rotation + math.pi / 6.0 + j * 2.0 * math.pi / 3.0
                 vertices.append(mi.Vector2f(radius * math.cos(ang), radius * math.sin(ang)))
             scaled = 3.0 * aperture_sample.x
             k = dr.minimum(dr.floor(scaled), 2.0)
@@ -220,47 +265,49 @@ def register(mi: ModuleType) -> None:
             return (scaled - k) * first + aperture_sample.y * second
 
         def nearest_lens_centre(self, point):
-            """Image-plane centre of the lattice point nearest to ``point`` (Vector2f)."""
-            mla = self.camera.mla
-            basis = mla.basis_m.tolist()
-            inv = np.linalg.inv(mla.basis_m).tolist()
-            rel = point - mi.Vector2f(*mla.offset_m)
-            fa = dr.floor(inv[0][0] * rel.x + inv[0][1] * rel.y)
-            fb = dr.floor(inv[1][0] * rel.x + inv[1][1] * rel.y)
+            """Image-plane centre of the lattice point nearest to ``point`` (Vector2f).
+
+            The nearest lattice point is a corner of the lattice cell (parallelogram) holding the
+            point, so the four corners are compared.
+            """
+            (i00, i01), (i10, i11) = self._inv
+            a1, a2 = self._a1, self._a2
+            rel = point - mi.Vector2f(*self._offset)
+            fa = dr.floor(i00 * rel.x + i01 * rel.y)
+            fb = dr.floor(i10 * rel.x + i11 * rel.y)
             best = mi.Vector2f(0.0)
             best_d2 = mi.Float(dr.inf)
             for da, db in ((0, 0), (1, 0), (0, 1), (1, 1)):
                 ia, ib = fa + da, fb + db
-                cand = mi.Vector2f(basis[0][0] * ia + basis[0][1] * ib, basis[1][0] * ia + basis[1][1] * ib)
+                cand = mi.Vector2f(a1[0] * ia + a2[0] * ib, a1[1] * ia + a2[1] * ib)
                 d2 = dr.squared_norm(cand - rel)
                 closer = d2 < best_d2
                 best = dr.select(closer, cand, best)
                 best_d2 = dr.select(closer, d2, best_d2)
-            return best + mi.Vector2f(*mla.offset_m)
+            return best + mi.Vector2f(*self._offset)
 
         def sample_ray(self, time, wavelength_sample, position_sample, aperture_sample, active=True):
-            cam = self.camera
             u, v, size = self._film_pixels(position_sample)
-            pitch = cam.sensor.pixel_pitch_m
+            pitch = self._pitch_px_m
             sensor_img = mi.Vector2f((u - 0.5 * (size.x - 1.0)) * pitch, (v - 0.5 * (size.y - 1.0)) * pitch)
-            centre_img = self.nearest_lens_centre(sensor_img / cam.micro_image_scale)
+            centre_img = self.nearest_lens_centre(sensor_img / self._scale)
             through_img = centre_img + self.sample_lens_offset(aperture_sample)
             # Image-plane -> camera frame: x = -xi, y = -eta.
-            slope_in = (sensor_img - centre_img) / cam.mla.focal_length_m
-            hit = -through_img + slope_in * cam.lens_to_mla_m
-            inside = dr.squared_norm(hit) <= cam.aperture_radius_m**2
-            slope_out = slope_in - hit / cam.focal_length_m
+            slope_in = (sensor_img - centre_img) / self._f_mla
+            hit = -through_img + slope_in * self._f_prime
+            inside = dr.squared_norm(hit) <= self._aperture_r2
+            slope_out = slope_in - hit / self._f
             direction = dr.normalize(mi.Vector3f(slope_out.x, slope_out.y, 1.0))
             origin = mi.Point3f(hit.x, hit.y, 0.0)
             weight = mi.Float(1.0)
-            if self.port is not None:
+            if self._port is not None:
                 origin, direction, weight, passed = self.through_port(origin, direction)
                 inside &= passed
             ray = self._ray(time, origin, direction, maxt=dr.select(inside, dr.largest(mi.Float), 0.0))
             return ray, mi.Spectrum(dr.select(inside & active, weight, 0.0))
 
         def to_string(self):
-            return f"PlenopticSensor[camera={self.camera!r}]"
+            return f"PlenopticSensor[camera={self.camera!r}, port={self._port!r}]"
 
     class PinholeSensor(_CameraSensor):
         """Ideal central projection with OpenCV intrinsics, centre at the main-lens centre."""

@@ -226,6 +226,7 @@ def test_staged_directory_overwrite_replaces(tmp_path):
     out = tmp_path / "run"
     out.mkdir()
     (out / "old.txt").write_text("old")
+    write_json(out / "meta.json", {"kind": "an earlier output"})
     with staged_directory(out, overwrite=True) as stage:
         (stage / "new.txt").write_text("new")
         assert (out / "old.txt").exists()  # the old output stays until the new one is complete
@@ -233,13 +234,24 @@ def test_staged_directory_overwrite_replaces(tmp_path):
     assert only_entry(tmp_path) == ["run"]
 
 
+def test_staged_directory_overwrite_refuses_a_foreign_directory(tmp_path):
+    out = tmp_path / "home"
+    out.mkdir()
+    (out / "thesis.tex").write_text("precious")
+    with pytest.raises(FileExistsError, match=r"holds no lfrefract meta\.json"), staged_directory(out, overwrite=True):
+        pass
+    assert only_entry(out) == ["thesis.tex"]
+    assert only_entry(tmp_path) == ["home"]
+
+
 def test_staged_directory_overwrite_keeps_old_output_on_failure(tmp_path):
     out = tmp_path / "run"
     out.mkdir()
     (out / "old.txt").write_text("old")
+    write_json(out / "meta.json", {"kind": "an earlier output"})
     with pytest.raises(KeyError):
         write_then_fail(out, KeyError("x"), overwrite=True)
-    assert only_entry(out) == ["old.txt"]
+    assert only_entry(out) == ["meta.json", "old.txt"]
     assert only_entry(tmp_path) == ["run"]
 
 

@@ -254,12 +254,12 @@ def test_equal_indices_leave_rays_unchanged():
     dirs = unit(np.concatenate([rng.uniform(-0.4, 0.4, (50, 2)), np.ones((50, 1))], axis=1))
     tr = port.trace_from_air(origins, dirs)
     assert tr.valid.all()
-    np.testing.assert_allclose(tr.directions, dirs, rtol=0, atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(tr.directions_cam, dirs, rtol=0, atol=FLOAT64_UNIT)
     n = port.normal
-    np.testing.assert_allclose(tr.entry_points @ n, 0.05, rtol=0, atol=FLOAT64_GEOMETRY_M)
-    np.testing.assert_allclose(tr.exit_points @ n, 0.06, rtol=0, atol=FLOAT64_GEOMETRY_M)
-    np.testing.assert_allclose(distance_point_to_line(tr.exit_points, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
-    np.testing.assert_allclose(distance_point_to_line(tr.entry_points, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.entry_points_cam @ n, 0.05, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.exit_points_cam @ n, 0.06, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(distance_point_to_line(tr.exit_points_cam, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(distance_point_to_line(tr.entry_points_cam, origins, dirs), 0.0, atol=FLOAT64_GEOMETRY_M)
     np.testing.assert_allclose(tr.transmittance, 1.0, rtol=0, atol=FLOAT64_UNIT)
 
 
@@ -289,23 +289,23 @@ def test_air_water_round_trip_is_reversible(thickness, tilt_x, tilt_y, origin_xy
 
     fwd = port.trace_from_air(origin, d)
     assert fwd.valid[0]
-    w = fwd.directions[0]
+    w = fwd.directions_cam[0]
     # Parallel faces: n_air sin(theta_air) = n_water sin(theta_water), the glass drops out.
     sin_air = np.linalg.norm(np.cross(d, n))
     sin_water = np.linalg.norm(np.cross(w, n))
     assert 1.0 * sin_air == pytest.approx(1.333 * sin_water, abs=FLOAT64_UNIT)
-    assert fwd.entry_points[0] @ n == pytest.approx(0.05, abs=FLOAT64_GEOMETRY_M)
-    assert fwd.exit_points[0] @ n == pytest.approx(0.05 + thickness, abs=FLOAT64_GEOMETRY_M)
-    assert distance_point_to_line(fwd.entry_points[0], origin, d) == pytest.approx(0.0, abs=FLOAT64_GEOMETRY_M)
+    assert fwd.entry_points_cam[0] @ n == pytest.approx(0.05, abs=FLOAT64_GEOMETRY_M)
+    assert fwd.exit_points_cam[0] @ n == pytest.approx(0.05 + thickness, abs=FLOAT64_GEOMETRY_M)
+    assert distance_point_to_line(fwd.entry_points_cam[0], origin, d) == pytest.approx(0.0, abs=FLOAT64_GEOMETRY_M)
 
     # Light from a point in the water along the reversed ray comes back along the air ray.
-    water_point = fwd.exit_points[0] + 0.3 * w
+    water_point = fwd.exit_points_cam[0] + 0.3 * w
     back = port.trace_from_water(water_point, -w)
     assert back.valid[0]
-    np.testing.assert_allclose(back.directions[0], -d, rtol=0, atol=FLOAT64_UNIT)
-    np.testing.assert_allclose(back.entry_points[0], fwd.exit_points[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
-    np.testing.assert_allclose(back.exit_points[0], fwd.entry_points[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
-    assert distance_point_to_line(origin, back.exit_points[0], back.directions[0]) == pytest.approx(
+    np.testing.assert_allclose(back.directions_cam[0], -d, rtol=0, atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(back.entry_points_cam[0], fwd.exit_points_cam[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(back.exit_points_cam[0], fwd.entry_points_cam[0], rtol=0, atol=FLOAT64_GEOMETRY_M)
+    assert distance_point_to_line(origin, back.exit_points_cam[0], back.directions_cam[0]) == pytest.approx(
         0.0, abs=FLOAT64_GEOMETRY_M
     )
     # Fresnel transmittance is reciprocal.
@@ -326,9 +326,9 @@ def test_normal_incidence_is_undeviated(thickness, tilt_x, tilt_y):
     )
     n = port.normal
     tr = port.trace_from_air(np.zeros(3), n)
-    np.testing.assert_allclose(tr.directions[0], n, rtol=0, atol=FLOAT64_UNIT)
-    np.testing.assert_allclose(tr.entry_points[0], 0.06 * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
-    np.testing.assert_allclose(tr.exit_points[0], (0.06 + thickness) * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.directions_cam[0], n, rtol=0, atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(tr.entry_points_cam[0], 0.06 * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.exit_points_cam[0], (0.06 + thickness) * n, rtol=0, atol=FLOAT64_GEOMETRY_M)
 
     def r(a, b):
         return ((a - b) / (a + b)) ** 2
@@ -357,8 +357,8 @@ def test_slab_lateral_shift_matches_textbook(theta_deg, azimuth, tilt_x, thickne
     # t sin(theta - theta_t) / cos(theta_t).
     theta_t = math.asin(math.sin(theta) / n_glass)
     shift = thickness * math.sin(theta - theta_t) / math.cos(theta_t)
-    np.testing.assert_allclose(tr.directions[0], d, rtol=0, atol=FLOAT64_UNIT)
-    assert distance_point_to_line(tr.exit_points[0], np.zeros(3), d) == pytest.approx(shift, abs=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(tr.directions_cam[0], d, rtol=0, atol=FLOAT64_UNIT)
+    assert distance_point_to_line(tr.exit_points_cam[0], np.zeros(3), d) == pytest.approx(shift, abs=FLOAT64_GEOMETRY_M)
 
 
 def test_rays_parallel_or_away_or_starting_beyond_the_port_miss():
@@ -372,7 +372,7 @@ def test_rays_parallel_or_away_or_starting_beyond_the_port_miss():
     np.testing.assert_array_equal(tr.misses, [False, True, True, True])
     np.testing.assert_array_equal(tr.tir, [False, False, False, False])
     np.testing.assert_array_equal(tr.valid, [True, False, False, False])
-    for arr in (tr.entry_points, tr.exit_points, tr.directions):
+    for arr in (tr.entry_points_cam, tr.exit_points_cam, tr.directions_cam):
         assert np.all(np.isfinite(arr[0]))
         assert np.all(np.isnan(arr[1:]))
     np.testing.assert_array_equal(tr.transmittance[1:], 0.0)
@@ -380,7 +380,7 @@ def test_rays_parallel_or_away_or_starting_beyond_the_port_miss():
     # From the water: light travelling away from the port (into the water) never reaches the camera.
     back = port.trace_from_water(np.stack([0.2 * n, 0.2 * n]), np.stack([-n, n]))
     np.testing.assert_array_equal(back.misses, [False, True])
-    assert np.all(np.isnan(back.directions[1]))
+    assert np.all(np.isnan(back.directions_cam[1]))
 
 
 @pytest.mark.parametrize("thickness", [0.0, 0.01])
@@ -393,16 +393,16 @@ def test_tir_is_reported_not_dropped(thickness):
     tr = port.trace_from_air(np.zeros((len(angles), 3)), dirs)
     expected_tir = np.array([1.5 * math.sin(math.radians(a)) > 1.0 for a in angles])
     np.testing.assert_array_equal(expected_tir, [False, False, False, True, True, True])
-    assert tr.directions.shape == (len(angles), 3)
+    assert tr.directions_cam.shape == (len(angles), 3)
     np.testing.assert_array_equal(tr.tir, expected_tir)
     np.testing.assert_array_equal(tr.misses, False)
     np.testing.assert_array_equal(tr.valid, ~expected_tir)
-    assert np.all(np.isnan(tr.directions[expected_tir]))
-    assert np.all(np.isnan(tr.exit_points[expected_tir]))
+    assert np.all(np.isnan(tr.directions_cam[expected_tir]))
+    assert np.all(np.isnan(tr.exit_points_cam[expected_tir]))
     np.testing.assert_array_equal(tr.transmittance[expected_tir], 0.0)
     assert np.all(tr.transmittance[~expected_tir] > 0.0)
     # The surviving rays obey Snell across the port.
-    sin_out = np.linalg.norm(np.cross(tr.directions[~expected_tir], n), axis=1)
+    sin_out = np.linalg.norm(np.cross(tr.directions_cam[~expected_tir], n), axis=1)
     np.testing.assert_allclose(sin_out, 1.5 * np.sin(np.radians(angles))[~expected_tir], rtol=0, atol=FLOAT64_UNIT)
 
 
@@ -418,7 +418,7 @@ def test_tir_inside_the_glass_from_the_water_side():
     tr = port.trace_from_water(np.tile(0.2 * n, (3, 1)), dirs)
     np.testing.assert_array_equal(tr.tir, [True, True, False])
     np.testing.assert_array_equal(tr.misses, False)
-    sin_air = np.linalg.norm(np.cross(tr.directions[2], n))
+    sin_air = np.linalg.norm(np.cross(tr.directions_cam[2], n))
     assert sin_air == pytest.approx(1.6 * 0.5, abs=FLOAT64_UNIT)
 
 
@@ -498,11 +498,11 @@ def test_to_dict_reports_normal_and_tilt():
 @pytest.mark.parametrize(
     ("origins", "directions", "pattern"),
     [
-        (np.zeros((2, 3)), np.tile([0.0, 0.0, 2.0], (2, 1)), "directions must be unit vectors, got a norm of"),
+        (np.zeros((2, 3)), np.tile([0.0, 0.0, 2.0], (2, 1)), "directions_cam must be unit vectors, got a norm of"),
         (np.zeros((2, 3)), np.tile([0.0, 0.0, 1.0], (3, 1)), "must have the same shape, got (2, 3) and (3, 3)"),
-        (np.zeros((2, 2)), np.tile([0.0, 0.0, 1.0], (2, 1)), "origins must have shape (N, 3), got shape (2, 2)"),
-        (np.zeros(3), [[0.0, float("nan"), 1.0]], "directions must be finite, got a row [0.0, nan, 1.0]"),
-        ([[0.0, 0.0, float("inf")]], [0.0, 0.0, 1.0], "origins must be finite"),
+        (np.zeros((2, 2)), np.tile([0.0, 0.0, 1.0], (2, 1)), "origins_cam must have shape (N, 3), got shape (2, 2)"),
+        (np.zeros(3), [[0.0, float("nan"), 1.0]], "directions_cam must be finite, got a row [0.0, nan, 1.0]"),
+        ([[0.0, 0.0, float("inf")]], [0.0, 0.0, 1.0], "origins_cam must be finite"),
     ],
 )
 def test_bad_rays(origins, directions, pattern):

@@ -92,7 +92,7 @@ BAD_SCENES = {
     "object-in-air": ({"object": [PLANE | {"position_m": [0.0, 0.0, 0.01]}]}, "reaches the camera side of the port"),
     "light-in-air": (
         {"light": [{"type": "point", "position_m": [0, 0, 0.005], "intensity_w_sr": 1}]},
-        "is not in the water",
+        "light[0] (point) reaches the camera side of the port",
     ),
     "negative-pitch": (
         {

@@ -124,9 +124,9 @@ def test_plenoptic_sensor_refracts_through_port_like_numpy(mi, tiny, thickness_m
     ok = air.in_aperture & water.valid & (_arrays(weight)[:, 0] > 0)
     assert ok.mean() > 0.5
     np.testing.assert_allclose(
-        _arrays(ray.o)[ok], POSE.to_world(water.exit_points[ok]), atol=10 * SENSOR_VS_NUMPY_ORIGIN_M
+        _arrays(ray.o)[ok], POSE.to_world(water.exit_points_cam[ok]), atol=10 * SENSOR_VS_NUMPY_ORIGIN_M
     )
-    directions_world = water.directions @ np.asarray(POSE.rotation).T
+    directions_world = water.directions_cam @ np.asarray(POSE.rotation).T
     np.testing.assert_allclose(_arrays(ray.d)[ok], directions_world[ok], atol=SENSOR_VS_NUMPY_DIRECTION)
     expected_weight = water.transmittance * port.radiance_scale
     np.testing.assert_allclose(_arrays(weight)[ok, 0], expected_weight[ok], rtol=SENSOR_VS_NUMPY_DIRECTION)

@@ -82,7 +82,7 @@ def test_target_in_raw_image_under_predicted_pixels(mi, port_model):
     trace = prt.trace_from_air(rays.origins_cam, rays.directions_cam)
     lit = rays.in_aperture & trace.valid
     dist = np.full(len(lit), np.inf)
-    dist[lit] = _distance_on_target_plane(trace.exit_points[lit], trace.directions[lit])
+    dist[lit] = _distance_on_target_plane(trace.exit_points_cam[lit], trace.directions_cam[lit])
     values = raw.ravel()
     expected_radiance = RADIANCE * prt.radiance_scale * trace.transmittance
     bright = dist < TARGET_RADIUS_M - BEAM_MARGIN_M
