@@ -79,6 +79,17 @@ def _rgb(name: str, value: Any) -> tuple[float, float, float]:
     return rgb
 
 
+#: Largest random-texture side: 8192^2 RGB float32 texels are 0.8 GB, and generating them takes
+#: about a minute; anything larger is a typo, not a scene.
+MAX_TEXTURE_PX = 8192
+
+
+def _seed(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**31:
+        raise ParameterError(f"{name} must be an integer in [0, 2**31), got {value!r}")
+    return value
+
+
 def _albedo(name: str, value: Any) -> tuple[float, float, float]:
     rgb = _rgb(name, value)
     if max(rgb) > 1.0:
@@ -125,7 +136,9 @@ class TexturedPlane:
         for i, s in enumerate(size):
             positive_float(f"size_m[{i}]", s)
         object.__setattr__(self, "size_m", size)
-        positive_int("texture_px", self.texture_px)
+        if positive_int("texture_px", self.texture_px) > MAX_TEXTURE_PX:
+            raise ParameterError(f"texture_px must be at most {MAX_TEXTURE_PX}, got {self.texture_px!r}")
+        _seed("texture_seed", self.texture_seed)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -196,6 +209,7 @@ class Figurine:
 
     def __post_init__(self) -> None:
         positive_float("height_m", self.height_m)
+        _seed("seed", self.seed)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
 
 
@@ -263,8 +277,7 @@ class RenderSettings:
     def __post_init__(self) -> None:
         positive_int("render.spp", self.spp)
         one_of("render.port_model", self.port_model, PORT_MODELS)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
-            raise ParameterError(f"render.seed must be an integer in [0, 2**31), got {self.seed!r}")
+        _seed("render.seed", self.seed)
 
 
 SceneObject = TexturedPlane | Chessboard | Disc | Bowl | Figurine | MeshFile
@@ -344,7 +357,10 @@ def _build(cls: type, table: dict, where: str, base_dir: Path) -> Any:
         place = {k: table.pop(k) for k in ("position_m", "rotation_xyz_deg") if k in table}
         if "position_m" not in place:
             raise ParameterError(f"{where}: missing key 'position_m'")
-        kwargs["placement"] = Placement(**place)
+        try:
+            kwargs["placement"] = Placement(**place)
+        except ParameterError as exc:
+            raise ParameterError(f"{where}: {exc}") from None
         names.discard("placement")
     reject_unknown_keys(where, table, names)
     for key, value in table.items():

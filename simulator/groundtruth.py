@@ -17,7 +17,7 @@ import numpy as np
 
 from lfrefract import LightFieldCamera, PinholeCamera, Pose
 from simulator.config import SceneConfig
-from simulator.render import render_bands
+from simulator.render import IDEAL_STREAM, render_bands
 from simulator.sensor import pinhole_sensor_dict
 
 __all__ = ["GroundTruth", "compute", "depth_map", "lens_table"]
@@ -108,6 +108,7 @@ def compute(
         seed=seed,
         progress=progress,
         label="ideal",
+        stream=IDEAL_STREAM,
     )
     return GroundTruth(
         ideal=ideal, depth_m=depth_map(mi, scene, pinhole, config.pose), lenses=lens_table(config.camera)

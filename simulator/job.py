@@ -145,7 +145,7 @@ def render_job(
                 "depth": "depth.exr",
                 "lenses": "lenses.npz",
             },
-            "scene": config.to_dict(),
+            "scene": {k: v for k, v in config.to_dict().items() if k not in ("camera", "pose", "port")},
             "camera": camera.to_dict(),
             "pose": config.pose.to_dict(),
             "port": None if config.port is None else config.port.to_dict(),
@@ -162,7 +162,8 @@ def render_job(
             "render": {
                 "spp": spp,
                 "seed": seed,
-                "band_seed": "(seed * 1000003 + band) mod 2**32",
+                "band_seed": "numpy.random.SeedSequence([seed, stream, band]).generate_state(1, uint32); "
+                "stream 0 raw, 1 ideal",
                 "max_band_pixels": max_band_pixels,
                 "port_model": config.render.port_model,
                 "integrator_raw": integrator(config.port if port_geometry else None),

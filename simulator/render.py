@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 
 from lfrefract import ParameterError
 
-__all__ = ["DEFAULT_MAX_BAND_PIXELS", "band_seed", "render_bands"]
+__all__ = ["DEFAULT_MAX_BAND_PIXELS", "IDEAL_STREAM", "RAW_STREAM", "band_seed", "render_bands"]
 
 #: Pixels per band: 8 Mpx keeps Mitsuba near 0.55 GB per band, so a full Illum raw (41.5 Mpx,
 #: 6 bands) stays well inside 2.5 GB with the 0.5 GB output array.
@@ -25,9 +25,17 @@ DEFAULT_MAX_BAND_PIXELS = 8_000_000
 SensorFactory = Callable[[tuple[int, int, int, int]], dict]
 
 
-def band_seed(seed: int, band: int) -> int:
-    """Sampler seed of band ``band`` for the job seed ``seed`` (a 32-bit value)."""
-    return (seed * 1_000_003 + band) % 2**32
+#: Seed streams: the raw and the ideal image draw independent samples from one job seed.
+RAW_STREAM, IDEAL_STREAM = 0, 1
+
+
+def band_seed(seed: int, band: int, stream: int = RAW_STREAM) -> int:
+    """Sampler seed (32 bits) of band ``band`` of image stream ``stream`` for job seed ``seed``.
+
+    ``numpy.random.SeedSequence([seed, stream, band])`` mixes the three, so neighbouring bands,
+    streams and seeds get unrelated sample sequences.
+    """
+    return int(np.random.SeedSequence([seed, stream, band]).generate_state(1, dtype=np.uint32)[0])
 
 
 def render_bands(
@@ -42,6 +50,7 @@ def render_bands(
     max_band_pixels: int = DEFAULT_MAX_BAND_PIXELS,
     progress: bool = True,
     label: str = "render",
+    stream: int = RAW_STREAM,
 ) -> np.ndarray:
     """Render an image band by band.
 
@@ -57,13 +66,15 @@ def render_bands(
     spp : int
         Samples per pixel.
     seed : int
-        Job seed; band ``b`` uses :func:`band_seed` ``(seed, b)``.
+        Job seed; band ``b`` uses :func:`band_seed` ``(seed, b, stream)``.
     max_band_pixels : int
         Upper bound on the pixels of one band (at least one row is rendered per band).
     progress : bool
         Show a progress bar (rows).
     label : str
         Progress bar label.
+    stream : int
+        Seed stream (:data:`RAW_STREAM`, :data:`IDEAL_STREAM`).
 
     Returns
     -------
@@ -77,7 +88,7 @@ def render_bands(
         for band, y0 in enumerate(range(0, height, rows)):
             h = min(rows, height - y0)
             sensor = mi.load_dict(sensor_for_crop((0, y0, width, h)))
-            image = mi.render(scene, sensor=sensor, spp=spp, seed=band_seed(seed, band))
+            image = mi.render(scene, sensor=sensor, spp=spp, seed=band_seed(seed, band, stream))
             out[y0 : y0 + h] = np.asarray(image, dtype=np.float32)[:, :, :3]
             del image, sensor
             bar.update(h)

@@ -99,8 +99,9 @@ NAIVE_CENTRE_MIN_ERROR_PX = 2.0
 IDEAL_TARGET_CENTROID_PX = 0.02
 
 # Pixels RMS; OpenCV corner detection with cornerSubPix on a 64 spp, 400 x 300 ideal image of a
-# chessboard with 16 x 16 texel squares, nearest-filtered: detector bias and aliasing at
-# ~13 px per square are about 0.05 px (0.085 px RMS measured).
+# slanted chessboard with 16 x 16 texel squares (nearest-filtered) at ~13 px per square: the
+# detector's bias on anti-aliased, perspective-distorted corners dominates (0.085 px RMS
+# measured); a K or placement error of one pixel, or a flipped texture, fails by far.
 IDEAL_CHESSBOARD_RMS_PX = 0.15
 
 # Relative; depth from Mitsuba's float32 ray intersection, compared with the analytic plane:
@@ -128,3 +129,59 @@ PORT_RADIANCE_RELATIVE = 1e-3
 # mean averages ~80 pixels x 16 samples of texture seen through a ~1 deg beam. Measured 0.0076
 # (single interface) and 0.0093 (6 mm glass); a port tilted 5 deg less differs by 0.17.
 PORT_MODELS_LENS_MEAN_RELATIVE = 0.015
+
+# Dimensionless; the global mean radiance ratio of the two port models over all whole micro-images
+# (~1800 lens means): noise averages down to 0.08 % measured.
+PORT_MODELS_GLOBAL_MEAN_RELATIVE = 0.004
+
+# Relative; the same per-lens comparison against a port tilted 5 deg less must differ by at least
+# this (0.17 measured), or the comparison could not tell ports apart.
+PORT_MODELS_WRONG_TILT_MIN = 0.05
+
+# Metres; float32 port exit points of the sensor, on paths extended 15-25 mm from the lens:
+# eps32 * 25 mm * a few dozen operations.
+SENSOR_VS_NUMPY_PORT_POINT_M = 1e-6
+
+# Relative; float32 Fresnel transmittance products from float32 cosines (a few eps32 each).
+SENSOR_VS_NUMPY_WEIGHT_RELATIVE = 1e-5
+
+# Pixels; projecting the pinhole sensor's float32 directions (1e-6) back with f = 321 px, plus the
+# float32 film position ((u + 0.5) / W rounds to ~1e-5 px at W = 200).
+SENSOR_VS_NUMPY_PIXEL_PX = 1e-3
+
+# Radiance; white-image pixels wholly inside a micro-image: every path has weight 1 and carries
+# radiance 1, accumulated in float32 over 64 samples (exact up to a few eps32).
+WHITE_RADIANCE_ABS = 1e-6
+
+# Relative; mean of the white image against (micro-image disc area) / (micro-image cell area):
+# micro-images cut by the sensor border (~5 % of the lenses, partly compensating) move it by a
+# few 1e-3.
+WHITE_FILL_RELATIVE = 0.01
+
+# Relative; flux (sum) of a luminous fronto-parallel disc in the ideal image against its projected
+# area times radiance: exact under pixel-area integration up to MC noise on ~60 edge pixels at 64 spp.
+IDEAL_DISC_FLUX_RELATIVE = 0.02
+
+# Fraction; of the raw pixels that straight rays (ignoring the port) put on the luminous disc, at
+# most this share may actually be lit (below 10 % of the disc's radiance would count as unlit):
+# the port moves the disc's image by many micro-images, so a correct trace leaves them dark.
+RAW_STRAIGHT_PREDICTION_MAX_LIT = 0.5
+RAW_LIT_THRESHOLD = 0.1
+
+# ----------------------------------------------------------------------------- procedural assets
+# Values of order 0.01-0.1 m computed by one or two float64 operations: a few ulps (1.4e-17 at 0.1).
+FLOAT64_FEW_OPS = 1e-15
+
+# Band-pass (difference of box filters) std of the texture luminance that each scale must exceed.
+# The texture gives about 0.03-0.05 at 2, 8 and 32 px; white noise gives 0.007 at 32 px, a 16 px
+# Gaussian blur of it 0.0001 at 2 px, and a single octave 0.016 at 32 px.
+TEXTURE_BAND_STD_MIN = 0.02
+
+# Texels; OpenCV's detected chessboard corners against chessboard_inner_corners. cornerSubPix on a
+# clean synthetic board is far better; half a texel still fails for any off-by-one-texel convention.
+CORNER_TOL_TEXELS = 0.5
+
+# Relative; mesh volume against the exact volume of the smooth bowl: the polygonal approximation
+# loses about (2 pi / segments)^2 / 6 = 0.07 % around the axis plus the rim's and walls' chords; the
+# defaults measure 0.1-0.2 % low. 1 % fails for a wall 2 % too thin or thick.
+BOWL_VOLUME_RELATIVE = 0.01

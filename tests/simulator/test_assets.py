@@ -25,19 +25,15 @@ from simulator.assets import (
     vertex_normals,
     write_ply,
 )
-
-# Tolerances, in one place.
-#: Band-pass (difference of box filters) std of the texture luminance that each scale must
-#: exceed. The texture gives about 0.03-0.05 at 2, 8 and 32 px; white noise gives 0.007 at
-#: 32 px, a 16 px Gaussian blur of it 0.0001 at 2 px, and a single octave 0.016 at 32 px.
-BAND_STD_MIN = 0.02
-#: OpenCV's detected corners against chessboard_inner_corners, in texels (the brief's 0.5 texel).
-CORNER_TOL_TEXELS = 0.5
-#: Mesh volume against the exact volume of the smooth bowl: the polygonal approximation loses
-#: about (2 pi / segments)^2 / 6 = 0.07% around the axis plus the rim's and walls' chords; the
-#: defaults measure 0.1-0.2% low. 1% fails for a wall 2% too thin or thick.
-BOWL_VOLUME_RTOL = 0.01
-
+from tests.tolerances import (
+    BOWL_VOLUME_RELATIVE,
+    CORNER_TOL_TEXELS,
+    FLOAT64_FEW_OPS,
+    FLOAT64_PIXEL_PX,
+    FLOAT64_RELATIVE,
+    FLOAT64_UNIT,
+    TEXTURE_BAND_STD_MIN,
+)
 
 # ------------------------------------------------------------------------------------------
 # helpers
@@ -81,7 +77,7 @@ def _assert_well_formed(v: np.ndarray, f: np.ndarray, n: np.ndarray) -> None:
     diag = np.linalg.norm(v.max(axis=0) - v.min(axis=0))
     assert area.min() > 1e-9 * diag**2
     # unit normals that agree with the winding of every adjacent face
-    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, rtol=0, atol=FLOAT64_UNIT)
     face_n = cross / (2.0 * area[:, None])
     for k in range(3):
         assert np.einsum("ij,ij->i", face_n, n[f[:, k]]).min() > 0.0
@@ -118,14 +114,14 @@ def test_random_texture_has_energy_at_several_scales(seed):
     lum = random_texture(size_px=256, seed=seed).mean(axis=2)
     for scale in (2, 8, 32):
         band = ndimage.uniform_filter(lum, scale, mode="wrap") - ndimage.uniform_filter(lum, 2 * scale, mode="wrap")
-        assert band.std() > BAND_STD_MIN, f"too little energy at {scale} px: {band.std():.4f}"
+        assert band.std() > TEXTURE_BAND_STD_MIN, f"too little energy at {scale} px: {band.std():.4f}"
 
 
 def test_random_texture_single_octave_lacks_coarse_energy():
     """The band test above can fail: one 2 px octave has no 32 px structure."""
     lum = random_texture(size_px=256, seed=0, octaves=1).mean(axis=2)
     band = ndimage.uniform_filter(lum, 32, mode="wrap") - ndimage.uniform_filter(lum, 64, mode="wrap")
-    assert band.std() < BAND_STD_MIN
+    assert band.std() < TEXTURE_BAND_STD_MIN
 
 
 @pytest.mark.parametrize(
@@ -178,10 +174,10 @@ def test_chessboard_size_matches_texture():
     squares, tps, margin, s = (7, 4), 10, 0.5, 0.025
     tex = chessboard_texture(squares=squares, texels_per_square=tps, margin_squares=margin)
     width, height = chessboard_size_m(squares=squares, square_size_m=s, margin_squares=margin)
-    assert width == pytest.approx(tex.shape[1] * s / tps, rel=1e-12)
-    assert height == pytest.approx(tex.shape[0] * s / tps, rel=1e-12)
-    assert width == pytest.approx(8 * s, rel=1e-12)
-    assert height == pytest.approx(5 * s, rel=1e-12)
+    assert width == pytest.approx(tex.shape[1] * s / tps, rel=FLOAT64_RELATIVE)
+    assert height == pytest.approx(tex.shape[0] * s / tps, rel=FLOAT64_RELATIVE)
+    assert width == pytest.approx(8 * s, rel=FLOAT64_RELATIVE)
+    assert height == pytest.approx(5 * s, rel=FLOAT64_RELATIVE)
 
 
 def _metres_to_texels(xy: np.ndarray, tex_shape: tuple[int, ...], texel_m: float) -> np.ndarray:
@@ -200,7 +196,7 @@ def test_chessboard_inner_corners_lie_on_junctions(squares, margin):
     assert corners.dtype == np.float64
     uv = _metres_to_texels(corners, tex.shape, s / tps)
     # a junction lies on texel edges: half-integer pixel coordinates
-    np.testing.assert_allclose(uv - np.floor(uv), 0.5, atol=1e-9)
+    np.testing.assert_allclose(uv - np.floor(uv), 0.5, atol=FLOAT64_PIXEL_PX)
     grey = tex[..., 0]
     for k, (u, v) in enumerate(uv):
         c0, r0 = math.floor(u), math.floor(v)  # texel up-left of the junction
@@ -234,7 +230,7 @@ def test_chessboard_matches_opencv_detection(squares, tps, margin):
     assert detected_m.shape == expected.shape
     np.testing.assert_allclose(detected_m, expected, rtol=0, atol=CORNER_TOL_TEXELS * texel_m)
     # the board is centred on the texture centre
-    np.testing.assert_allclose(expected.mean(axis=0), 0.0, atol=1e-15)
+    np.testing.assert_allclose(expected.mean(axis=0), 0.0, atol=FLOAT64_FEW_OPS)
 
 
 @pytest.mark.parametrize(
@@ -301,13 +297,13 @@ def test_bowl_is_closed_outward_and_of_the_right_volume(a, h, t):
     _assert_closed_and_oriented(f)
     volume = _signed_volume(v, f)
     assert volume > 0.0
-    assert volume == pytest.approx(_expected_bowl_volume(a, h, t), rel=BOWL_VOLUME_RTOL)
+    assert volume == pytest.approx(_expected_bowl_volume(a, h, t), rel=BOWL_VOLUME_RELATIVE)
 
 
 def test_bowl_volume_detects_a_wrong_thickness():
     """The volume check can fail: a wall 2% thicker is outside the tolerance."""
     v, f, _ = bowl_mesh(radius_m=0.1, depth_m=0.06, thickness_m=0.0051)
-    assert _signed_volume(v, f) != pytest.approx(_expected_bowl_volume(0.1, 0.06, 0.005), rel=BOWL_VOLUME_RTOL)
+    assert _signed_volume(v, f) != pytest.approx(_expected_bowl_volume(0.1, 0.06, 0.005), rel=BOWL_VOLUME_RELATIVE)
 
 
 @pytest.mark.parametrize(("a", "h", "t", "segments", "rings"), [(0.1, 0.06, 0.005, 96, 32), (0.03, 0.02, 0.004, 24, 8)])
@@ -318,19 +314,19 @@ def test_bowl_frame_and_bounding_box(a, h, t, segments, rings):
     tol = 0.5 * t * (1 - math.cos(math.pi / n_rim)) + 1e-12
     np.testing.assert_allclose(v.max(axis=0), [a, a, h / 2], rtol=0, atol=tol)
     np.testing.assert_allclose(v.min(axis=0), [-a, -a, -h / 2], rtol=0, atol=tol)
-    assert v[:, 2].max() == pytest.approx(h / 2, abs=1e-15)  # outside of the bottom, exact
-    assert v[:, 2].min() == pytest.approx(-h / 2, abs=1e-15)  # rim, nearest the viewer, exact
+    assert v[:, 2].max() == pytest.approx(h / 2, abs=FLOAT64_FEW_OPS)  # outside of the bottom, exact
+    assert v[:, 2].min() == pytest.approx(-h / 2, abs=FLOAT64_FEW_OPS)  # rim, nearest the viewer, exact
     # the outer and inner bottoms on the axis, a wall thickness apart
     on_axis = np.sort(v[np.hypot(v[:, 0], v[:, 1]) < 1e-15, 2])
-    np.testing.assert_allclose(on_axis, [h / 2 - t, h / 2], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(on_axis, [h / 2 - t, h / 2], rtol=0, atol=FLOAT64_FEW_OPS)
     # open towards the viewer (-z): near the axis everything is in the back half
     r = np.hypot(v[:, 0], v[:, 1])
     assert np.all(v[r < 0.5 * a, 2] > 0.0)
     # the inside faces the viewer: the inner bottom's normal points to -z, the outer one to +z
     bottom = np.flatnonzero(r < 1e-15)
     inner, outer = bottom[np.argsort(v[bottom, 2])]
-    np.testing.assert_allclose(n[inner], [0, 0, -1], atol=1e-12)
-    np.testing.assert_allclose(n[outer], [0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(n[inner], [0, 0, -1], atol=FLOAT64_UNIT)
+    np.testing.assert_allclose(n[outer], [0, 0, 1], atol=FLOAT64_UNIT)
     # a surface of revolution: two poles and `segments` vertices per interior profile point
     assert len(v) == 2 + segments * (2 * (rings + 1) - 2 + n_rim - 1)
 
@@ -338,7 +334,7 @@ def test_bowl_frame_and_bounding_box(a, h, t, segments, rings):
 def test_bowl_walls_lie_on_the_documented_spheres():
     a, h, t = 0.1, 0.06, 0.005
     geo = bowl_cap_geometry(radius_m=a, depth_m=h, thickness_m=t)
-    assert geo["volume_m3"] == pytest.approx(_expected_bowl_volume(a, h, t), rel=1e-12)
+    assert geo["volume_m3"] == pytest.approx(_expected_bowl_volume(a, h, t), rel=FLOAT64_RELATIVE)
     v, _, n = bowl_mesh(radius_m=a, depth_m=h, thickness_m=t)
     rel = v - [0.0, 0.0, geo["centre_z_m"]]
     dist = np.linalg.norm(rel, axis=1)
@@ -388,8 +384,8 @@ def test_figurine_is_closed_outward_and_of_the_right_height(seed, resolution):
     _assert_closed_and_oriented(f)
     assert len(v) == (resolution - 1) * 2 * resolution + 2
     lo, hi = v.min(axis=0), v.max(axis=0)
-    assert hi[1] - lo[1] == pytest.approx(height, rel=1e-12)
-    np.testing.assert_allclose(lo + hi, 0.0, atol=1e-12)  # bounding box centred on the origin
+    assert hi[1] - lo[1] == pytest.approx(height, rel=FLOAT64_RELATIVE)
+    np.testing.assert_allclose(lo + hi, 0.0, atol=FLOAT64_UNIT)  # bounding box centred on the origin
     # a figurine: narrower and shallower than tall, but not a sliver
     assert 0.4 * height < hi[0] - lo[0] < height
     assert 0.3 * height < hi[2] - lo[2] < height
@@ -513,10 +509,10 @@ def test_vertex_normals_of_a_tetrahedron():
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     n = vertex_normals(v, f)
     # the right-angle corner's three faces have equal areas: its normal is -(1, 1, 1)/sqrt(3)
-    np.testing.assert_allclose(n[0], -np.ones(3) / math.sqrt(3.0), atol=1e-15)
+    np.testing.assert_allclose(n[0], -np.ones(3) / math.sqrt(3.0), atol=FLOAT64_FEW_OPS)
     # corner 1 sees faces of area 1/2, 1/2 (normals -z, -y) and sqrt(3)/2 (normal (1,1,1)/sqrt 3)
     expected = np.array([0.5, 0.0, 0.0])
-    np.testing.assert_allclose(n[1], expected / np.linalg.norm(expected), atol=1e-15)
+    np.testing.assert_allclose(n[1], expected / np.linalg.norm(expected), atol=FLOAT64_FEW_OPS)
     with pytest.raises(ParameterError, match="vertex 4"):
         vertex_normals(np.vstack([v, [[2.0, 2.0, 2.0]]]), f)
     with pytest.raises(ParameterError, match="faces"):

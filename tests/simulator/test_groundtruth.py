@@ -72,6 +72,19 @@ def test_chessboard_corners_in_ideal_image_at_pinhole_projection(mi):
     # OpenCV may report the grid from either end; compare with the matching order.
     rms = min(np.sqrt(np.mean(np.sum((corners - e) ** 2, axis=1))) for e in (expected, expected[::-1]))
     assert rms < IDEAL_CHESSBOARD_RMS_PX
+    # The grid alone is symmetric under a half turn; the squares' colours are not: the top-left
+    # square (column 0, row 0 inside the margin) is black, its right neighbour white.
+    w, h = assets.chessboard_size_m(squares=(8, 6), square_size_m=0.025, margin_squares=obj.margin_squares)
+    margin = obj.margin_squares * 0.025
+    centres_local = np.array(
+        [
+            [-w / 2 + margin + 0.0125, -h / 2 + margin + 0.0125, 0.0],
+            [-w / 2 + margin + 0.0375, -h / 2 + margin + 0.0125, 0.0],
+        ]
+    )
+    u, v = np.round(BIG.project(obj.placement.to_world(centres_local))).astype(int).T
+    black, white = gray[v[0], u[0]], gray[v[1], u[1]]
+    assert black < 0.3 * white
 
 
 def test_lens_table_lists_every_micro_image_on_the_sensor(tiny):

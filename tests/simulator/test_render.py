@@ -11,7 +11,7 @@ import pytest
 from lfrefract import ParameterError
 from lfrefract.io import read_exr, read_json
 from simulator import cli
-from simulator.config import RenderSettings, load_scene, parse_scene
+from simulator.config import RenderSettings, embedded_scenes, load_scene, parse_scene
 from simulator.job import render_job, render_raw
 from simulator.scene import check_geometry
 from tests.simulator.scenes import port, scene
@@ -36,7 +36,7 @@ def test_same_seed_is_bit_identical_and_another_seed_is_not(mi):
 @pytest.mark.render
 def test_render_job_writes_every_file_with_its_parameters(tmp_path):
     out = tmp_path / "run"
-    config = load_scene("scenes/white.toml").with_overrides(render=RenderSettings(spp=8, seed=3))
+    config = load_scene(embedded_scenes()["white"]).with_overrides(render=RenderSettings(spp=8, seed=3))
     result = render_job(config, out, progress=False)
     names = {p.name for p in out.iterdir()}
     assert {"raw.exr", "ideal.exr", "depth.exr", "lenses.npz", "meta.json", "previews"} <= names
@@ -149,7 +149,7 @@ def test_failure_during_render_leaves_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(job.groundtruth, "compute", explode)
     out = tmp_path / "out"
     with pytest.raises(RuntimeError, match="disk full"):
-        render_job(load_scene("scenes/white.toml"), out, progress=False)
+        render_job(load_scene(embedded_scenes()["white"]), out, progress=False)
     assert list(tmp_path.iterdir()) == []
 
 

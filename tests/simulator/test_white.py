@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulator.config import RenderSettings, load_scene
+from simulator.config import RenderSettings, embedded_scenes, load_scene
 from simulator.job import render_raw
 from tests.tolerances import (
     MICRO_IMAGE_CENTRE_MAX_PX,
     MICRO_IMAGE_CENTRE_RMS_PX,
     NAIVE_CENTRE_MIN_ERROR_PX,
+    WHITE_FILL_RELATIVE,
+    WHITE_RADIANCE_ABS,
 )
 
 pytestmark = pytest.mark.render
@@ -31,7 +33,7 @@ def micro_image_centroids(raw: np.ndarray, predicted_px: np.ndarray, radius_px: 
 
 @pytest.fixture(scope="module")
 def white(mi):
-    config = load_scene("scenes/white.toml").with_overrides(render=RenderSettings(spp=64, seed=0))
+    config = load_scene(embedded_scenes()["white"]).with_overrides(render=RenderSettings(spp=64, seed=0))
     return config.camera, render_raw(mi, config, progress=False).mean(axis=2)
 
 
@@ -62,11 +64,11 @@ def test_micro_images_are_discs_of_the_aperture(white):
     dist = np.linalg.norm(uv - camera.micro_image_centres_px(idx), axis=1).reshape(raw.shape)
     r = camera.micro_image_radius_px
     np.testing.assert_allclose(
-        raw[dist < r - 1.0], 1.0, atol=1e-6
+        raw[dist < r - 1.0], 1.0, atol=WHITE_RADIANCE_ABS
     )  # pixel and lens-cell blur inside: every path passes
     assert np.all(raw[dist > r + 1.0] == 0.0)  # wholly outside: vignetted
     fill = raw.mean()
     expected_fill = (
         np.pi * r**2 / (camera.mla.cell_area_m2 * camera.micro_image_scale**2 / camera.sensor.pixel_pitch_m**2)
     )
-    assert fill == pytest.approx(expected_fill, rel=0.01)
+    assert fill == pytest.approx(expected_fill, rel=WHITE_FILL_RELATIVE)
