@@ -107,6 +107,24 @@ BAD_SCENES = {
         "mla.pitch_m must be positive, got -0.0001",
     ),
     "zero-spp": ({"render": {"spp": 0, "seed": 0}}, "render.spp must be positive, got 0"),
+    "negative-seed": ({"render": {"spp": 4, "seed": -3}}, "render.seed must be an integer in [0, 2**31), got -3"),
+    "huge-texture": ({"object": [PLANE | {"texture_px": 100_000}]}, "texture_px must be at most 8192, got 100000"),
+    "nan-position": (
+        {"object": [PLANE | {"position_m": [float("nan"), 0.0, 0.5]}]},
+        "object[0] (textured_plane): position_m[0] must be finite, got nan",
+    ),
+    "camera-missing-key": (
+        {
+            "camera": {
+                "focal_length_m": 0.006,
+                "lens_to_mla_m": 0.006,
+                "mla": {"grid": "hex", "pitch_m": 1e-4, "focal_length_m": 2e-4},
+                "sensor": {"width_px": 10, "height_px": 10, "pixel_pitch_m": 1e-5},
+            }
+        },
+        "missing key(s) in camera: ['f_number']",
+    ),
+    "port-missing-distance": ({"port": {"tilt_x_deg": 10.0}}, "missing key(s) in port: ['distance_m']"),
 }
 
 
@@ -161,3 +179,41 @@ def test_tir_fraction_reported_for_partial_tir():
     }
     figures = check_geometry(parse_scene(data))
     assert 0.0 < figures["tir_fraction"] < 1.0
+
+
+def _mesh_scene(tmp_path, mesh_text: str, position_m):
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    (meshes / "thing.obj").write_text(mesh_text)
+    data = {
+        "camera": {"preset": "tiny"},
+        "port": port(10.0),
+        "light": [{"type": "point", "position_m": [0.1, -0.2, 0.2], "intensity_w_sr": 0.3}],
+        "object": [{"type": "mesh", "path": "thing.obj", "position_m": position_m}],
+    }
+    return parse_scene(data, base_dir=meshes)
+
+
+@pytest.mark.render
+def test_user_mesh_reaching_through_the_glass_is_refused(tmp_path):
+    # Its placement is 0.4 m away, but one vertex reaches back to z = 0.01 m, below the port.
+    sliver = "v -0.1 -0.1 0\nv 0.1 -0.1 0\nv 0 1 -0.39\nf 1 2 3\n"
+    config = _mesh_scene(tmp_path, sliver, [0.0, 0.0, 0.4])
+    with pytest.raises(ParameterError, match=r"object\[0\] \(mesh thing\.obj\) reaches the camera side"):
+        render_job(config, tmp_path / "out", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["meshes"]
+
+
+@pytest.mark.render
+def test_corrupt_user_mesh_is_a_clear_error(tmp_path):
+    config = _mesh_scene(tmp_path, "v 1 2\nf 1 2 9\n", [0.0, 0.0, 0.4])
+    with pytest.raises(ParameterError, match=r"object\[0\] \(mesh\): cannot load '.*thing\.obj'"):
+        render_job(config, tmp_path / "out", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["meshes"]
+
+
+def test_cli_never_replaces_a_foreign_directory(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    assert cli.main(["render", "white", "--out", str(tmp_path), "--overwrite", "--quiet"]) == 2
+    assert "holds no lfrefract meta.json" in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
