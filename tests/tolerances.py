@@ -185,3 +185,7 @@ CORNER_TOL_TEXELS = 0.5
 # loses about (2 pi / segments)^2 / 6 = 0.07 % around the axis plus the rim's and walls' chords; the
 # defaults measure 0.1-0.2 % low. 1 % fails for a wall 2 % too thin or thick.
 BOWL_VOLUME_RELATIVE = 0.01
+
+# ----------------------------------------------------------------------------- synthesis
+# Row sums of a warp map: float32 weights (eps 6e-8) summed over up to k * s^2 = 128 entries.
+FLOAT32_WEIGHT_SUM = 1e-5

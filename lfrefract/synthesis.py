@@ -1,0 +1,450 @@
+"""Refraction-free image synthesis from a light field behind a flat port (paper sections 3.2, 4.1).
+
+For every output (sub-)pixel of a virtual pinhole camera whose centre of projection is the
+main-lens centre, the *necessary ray* is the straight line from that centre through the pixel,
+continued into the water. The light that travels back along it is traced exactly through the
+port (water, glass, air) to the air-side face: the *necessary air ray*, through point ``P`` on the
+air-side face with direction ``r``. Among the captured rays (each raw pixel's ray through its
+microlens centre, see :meth:`LightFieldCamera.captured_rays`) those closest to it by
+
+    D = |P' - P| + lambda * angle(r', r)        (P' where the captured ray meets the face)
+
+are averaged, the ``k`` nearest with weights ``1 / D``. Candidates come from an analytic search:
+the necessary air ray is followed back through the thin main lens to the MLA; the microlenses
+around that point (``lens_rings`` rings) are candidates, and under each the pixels within
+``window`` of the pixel whose chief ray passes through ``P``. Sub-pixel necessary rays
+(``supersample`` x ``supersample`` per output pixel) are averaged.
+
+The result is a :class:`WarpMap`, a sparse weighted gather (CSR) from raw pixels to output pixels,
+built once per camera, port, output geometry and options and applied per frame. Output pixels
+whose necessary ray misses the main-lens aperture (paper section 6, the field-of-view
+limitation) are reported in a coverage mask; they still get the nearest captured rays the search
+finds, or nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lfrefract import __version__
+from lfrefract._kernels import build_rows, gather
+from lfrefract._validate import ParameterError, non_negative_float, positive_int
+from lfrefract.camera import LightFieldCamera
+from lfrefract.io import FileFormatError
+from lfrefract.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.port import FlatPort
+
+__all__ = ["SynthesisOptions", "WarpMap", "build_warp_map", "necessary_air_rays", "warp_map_key"]
+
+#: Version of the warp-map algorithm and file layout; part of every map's key.
+WARP_MAP_VERSION = 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class SynthesisOptions:
+    """Options of the refraction-free synthesis.
+
+    Parameters
+    ----------
+    k : int
+        Captured rays averaged per necessary ray (paper: 32).
+    supersample : int
+        Necessary rays per output pixel along each axis (paper: 2).
+    lambda_m_per_rad : float
+        Weight of the angle term of D, metres per radian (paper: 0, the angle term is not used).
+    lens_rings : int
+        Rings of microlenses around the necessary ray's MLA point searched for candidates.
+    window : int
+        Half-size, in pixels, of the window searched under each candidate lens.
+    rim_margin_px : float
+        Raw pixels whose centre lies within this many pixels of their micro-image's rim are not
+        used: part of their area is vignetted, so their value is not the radiance of their ray.
+    compensate_port : bool
+        Divide by the port's radiometric factor along the necessary ray (Fresnel transmittance
+        times ``(n_air / n_water)^2``), so the output is radiance in the water, comparable with
+        the simulator's ideal image.
+    """
+
+    k: int = 32
+    supersample: int = 2
+    lambda_m_per_rad: float = 0.0
+    lens_rings: int = 1
+    window: int = 2
+    rim_margin_px: float = 1.0
+    compensate_port: bool = True
+
+    def __post_init__(self) -> None:
+        positive_int("k", self.k)
+        positive_int("supersample", self.supersample)
+        non_negative_float("lambda_m_per_rad", self.lambda_m_per_rad)
+        positive_int("lens_rings", self.lens_rings)
+        if isinstance(self.window, bool) or not isinstance(self.window, int) or self.window < 0:
+            raise ParameterError(f"window must be a non-negative integer, got {self.window!r}")
+        non_negative_float("rim_margin_px", self.rim_margin_px)
+        if not isinstance(self.compensate_port, bool):
+            raise ParameterError(f"compensate_port must be True or False, got {self.compensate_port!r}")
+        lenses = 7 if self.lens_rings == 1 else 3 * self.lens_rings * (self.lens_rings + 1) + 1
+        if self.k > lenses * (2 * self.window + 1) ** 2:
+            raise ParameterError(
+                f"k={self.k!r} exceeds the candidates searched ({lenses} lenses x {(2 * self.window + 1) ** 2} "
+                "pixels): raise lens_rings or window"
+            )
+
+    def to_dict(self) -> dict:
+        """Plain data for sidecars and the map key."""
+        return dataclasses.asdict(self)
+
+
+def necessary_air_rays(port: FlatPort, directions_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Trace the light arriving along pinhole lines of sight back through the port into the air.
+
+    Parameters
+    ----------
+    port : FlatPort
+    directions_cam : ndarray, shape (N, 3)
+        Unit directions of the lines of sight from the main-lens centre, camera frame.
+
+    Returns
+    -------
+    points_cam : ndarray, shape (N, 3)
+        Where the light leaves the port's air-side face (P), metres.
+    directions_out_cam : ndarray, shape (N, 3)
+        Unit direction of the air ray pointing out of the camera (r); the light travels along -r.
+    transmittance : ndarray, shape (N,)
+        Fresnel transmittance of the port along the path (0 where invalid).
+    valid : ndarray of bool, shape (N,)
+        The line of sight reaches the port and its light is not totally internally reflected.
+    """
+    d = np.asarray(directions_cam, dtype=np.float64)
+    n = port.normal
+    water_face = port.distance_m + port.thickness_m
+    cos = d @ n
+    ok = cos > 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = d * np.where(ok, water_face / cos, np.nan)[:, None]
+    trace = port.trace_from_water(np.where(ok[:, None], q, 0.0), np.where(ok[:, None], -d, n))
+    valid = ok & trace.valid
+    return trace.exit_points_cam, -trace.directions_cam, np.where(valid, trace.transmittance, 0.0), valid
+
+
+def _lens_offsets(camera: LightFieldCamera, rings: int) -> np.ndarray:
+    """Lattice offsets (M, 2) of the lenses within ``rings`` neighbour steps of a lens."""
+    r = rings + 1
+    ii, jj = np.meshgrid(np.arange(-2 * r, 2 * r + 1), np.arange(-2 * r, 2 * r + 1))
+    idx = np.stack([ii.ravel(), jj.ravel()], axis=1)
+    dist = np.linalg.norm(idx @ camera.mla.basis_m.T, axis=1) / camera.mla.pitch_m
+    limit = rings * (math.sqrt(2.0) if camera.mla.grid == "square" else 1.0) + 1e-9
+    keep = dist <= limit
+    order = np.argsort(dist[keep], kind="stable")
+    return idx[keep][order].astype(np.int64)
+
+
+def warp_map_key(camera: LightFieldCamera, port: FlatPort, output: PinholeCamera, options: SynthesisOptions) -> str:
+    """Hash identifying a warp map: every input that changes it, and the algorithm version."""
+    payload = {
+        "version": WARP_MAP_VERSION,
+        "camera": camera.to_dict(),
+        "port": {k: v for k, v in port.to_dict().items() if k not in ("normal", "total_tilt_deg")},
+        "output": output.to_dict(),
+        "options": options.to_dict(),
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
+
+
+@dataclass(frozen=True, eq=False)
+class WarpMap:
+    """A sparse weighted gather from a raw lenslet image to a refraction-free image.
+
+    Attributes
+    ----------
+    output : PinholeCamera
+        Geometry of the refraction-free image (K, size).
+    raw_shape : tuple of int
+        ``(height, width)`` of the raw images it applies to.
+    indptr, indices, weights : ndarray
+        CSR rows, one per output pixel (row-major): raw flat indices (``v * W + u``) and weights
+        (each non-empty row sums to 1).
+    gain : ndarray, shape (n_pixels,)
+        Radiometric factor applied after the gather (1, or the inverse port factor).
+    coverage : ndarray, shape (height, width)
+        Fraction of each output pixel's necessary rays that the camera records: they pass the
+        main-lens aperture and land on the sensor (1: exact; below 1: the field-of-view
+        limitation of paper section 6).
+    key : str
+        :func:`warp_map_key` of its inputs.
+    meta : dict
+        Camera, port, output and options as plain data.
+    """
+
+    output: PinholeCamera
+    raw_shape: tuple[int, int]
+    indptr: np.ndarray
+    indices: np.ndarray
+    weights: np.ndarray
+    gain: np.ndarray
+    coverage: np.ndarray
+    key: str
+    meta: dict
+
+    @property
+    def filled(self) -> np.ndarray:
+        """Output pixels that received any captured ray, shape (height, width)."""
+        return (np.diff(self.indptr) > 0).reshape(self.output.height_px, self.output.width_px)
+
+    @property
+    def exact(self) -> np.ndarray:
+        """Output pixels whose every necessary ray passes the aperture, shape (height, width)."""
+        return self.coverage >= 1.0
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """Synthesize the refraction-free image of one raw frame.
+
+        Parameters
+        ----------
+        raw : ndarray, shape (H, W) or (H, W, C)
+            Raw lenslet image, float or integer, of :attr:`raw_shape`.
+
+        Returns
+        -------
+        ndarray, float32, shape (height, width) or (height, width, C)
+            Zero where :attr:`filled` is False.
+        """
+        arr = np.asarray(raw)
+        if arr.shape[:2] != tuple(self.raw_shape):
+            raise ParameterError(f"raw must have shape {tuple(self.raw_shape)} (+ channels), got {arr.shape}")
+        if arr.ndim not in (2, 3) or not (
+            np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+        ):
+            raise ParameterError(f"raw must be a real (H, W) or (H, W, C) image, got shape {arr.shape}, {arr.dtype}")
+        flat = arr.reshape(arr.shape[0] * arr.shape[1], -1)
+        if not np.issubdtype(flat.dtype, np.floating):
+            flat = flat.astype(np.float32)
+        out = np.empty((len(self.indptr) - 1, flat.shape[1]), dtype=np.float32)
+        gather(self.indptr, self.indices, self.weights, self.gain, flat, out)
+        shape = (self.output.height_px, self.output.width_px)
+        return out.reshape(shape) if arr.ndim == 2 else out.reshape(*shape, flat.shape[1])
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the map as a compressed ``.npz`` (atomically)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp.npz")
+        np.savez_compressed(
+            tmp,
+            indptr=self.indptr,
+            indices=self.indices,
+            weights=self.weights,
+            gain=self.gain,
+            coverage=self.coverage,
+            raw_shape=np.asarray(self.raw_shape),
+            key=np.asarray(self.key),
+            meta=np.asarray(json.dumps(self.meta)),
+        )
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, *, expected_key: str | None = None) -> WarpMap:
+        """Read a map written by :meth:`save`; with ``expected_key`` a stale map is an error."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileFormatError(f"no such file: {str(path)!r}")
+        try:
+            data = np.load(path, allow_pickle=False)
+            key = str(data["key"])
+            meta = json.loads(str(data["meta"]))
+        except (OSError, ValueError, KeyError) as exc:
+            raise FileFormatError(f"{str(path)!r} is not a warp map: {exc}") from None
+        if expected_key is not None and key != expected_key:
+            raise FileFormatError(
+                f"{str(path)!r} is a warp map for other parameters (key {key}, expected {expected_key})"
+            )
+        return cls(
+            output=PinholeCamera.from_dict(meta["output"]),
+            raw_shape=tuple(int(x) for x in data["raw_shape"]),
+            indptr=data["indptr"],
+            indices=data["indices"],
+            weights=data["weights"],
+            gain=data["gain"],
+            coverage=data["coverage"],
+            key=key,
+            meta=meta,
+        )
+
+
+def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarray:
+    r_ok = camera.aperture_radius_m - rim_margin_px * camera.sensor.pixel_pitch_m * (
+        camera.lens_to_mla_m / camera.mla.focal_length_m
+    )
+    cu, cv = camera.sensor.centre_px
+    return np.array(
+        [
+            camera.focal_length_m,
+            camera.lens_to_mla_m,
+            camera.mla.focal_length_m,
+            camera.sensor.pixel_pitch_m,
+            cu,
+            cv,
+            camera.micro_image_scale,
+            max(r_ok, 0.0) ** 2,
+        ]
+    )
+
+
+def _lattice_scalars(camera: LightFieldCamera) -> np.ndarray:
+    b = camera.mla.basis_m
+    inv = np.linalg.inv(b)
+    return np.array(
+        [b[0, 0], b[1, 0], b[0, 1], b[1, 1], inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], *camera.mla.offset_m]
+    )
+
+
+def build_warp_map(
+    camera: LightFieldCamera,
+    port: FlatPort,
+    *,
+    output: PinholeCamera | None = None,
+    options: SynthesisOptions | None = None,
+) -> WarpMap:
+    """Build the warp map for a camera behind a port.
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    port : FlatPort
+        The port; equal indices model no refraction.
+    output : PinholeCamera, optional
+        Geometry of the refraction-free image; default :func:`virtual_camera_for` ``(camera)``
+        (the simulator's ideal image uses the same).
+    options : SynthesisOptions, optional
+
+    Returns
+    -------
+    WarpMap
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    if not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort, got {port!r}")
+    output = output if output is not None else virtual_camera_for(camera)
+    options = options if options is not None else SynthesisOptions()
+    if port.clearance_m(camera.aperture_radius_m) <= 0.0:
+        raise ParameterError(f"port.distance_m={port.distance_m!r} cuts the main-lens aperture")
+    s = options.supersample
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    vv, uu = np.mgrid[0 : output.height_px, 0 : output.width_px]
+    sub_u = (uu.ravel()[:, None, None] + offsets[None, None, :]).repeat(s, axis=1)
+    sub_v = (vv.ravel()[:, None, None] + offsets[None, :, None]).repeat(s, axis=2)
+    uv = np.stack([sub_u.ravel(), sub_v.ravel()], axis=1)  # pixel-major, s*s samples per pixel
+    points, dirs, transmittance, valid = necessary_air_rays(port, output.pixel_directions(uv))
+
+    # Follow the necessary air ray back through the thin main lens to the MLA.
+    f, f_prime = camera.focal_length_m, camera.lens_to_mla_m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = -points[:, 2] / dirs[:, 2]
+        hit = points[:, :2] + tau[:, None] * dirs[:, :2]
+    radius = np.sqrt(np.sum(hit**2, axis=1))
+    covered = valid & (radius <= camera.aperture_radius_m)
+    # A necessary ray that misses the aperture (or its usable part) has no captured twin: aim the
+    # search at the parallel ray through the nearest usable point of the aperture instead (paper
+    # section 6: nearby rays stand in; these pixels are outside the exact coverage).
+    r_ok = math.sqrt(_camera_scalars(camera, options.rim_margin_px)[7])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shrink = np.where(radius > r_ok, r_ok / radius, 1.0)
+    aim_hit = hit * shrink[:, None]
+    aim_slope_in = dirs[:, :2] / dirs[:, 2:3] + aim_hit / f
+    mla_point_img = -(aim_hit - aim_slope_in * f_prime)
+    aim_points = np.concatenate([aim_hit + dirs[:, :2] / dirs[:, 2:3] * points[:, 2:3], points[:, 2:3]], axis=1)
+    usable = valid & np.all(np.isfinite(mla_point_img), axis=1)
+    lens0 = np.zeros((len(uv), 2), dtype=np.int64)
+    lens0[usable] = camera.mla.nearest_indices(mla_point_img[usable])
+    # The camera records the necessary ray only if it also lands on the sensor (its MLA point's
+    # image through the main-lens centre, i.e. its micro-image position, is on the pixel grid).
+    with np.errstate(invalid="ignore"):
+        sensor_px = camera.sensor.image_plane_to_pixels(
+            -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime) * camera.micro_image_scale
+        )
+    on_sensor = (
+        (sensor_px[:, 0] >= -0.5)
+        & (sensor_px[:, 0] <= camera.sensor.width_px - 0.5)
+        & (sensor_px[:, 1] >= -0.5)
+        & (sensor_px[:, 1] <= camera.sensor.height_px - 0.5)
+    )
+    covered &= on_sensor
+
+    beta = f_prime / camera.mla.focal_length_m + points[:, 2] * (1 - f_prime / f) / camera.mla.focal_length_m
+    degenerate = usable & (np.abs(beta) * camera.sensor.pixel_pitch_m < 1e-12)
+    if np.any(degenerate):
+        raise ParameterError(
+            "the port's air-side face is conjugate to the MLA through the main lens "
+            f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there"
+        )
+
+    n_pixels = output.width_px * output.height_px
+    width = s * s * options.k
+    out_index = np.zeros((n_pixels, width), dtype=np.int32)
+    out_weight = np.zeros((n_pixels, width), dtype=np.float32)
+    out_count = np.zeros(n_pixels, dtype=np.int32)
+    build_rows(
+        np.nan_to_num(points),
+        np.nan_to_num(aim_points),
+        np.nan_to_num(dirs),
+        usable,
+        lens0,
+        _lens_offsets(camera, options.lens_rings),
+        s * s,
+        options.k,
+        options.window,
+        options.lambda_m_per_rad,
+        _camera_scalars(camera, options.rim_margin_px),
+        _lattice_scalars(camera),
+        port.normal,
+        port.distance_m,
+        camera.sensor.width_px,
+        camera.sensor.height_px,
+        out_index,
+        out_weight,
+        out_count,
+    )
+    indptr = np.zeros(n_pixels + 1, dtype=np.int64)
+    np.cumsum(out_count, out=indptr[1:])
+    keep = np.arange(width)[None, :] < out_count[:, None]
+    indices = out_index[keep]
+    weights = out_weight[keep]
+    del out_index, out_weight
+
+    factor = (transmittance * port.radiance_scale).reshape(n_pixels, s * s)
+    passing = (factor > 0).sum(axis=1)
+    mean_factor = factor.sum(axis=1) / np.maximum(passing, 1)
+    gain = np.ones(n_pixels, dtype=np.float32)
+    if options.compensate_port:
+        gain = np.where(mean_factor > 0, 1.0 / np.where(mean_factor > 0, mean_factor, 1.0), 0.0).astype(np.float32)
+    coverage = covered.reshape(n_pixels, s * s).mean(axis=1).reshape(output.height_px, output.width_px)
+    meta = {
+        "version": WARP_MAP_VERSION,
+        "lfrefract": __version__,
+        "camera": camera.to_dict(),
+        "port": port.to_dict(),
+        "output": output.to_dict(),
+        "options": options.to_dict(),
+    }
+    return WarpMap(
+        output=output,
+        raw_shape=(camera.sensor.height_px, camera.sensor.width_px),
+        indptr=indptr,
+        indices=indices,
+        weights=weights,
+        gain=gain,
+        coverage=coverage,
+        key=warp_map_key(camera, port, output, options),
+        meta=meta,
+    )

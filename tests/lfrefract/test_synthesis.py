@@ -1,0 +1,208 @@
+"""The warp map: structure, weights, geometry of the selected rays, files, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lfrefract.synthesis as synthesis
+from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
+from lfrefract.io import FileFormatError
+from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map, necessary_air_rays, warp_map_key
+from tests.tolerances import FLOAT32_WEIGHT_SUM, FLOAT64_UNIT
+
+TINY = camera_preset("tiny")
+PORT = FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004, tilt_x_deg=15.0, tilt_y_deg=-5.0)
+NO_PORT = FlatPort(distance_m=0.012, thickness_m=0.004, n_air=1.0, n_glass=1.0, n_water=1.0)
+
+
+@pytest.fixture(scope="module")
+def warp():
+    return build_warp_map(TINY, PORT)
+
+
+def test_rows_are_normalised_non_negative_and_in_range(warp):
+    rows = np.diff(warp.indptr)
+    sums = np.add.reduceat(warp.weights.astype(np.float64), warp.indptr[:-1][rows > 0])
+    np.testing.assert_allclose(sums, 1.0, atol=FLOAT32_WEIGHT_SUM)
+    assert np.all(np.isfinite(warp.weights))
+    assert np.all(warp.weights > 0)
+    assert warp.indices.min() >= 0
+    assert warp.indices.max() < TINY.sensor.width_px * TINY.sensor.height_px
+    # Within a row each raw pixel appears once (duplicates from sub-samples are merged).
+    for p in np.flatnonzero(rows)[::97]:
+        row = warp.indices[warp.indptr[p] : warp.indptr[p + 1]]
+        assert len(np.unique(row)) == len(row)
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    tilt_x=st.floats(-30, 30),
+    tilt_y=st.floats(-30, 30),
+    k=st.integers(1, 40),
+    supersample=st.integers(1, 3),
+    lam=st.sampled_from([0.0, 1e-3, 0.05]),
+)
+def test_weights_hold_for_any_port_and_options(tilt_x, tilt_y, k, supersample, lam):
+    port = FlatPort.from_degrees(distance_m=0.01, thickness_m=0.003, tilt_x_deg=tilt_x, tilt_y_deg=tilt_y)
+    options = SynthesisOptions(k=k, supersample=supersample, lambda_m_per_rad=lam)
+    warp = build_warp_map(TINY, port, options=options)
+    rows = np.diff(warp.indptr)
+    assert rows.max() <= k * supersample**2
+    filled = rows > 0
+    sums = np.add.reduceat(warp.weights.astype(np.float64), warp.indptr[:-1][filled])
+    np.testing.assert_allclose(sums, 1.0, atol=FLOAT32_WEIGHT_SUM)
+    assert np.all(warp.weights > 0)
+    assert np.all(np.isfinite(warp.gain))
+    # Exactly covered pixels always get rays.
+    assert np.all(warp.filled[warp.exact])
+
+
+def test_map_does_not_depend_on_candidate_order(monkeypatch):
+    plain = build_warp_map(TINY, PORT)
+    original = synthesis._lens_offsets
+
+    def shuffled(camera, rings):
+        offsets = original(camera, rings)
+        return offsets[np.random.default_rng(5).permutation(len(offsets))]
+
+    monkeypatch.setattr(synthesis, "_lens_offsets", shuffled)
+    permuted = build_warp_map(TINY, PORT)
+    dense = lambda w: _dense_rows(w, np.arange(0, len(w.gain), 37))  # noqa: E731
+    np.testing.assert_allclose(dense(permuted), dense(plain), atol=FLOAT32_WEIGHT_SUM)
+
+
+def _dense_rows(warp, rows):
+    out = np.zeros((len(rows), warp.raw_shape[0] * warp.raw_shape[1]))
+    for n, p in enumerate(rows):
+        sl = slice(warp.indptr[p], warp.indptr[p + 1])
+        out[n, warp.indices[sl]] = warp.weights[sl]
+    return out
+
+
+def test_without_refraction_the_chosen_rays_follow_the_line_of_sight():
+    """k = 1, one ray per pixel, equal indices: the selected captured ray passes the necessary
+    ray's point on the port within the spacing of captured rays, with the line of sight's direction
+    to within one microlens's angular pitch."""
+    options = SynthesisOptions(k=1, supersample=1)
+    warp = build_warp_map(TINY, NO_PORT, options=options)
+    assert warp.exact.all()
+    assert warp.filled.all()
+    out = warp.output
+    directions = out.pixel_directions()
+    chosen = warp.indices[warp.indptr[:-1]]
+    uv = np.stack([chosen % TINY.sensor.width_px, chosen // TINY.sensor.width_px], axis=1).astype(float)
+    rays = TINY.captured_rays(uv)
+    assert rays.in_aperture.all()
+    angle = np.arccos(np.clip(np.sum(rays.directions_cam * directions, axis=1), -1, 1))
+    # With lambda = 0 only the position on the face counts, so a ray from a neighbouring lens
+    # (one lens pitch seen from the main lens is pitch / f' of angle) may win.
+    lens_angle = TINY.mla.pitch_m / TINY.lens_to_mla_m
+    assert np.max(angle) < (options.lens_rings + 1) * lens_angle
+    trace = NO_PORT.trace_from_air(rays.origins_cam, rays.directions_cam)
+    points, _, _, _ = necessary_air_rays(NO_PORT, directions)
+    miss_m = np.linalg.norm(trace.entry_points_cam - points, axis=1)
+    # Neighbouring pixels' rays are this far apart on the face: pixel pitch * f' / f_mla (+ the face).
+    spacing = TINY.sensor.pixel_pitch_m * TINY.lens_to_mla_m / TINY.mla.focal_length_m
+    assert np.median(miss_m) < spacing
+    np.testing.assert_allclose(warp.gain, 1.0, atol=FLOAT64_UNIT)  # no port, no radiometric factor
+
+
+def test_a_large_angle_weight_keeps_the_direction():
+    """lambda >> port distance: the direction dominates D, so the chosen ray comes from the lens
+    the necessary ray crosses, within half a lens pitch of angle (plus the pixel's own step)."""
+    warp = build_warp_map(TINY, NO_PORT, options=SynthesisOptions(k=1, supersample=1, lambda_m_per_rad=10.0))
+    chosen = warp.indices[warp.indptr[:-1]]
+    uv = np.stack([chosen % TINY.sensor.width_px, chosen // TINY.sensor.width_px], axis=1).astype(float)
+    rays = TINY.captured_rays(uv)
+    angle = np.arccos(np.clip(np.sum(rays.directions_cam * warp.output.pixel_directions(), axis=1), -1, 1))
+    lens_angle = TINY.mla.pitch_m / TINY.lens_to_mla_m
+    assert np.max(angle) < 0.6 * lens_angle
+
+
+def test_necessary_air_rays_reverse_the_port():
+    directions = virtual_camera_for(TINY).pixel_directions()
+    points, out_dirs, transmittance, valid = necessary_air_rays(PORT, directions)
+    assert valid.all()
+    # Tracing the air ray outwards again lands on the line of sight in the water.
+    forward = PORT.trace_from_air(points - out_dirs * 1e-9, out_dirs)
+    cross = np.cross(forward.exit_points_cam, directions)
+    np.testing.assert_allclose(cross, 0.0, atol=1e-9)
+    np.testing.assert_allclose(forward.directions_cam, directions, atol=1e-9)
+    assert np.all((transmittance > 0.8) & (transmittance <= 1.0))
+
+
+def test_save_load_round_trip_and_stale_key(tmp_path, warp):
+    path = warp.save(tmp_path / "map.npz")
+    loaded = WarpMap.load(path, expected_key=warp.key)
+    for name in ("indptr", "indices", "weights", "gain", "coverage"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(warp, name))
+    assert loaded.output == warp.output
+    other = warp_map_key(TINY, PORT, warp.output, SynthesisOptions(k=8))
+    with pytest.raises(FileFormatError, match="other parameters"):
+        WarpMap.load(path, expected_key=other)
+    with pytest.raises(FileFormatError, match="no such file"):
+        WarpMap.load(tmp_path / "none.npz")
+    (tmp_path / "bad.npz").write_bytes(b"not a map")
+    with pytest.raises(FileFormatError, match="is not a warp map"):
+        WarpMap.load(tmp_path / "bad.npz")
+
+
+def test_key_changes_with_every_input(warp):
+    out = warp.output
+    keys = {
+        warp.key,
+        warp_map_key(TINY, PORT, out, SynthesisOptions(k=31)),
+        warp_map_key(TINY, PORT, out, SynthesisOptions(supersample=3)),
+        warp_map_key(
+            TINY,
+            FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004, tilt_x_deg=15.0001, tilt_y_deg=-5.0),
+            out,
+            SynthesisOptions(),
+        ),
+        warp_map_key(camera_preset("f01"), PORT, out, SynthesisOptions()),
+    }
+    assert len(keys) == 5
+
+
+def test_apply_accepts_rgb_grey_and_integers(warp):
+    rng = np.random.default_rng(0)
+    raw = rng.uniform(0, 1, size=(*warp.raw_shape, 3)).astype(np.float32)
+    rgb = warp.apply(raw)
+    grey = warp.apply(raw[..., 1])
+    assert rgb.shape == (warp.output.height_px, warp.output.width_px, 3)
+    np.testing.assert_allclose(grey, rgb[..., 1], rtol=1e-6)
+    ints = warp.apply((raw * 1000).astype(np.uint16))
+    np.testing.assert_allclose(ints, warp.apply(np.floor(raw * 1000)), rtol=1e-6)
+    # A constant raw image gives that constant times the gain wherever rays were found.
+    constant = warp.apply(np.full(warp.raw_shape, 2.0, dtype=np.float32))
+    np.testing.assert_allclose(constant[warp.filled], 2.0 * warp.gain.reshape(constant.shape)[warp.filled], rtol=1e-5)
+    assert np.all(constant[~warp.filled] == 0.0)
+    with pytest.raises(ParameterError, match="raw must have shape"):
+        warp.apply(raw[:-1])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"k": 0}, "k must be positive, got 0"),
+        ({"supersample": -1}, "supersample must be positive, got -1"),
+        ({"lambda_m_per_rad": float("nan")}, "lambda_m_per_rad must be finite, got nan"),
+        ({"lambda_m_per_rad": -1.0}, "lambda_m_per_rad must be non-negative, got -1.0"),
+        ({"window": -1}, "window must be a non-negative integer, got -1"),
+        ({"k": 500, "window": 1}, "k=500 exceeds the candidates searched"),
+        ({"compensate_port": "yes"}, "compensate_port must be True or False, got 'yes'"),
+    ],
+)
+def test_bad_options(kwargs, message):
+    with pytest.raises(ParameterError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        SynthesisOptions(**kwargs)
+
+
+def test_bad_geometry():
+    with pytest.raises(ParameterError, match="cuts the main-lens aperture"):
+        build_warp_map(TINY, FlatPort.from_degrees(distance_m=0.0005, tilt_x_deg=60.0))
+    with pytest.raises(ParameterError, match="camera must be a LightFieldCamera"):
+        build_warp_map("tiny", PORT)
