@@ -1,7 +1,7 @@
 """``lfrefract``: the core's command line, working on files and presets (no renderer).
 
     lfrefract describe (PRESET | META.json) [--json]
-    lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda L] [--map-cache DIR]
+    lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full]
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     syn.add_argument("--out", required=True, help="output EXR")
     syn.add_argument("--k", type=int, default=32, help="captured rays averaged per necessary ray")
     syn.add_argument("--supersample", type=int, default=2, help="necessary rays per pixel along each axis")
-    syn.add_argument("--lambda", dest="lam", type=float, default=0.0, help="angle weight of D, metres per radian")
+    syn.add_argument("--lambda", dest="lam", type=float, default=0.3, help="angle weight of D, metres per radian")
     syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     nv = sub.add_parser("naive", help="conventional view with no refraction handling")
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")

@@ -59,7 +59,11 @@ class SynthesisOptions:
     supersample : int
         Necessary rays per output pixel along each axis (paper: 2).
     lambda_m_per_rad : float
-        Weight of the angle term of D, metres per radian (paper: 0, the angle term is not used).
+        Weight of the angle term of D, metres per radian. ``|P' - P| + lambda * angle`` is about
+        how far the two rays are apart at ``lambda`` beyond the port, so a typical object distance
+        is the natural value. The paper used 0 (position only); on the tiny camera behind
+        0-30 deg ports, 0.3 m/rad raised PSNR against the ideal image from 18-25 dB to 22-29 dB
+        and SSIM from 0.73-0.78 to 0.89-0.91 (docs/synthesis.md).
     lens_rings : int
         Rings of microlenses around the necessary ray's MLA point searched for candidates.
     window : int
@@ -75,7 +79,7 @@ class SynthesisOptions:
 
     k: int = 32
     supersample: int = 2
-    lambda_m_per_rad: float = 0.0
+    lambda_m_per_rad: float = 0.3
     lens_rings: int = 1
     window: int = 2
     rim_margin_px: float = 1.0
