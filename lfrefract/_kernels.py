@@ -14,24 +14,6 @@ import numpy as np
 D_FLOOR_M = 1e-9
 
 
-@numba.njit(cache=True, inline="always")
-def _nearest_lens(xi, eta, off_x, off_y, a1x, a1y, a2x, a2y, i00, i01, i10, i11):
-    """Lattice index of the lens centre nearest to image-plane point (xi, eta)."""
-    rx, ry = xi - off_x, eta - off_y
-    fa = np.floor(i00 * rx + i01 * ry)
-    fb = np.floor(i10 * rx + i11 * ry)
-    best_a, best_b, best_d2 = 0.0, 0.0, np.inf
-    for da in range(2):
-        for db in range(2):
-            ca, cb = fa + da, fb + db
-            dx = a1x * ca + a2x * cb - rx
-            dy = a1y * ca + a2y * cb - ry
-            d2 = dx * dx + dy * dy
-            if d2 < best_d2:
-                best_a, best_b, best_d2 = ca, cb, d2
-    return int(best_a), int(best_b)
-
-
 @numba.njit(cache=True, parallel=True)
 def build_rows(
     points,  # (n_samples, 3) necessary air ray: point on the air-side face (D is measured from it)
@@ -44,8 +26,8 @@ def build_rows(
     k,
     window,
     lam,
-    cam,  # float64 camera scalars, see synthesis._camera_scalars
-    lattice,  # float64 (a1x, a1y, a2x, a2y, i00, i01, i10, i11, off_x, off_y)
+    cam,  # float64 (f, f', f_mla, pixel pitch, cu, cv, usable aperture radius^2), see synthesis
+    lattice,  # float64 (a1x, a1y, a2x, a2y, off_x, off_y): lens (i, j) at off + i a1 + j a2 (image plane)
     normal,  # (3,) port normal
     plane_d,  # air-side face offset
     width,
@@ -56,9 +38,8 @@ def build_rows(
 ):
     """For every output pixel: per sub-sample the k candidates of smallest D, weights 1/D
     (normalised per sub-sample), averaged over sub-samples and merged by raw pixel."""
-    f, f_prime, f_mla, pitch, cu, cv, scale, r_ok2 = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5], cam[6], cam[7]
-    a1x, a1y, a2x, a2y = lattice[0], lattice[1], lattice[2], lattice[3]
-    i00, i01, i10, i11, off_x, off_y = lattice[4], lattice[5], lattice[6], lattice[7], lattice[8], lattice[9]
+    f, f_prime, f_mla, pitch, cu, cv, r_ok2 = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5], cam[6]
+    a1x, a1y, a2x, a2y, off_x, off_y = lattice[0], lattice[1], lattice[2], lattice[3], lattice[4], lattice[5]
     nx, ny, nz = normal[0], normal[1], normal[2]
     n_pixels = out_count.shape[0]
     n_off = lens_offsets.shape[0]
@@ -103,15 +84,13 @@ def build_rows(
                             continue
                         xi = (u - cu) * pitch
                         eta = (v - cv) * pitch
-                        li, lj = _nearest_lens(
-                            xi / scale, eta / scale, off_x, off_y, a1x, a1y, a2x, a2y, i00, i01, i10, i11
-                        )
-                        if li != ci or lj != cj:
-                            continue
                         sin_x = (xi - c_xi) / f_mla  # slope behind the main lens, camera frame
                         sin_y = (eta - c_eta) / f_mla
                         hx = cx + sin_x * f_prime
                         hy = cy + sin_y * f_prime
+                        # Inside the (shrunk) aperture means inside this lens's micro-image disc,
+                        # which lies inside the lens's own cell (the camera's f-numbers are
+                        # validated to match), so the pixel belongs to this lens.
                         if hx * hx + hy * hy > r_ok2:
                             continue
                         dx = sin_x - hx / f
@@ -173,8 +152,11 @@ def gather(indptr, indices, weights, gain, raw_flat, out):
     """``out[p, c] = gain[p] * sum_j weights[j] * raw_flat[indices[j], c]`` over row p's entries."""
     n_channels = raw_flat.shape[1]
     for p in numba.prange(out.shape[0]):
+        acc = np.zeros(n_channels, dtype=np.float32)
+        for j in range(indptr[p], indptr[p + 1]):
+            w = weights[j]
+            row = indices[j]
+            for c in range(n_channels):
+                acc[c] += w * raw_flat[row, c]
         for c in range(n_channels):
-            acc = 0.0
-            for j in range(indptr[p], indptr[p + 1]):
-                acc += weights[j] * raw_flat[indices[j], c]
-            out[p, c] = acc * gain[p]
+            out[p, c] = acc[c] * gain[p]

@@ -298,7 +298,6 @@ def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarra
             camera.sensor.pixel_pitch_m,
             cu,
             cv,
-            camera.micro_image_scale,
             max(r_ok, 0.0) ** 2,
         ]
     )
@@ -306,10 +305,7 @@ def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarra
 
 def _lattice_scalars(camera: LightFieldCamera) -> np.ndarray:
     b = camera.mla.basis_m
-    inv = np.linalg.inv(b)
-    return np.array(
-        [b[0, 0], b[1, 0], b[0, 1], b[1, 1], inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], *camera.mla.offset_m]
-    )
+    return np.array([b[0, 0], b[1, 0], b[0, 1], b[1, 1], *camera.mla.offset_m])
 
 
 def build_warp_map(
@@ -361,7 +357,7 @@ def build_warp_map(
     # A necessary ray that misses the aperture (or its usable part) has no captured twin: aim the
     # search at the parallel ray through the nearest usable point of the aperture instead (paper
     # section 6: nearby rays stand in; these pixels are outside the exact coverage).
-    r_ok = math.sqrt(_camera_scalars(camera, options.rim_margin_px)[7])
+    r_ok = math.sqrt(_camera_scalars(camera, options.rim_margin_px)[6])
     with np.errstate(invalid="ignore", divide="ignore"):
         shrink = np.where(radius > r_ok, r_ok / radius, 1.0)
     aim_hit = hit * shrink[:, None]
