@@ -92,3 +92,42 @@ def test_without_refraction_synthesis_is_the_central_projection(mi):
     assert psnr(image, ideal, data_range=peak) > SYNTH_NO_PORT_PSNR_DB
     assert ssim(image, ideal, data_range=peak) > SYNTH_NO_PORT_SSIM
     assert _shift_px(image, ideal, warp.exact) < SYNTH_SHIFT_PX
+
+
+def test_cli_synth_and_naive_on_a_render(tmp_path, capsys):
+    from lfrefract import cli as core_cli
+    from lfrefract.io import read_exr, read_json
+    from simulator import cli as sim_cli
+
+    render = tmp_path / "render"
+    assert sim_cli.main(["render", "--out", str(render), "--spp", "2", "--quiet", "--no-previews"]) == 0
+    cache = tmp_path / "maps"
+    out = tmp_path / "synth" / "frame.exr"
+    for _ in range(2):  # build and cache, then load from the cache
+        assert core_cli.main(["synth", str(render / "raw.exr"), "--out", str(out), "--map-cache", str(cache)]) == 0
+    printed = capsys.readouterr().out
+    assert "built, cached as" in printed
+    assert "loaded" in printed
+    sidecar = read_json(out.with_suffix(".json"))
+    meta = read_json(render / "meta.json")
+    assert sidecar["K"] == meta["ideal"]["K"]
+    image = read_exr(out, role="refraction_free")
+    assert image.shape == (meta["ideal"]["height_px"], meta["ideal"]["width_px"], 3)
+    coverage = read_exr(out.with_suffix(".coverage.exr"), role="coverage")
+    assert 0.0 < sidecar["coverage"]["exact_fraction"] == pytest.approx(float(np.mean(coverage >= 1.0)))
+    assert out.with_suffix(".png").is_file()
+    assert len(list(cache.iterdir())) == 1
+    naive = tmp_path / "naive.exr"
+    assert core_cli.main(["naive", str(render / "raw.exr"), "--out", str(naive)]) == 0
+    assert read_exr(naive, role="naive_central").shape == image.shape
+
+
+def test_cli_synth_refuses_a_capture_without_port(tmp_path, capsys):
+    from lfrefract import cli as core_cli
+    from simulator import cli as sim_cli
+
+    render = tmp_path / "white"
+    assert sim_cli.main(["render", "white", "--out", str(render), "--spp", "2", "--quiet", "--no-previews"]) == 0
+    assert core_cli.main(["synth", str(render / "raw.exr"), "--out", str(tmp_path / "x.exr")]) == 2
+    assert "has no port" in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
