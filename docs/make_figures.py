@@ -24,7 +24,7 @@ from lfrefract import camera_preset
 from lfrefract.io import read_exr, read_json
 from simulator.config import RenderSettings, embedded_scenes, load_scene
 from simulator.job import render_job
-from simulator.previews import display_rgb, white_level
+from simulator.previews import display_rgb, downsample, white_level
 
 FIGURES = Path(__file__).resolve().parent / "figures"
 
@@ -60,8 +60,7 @@ def main() -> None:
     half = int(12 * camera.micro_image_pitch_px)
     crop = _crop(raw, (h // 2, w // 2), half)
     plt.imsave(FIGURES / "raw_crop.png", display_rgb(crop, white=level))
-    step = max(1, int(np.ceil(max(h, w) / 800)))
-    small = raw[: h // step * step, : w // step * step].reshape(h // step, step, w // step, step, 3).mean(axis=(1, 3))
+    small = downsample(raw, 800)
     plt.imsave(FIGURES / "raw_full.png", display_rgb(small, white=level))
     plt.imsave(FIGURES / "ideal.png", display_rgb(ideal))
 

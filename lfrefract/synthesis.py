@@ -95,7 +95,7 @@ class SynthesisOptions:
         non_negative_float("rim_margin_px", self.rim_margin_px)
         if not isinstance(self.compensate_port, bool):
             raise ParameterError(f"compensate_port must be True or False, got {self.compensate_port!r}")
-        lenses = 7 if self.lens_rings == 1 else 3 * self.lens_rings * (self.lens_rings + 1) + 1
+        lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             raise ParameterError(
                 f"k={self.k!r} exceeds the candidates searched ({lenses} lenses x {(2 * self.window + 1) ** 2} "
@@ -285,10 +285,21 @@ class WarpMap:
         )
 
 
+def _usable_aperture_radius_m(camera: LightFieldCamera, rim_margin_px: float) -> float:
+    """Radius on the main lens inside which a pixel's chief ray keeps ``rim_margin_px`` pixels from
+    its micro-image's rim (one sensor pixel spans ``pitch * f' / f_mla`` on the main lens)."""
+    margin_m = rim_margin_px * camera.sensor.pixel_pitch_m * camera.lens_to_mla_m / camera.mla.focal_length_m
+    return max(camera.aperture_radius_m - margin_m, 0.0)
+
+
+def _mla_points_img(hit: np.ndarray, dirs: np.ndarray, f: float, f_prime: float) -> np.ndarray:
+    """Image-plane MLA points (N, 2) of air rays leaving the main lens at ``hit`` along ``dirs``
+    (thin lens backwards: slope behind the lens = slope in front + hit / f)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime)
+
+
 def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarray:
-    r_ok = camera.aperture_radius_m - rim_margin_px * camera.sensor.pixel_pitch_m * (
-        camera.lens_to_mla_m / camera.mla.focal_length_m
-    )
     cu, cv = camera.sensor.centre_px
     return np.array(
         [
@@ -298,7 +309,7 @@ def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarra
             camera.sensor.pixel_pitch_m,
             cu,
             cv,
-            max(r_ok, 0.0) ** 2,
+            _usable_aperture_radius_m(camera, rim_margin_px) ** 2,
         ]
     )
 
@@ -357,12 +368,11 @@ def build_warp_map(
     # A necessary ray that misses the aperture (or its usable part) has no captured twin: aim the
     # search at the parallel ray through the nearest usable point of the aperture instead (paper
     # section 6: nearby rays stand in; these pixels are outside the exact coverage).
-    r_ok = math.sqrt(_camera_scalars(camera, options.rim_margin_px)[6])
+    r_ok = _usable_aperture_radius_m(camera, options.rim_margin_px)
     with np.errstate(invalid="ignore", divide="ignore"):
         shrink = np.where(radius > r_ok, r_ok / radius, 1.0)
     aim_hit = hit * shrink[:, None]
-    aim_slope_in = dirs[:, :2] / dirs[:, 2:3] + aim_hit / f
-    mla_point_img = -(aim_hit - aim_slope_in * f_prime)
+    mla_point_img = _mla_points_img(aim_hit, dirs, f, f_prime)
     aim_points = np.concatenate([aim_hit + dirs[:, :2] / dirs[:, 2:3] * points[:, 2:3], points[:, 2:3]], axis=1)
     usable = valid & np.all(np.isfinite(mla_point_img), axis=1)
     lens0 = np.zeros((len(uv), 2), dtype=np.int64)
@@ -371,7 +381,7 @@ def build_warp_map(
     # image through the main-lens centre, i.e. its micro-image position, is on the pixel grid).
     with np.errstate(invalid="ignore"):
         sensor_px = camera.sensor.image_plane_to_pixels(
-            -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime) * camera.micro_image_scale
+            _mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale
         )
     on_sensor = (
         (sensor_px[:, 0] >= -0.5)

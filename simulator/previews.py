@@ -12,7 +12,7 @@ from lfrefract import LightFieldCamera
 mpl.use("Agg")
 import matplotlib.pyplot as plt
 
-__all__ = ["display_rgb", "white_level", "write_all"]
+__all__ = ["display_rgb", "downsample", "white_level", "write_all"]
 
 #: Longest side of the downsampled whole-raw preview, pixels.
 PREVIEW_MAX_SIDE_PX = 1600
@@ -41,7 +41,8 @@ def white_level(image: np.ndarray, *, max_samples: int = 1_000_000) -> float:
     return level if level > 0.0 else 1.0
 
 
-def _downsample(img: np.ndarray, max_side: int) -> np.ndarray:
+def downsample(img: np.ndarray, max_side: int) -> np.ndarray:
+    """Box-average ``img`` (H, W, C) by a whole factor so its longer side is at most ``max_side``."""
     step = int(np.ceil(max(img.shape[:2]) / max_side))
     if step <= 1:
         return img
@@ -66,7 +67,7 @@ def write_all(
     folder.mkdir(parents=True, exist_ok=True)
     white = white_level(raw)
     written = []
-    plt.imsave(folder / "raw.png", display_rgb(_downsample(raw, PREVIEW_MAX_SIDE_PX), white=white))
+    plt.imsave(folder / "raw.png", display_rgb(downsample(raw, PREVIEW_MAX_SIDE_PX), white=white))
     written.append(folder / "raw.png")
     half = int(CROP_MICRO_IMAGES * camera.micro_image_pitch_px / 2)
     cy, cx = raw.shape[0] // 2, raw.shape[1] // 2
