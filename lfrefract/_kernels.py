@@ -1,7 +1,8 @@
 """Numba kernels of the refraction-free synthesis: candidate search and the sparse gather.
 
 Everything here works on plain arrays and scalars in the camera frame (metres) and raw-pixel
-coordinates; :mod:`lfrefract.synthesis` prepares the inputs and documents the method.
+coordinates; :mod:`lfrefract.synthesis` prepares the inputs and documents the method. The build
+kernel is serial and releases the GIL: the caller runs blocks of output pixels on a thread pool.
 """
 
 from __future__ import annotations
@@ -14,15 +15,63 @@ import numpy as np
 D_FLOOR_M = 1e-9
 
 
-@numba.njit(cache=True, parallel=True)
-def build_rows(
+@numba.njit(cache=True, inline="always")
+def _better(d_a, i_a, d_b, i_b):
+    """Total order of candidates: smaller D first, ties broken by the smaller raw index, so the
+    selection does not depend on the order candidates are visited in."""
+    return d_a < d_b or (d_a == d_b and i_a < i_b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _select_best(dist, index, n, k):
+    """Reorder ``dist[:n]``, ``index[:n]`` in place so that the first ``min(n, k)`` are the best
+    under :func:`_better` (in no particular order); quickselect."""
+    lo, hi = 0, n - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        pd, pi = dist[mid], index[mid]
+        i, j = lo, hi
+        while i <= j:
+            while _better(dist[i], index[i], pd, pi):
+                i += 1
+            while _better(pd, pi, dist[j], index[j]):
+                j -= 1
+            if i <= j:
+                dist[i], dist[j] = dist[j], dist[i]
+                index[i], index[j] = index[j], index[i]
+                i += 1
+                j -= 1
+        # Now [lo, j] <= pivot <= [i, hi]; keep narrowing the side that holds position k - 1.
+        if k - 1 <= j:
+            hi = j
+        elif k - 1 >= i:
+            lo = i
+        else:
+            break
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_row(index, weight, first, stop):
+    """Insertion-sort entries ``first:stop`` by raw index (rows are short)."""
+    for r in range(first + 1, stop):
+        idx, w = index[r], weight[r]
+        j = r
+        while j > first and index[j - 1] > idx:
+            index[j] = index[j - 1]
+            weight[j] = weight[j - 1]
+            j -= 1
+        index[j] = idx
+        weight[j] = w
+
+
+@numba.njit(cache=True, nogil=True)
+def select_candidates(
     points,  # (n_samples, 3) necessary air ray: point on the air-side face (D is measured from it)
     aim_points,  # (n_samples, 3) point the candidate pixels are predicted from (= points when covered)
     dirs,  # (n_samples, 3) necessary air ray: unit direction, outwards
     usable,  # (n_samples,) bool: the necessary ray reached the air side
     lens0,  # (n_samples, 2) int64: lattice index of the lens nearest the ray's MLA hit
     lens_offsets,  # (n_off, 2) int64: candidate lenses relative to lens0
-    samples_per_pixel,
     k,
     window,
     lam,
@@ -32,131 +81,199 @@ def build_rows(
     plane_d,  # air-side face offset
     width,
     height,
-    out_index,  # (n_pixels, samples_per_pixel * k) int32, filled
-    out_weight,  # (n_pixels, samples_per_pixel * k) float32, filled
-    out_count,  # (n_pixels,) int32, filled
+    sel_index,  # (n_samples, k) int64, filled: raw flat indices of the k best, -1 where fewer
+    sel_dist,  # (n_samples, k) float64, filled: their D (metres)
 ):
-    """For every output pixel: per sub-sample the k candidates of smallest D, weights 1/D
-    (normalised per sub-sample), averaged over sub-samples and merged by raw pixel."""
+    """For every necessary ray (sample): the k captured rays of smallest D among the candidates of
+    the analytic search, under the total order of :func:`_better`."""
     f, f_prime, f_mla, pitch, cu, cv, r_ok2 = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5], cam[6]
     a1x, a1y, a2x, a2y, off_x, off_y = lattice[0], lattice[1], lattice[2], lattice[3], lattice[4], lattice[5]
     nx, ny, nz = normal[0], normal[1], normal[2]
-    n_pixels = out_count.shape[0]
+    n_samples = usable.shape[0]
     n_off = lens_offsets.shape[0]
     g = 1.0 + f_prime / f_mla
-    for p in numba.prange(n_pixels):
-        idx_buf = np.empty(samples_per_pixel * k, dtype=np.int64)
-        w_buf = np.empty(samples_per_pixel * k, dtype=np.float64)
-        best_d = np.empty(k, dtype=np.float64)
-        best_i = np.empty(k, dtype=np.int64)
+    # A captured ray leaves its pixel with slope sin = (xi - c) / f_mla towards lens centre c, meets
+    # the main lens at h = c + sin f' and leaves it with slope sin - h / f = sin (1 - f'/f) - c / f:
+    # under one lens the direction changes by `spread` per unit of sin (0 when the MLA sits in the
+    # focal plane: then all rays of a lens are parallel and share one angle to the necessary ray).
+    spread = 1.0 - f_prime / f
+    step = pitch * f_prime / f_mla  # main-lens distance between neighbouring pixels' rays
+    side = 2 * window + 1
+    cand_d = np.empty(n_off * side * side, dtype=np.float64)
+    cand_i = np.empty(n_off * side * side, dtype=np.int64)
+    sel_index[:] = -1
+    sel_dist[:] = np.inf
+    for s in range(n_samples):
+        if not usable[s]:
+            continue
+        px, py, pz = points[s, 0], points[s, 1], points[s, 2]
+        qx, qy = aim_points[s, 0], aim_points[s, 1]
+        rx, ry, rz = dirs[s, 0], dirs[s, 1], dirs[s, 2]
+        beta = f_prime / f_mla + pz * (1.0 / f_mla - f_prime / (f_mla * f))
+        n_cand = 0
+        for o in range(n_off):
+            ci = lens0[s, 0] + lens_offsets[o, 0]
+            cj = lens0[s, 1] + lens_offsets[o, 1]
+            c_xi = off_x + a1x * ci + a2x * cj
+            c_eta = off_y + a1y * ci + a2y * cj
+            cx, cy = -c_xi, -c_eta  # camera frame
+            # Predicted sensor point: the pixel of this lens whose chief ray passes P (plane z = P_z).
+            ax = cx * g + pz * (cx / f_mla - cx * g / f)
+            ay = cy * g + pz * (cy / f_mla - cy * g / f)
+            sx, sy = (ax - qx) / beta, (ay - qy) / beta
+            u0 = int(np.floor(-sx / pitch + cu + 0.5))
+            v0 = int(np.floor(-sy / pitch + cv + 0.5))
+            # Main-lens point of pixel (u, v)'s ray: h = h0 + step * (u - u0, v - v0).
+            sin0_x = ((u0 - cu) * pitch - c_xi) / f_mla
+            sin0_y = ((v0 - cv) * pitch - c_eta) / f_mla
+            h0x = cx + sin0_x * f_prime
+            h0y = cy + sin0_y * f_prime
+            lens_angle = 0.0
+            if lam != 0.0 and spread == 0.0:
+                dx, dy = -cx / f, -cy / f
+                norm = np.sqrt(dx * dx + dy * dy + 1.0)
+                ex, ey, ez = dx / norm - rx, dy / norm - ry, 1.0 / norm - rz
+                lens_angle = 2.0 * np.arcsin(min(1.0, 0.5 * np.sqrt(ex * ex + ey * ey + ez * ez)))
+            for dv in range(-window, window + 1):
+                v = v0 + dv
+                if v < 0 or v >= height:
+                    continue
+                hy = h0y + dv * step
+                half2 = r_ok2 - hy * hy
+                if half2 < 0.0:
+                    continue
+                # Columns whose main-lens point can lie inside the usable aperture (one pixel
+                # of slack each side; the exact test below decides).
+                half = np.sqrt(half2)
+                du_lo = max(-window, int(np.floor((-half - h0x) / step)) - 1)
+                du_hi = min(window, int(np.ceil((half - h0x) / step)) + 1)
+                for du in range(du_lo, du_hi + 1):
+                    u = u0 + du
+                    if u < 0 or u >= width:
+                        continue
+                    hx = h0x + du * step
+                    # Inside the (shrunk) aperture means inside this lens's micro-image disc,
+                    # which lies inside the lens's own cell (the camera's f-numbers are
+                    # validated to match), so the pixel belongs to this lens.
+                    if hx * hx + hy * hy > r_ok2:
+                        continue
+                    sin_x = sin0_x + du * pitch / f_mla
+                    sin_y = sin0_y + dv * pitch / f_mla
+                    dx = sin_x * spread - cx / f  # direction (dx, dy, 1), not normalised
+                    dy = sin_y * spread - cy / f
+                    denom = nx * dx + ny * dy + nz
+                    if denom <= 0.0:
+                        continue
+                    t = (plane_d - (nx * hx + ny * hy)) / denom
+                    ex = hx + t * dx - px
+                    ey = hy + t * dy - py
+                    ez = t - pz
+                    dist = np.sqrt(ex * ex + ey * ey + ez * ez)
+                    if lam != 0.0:
+                        if spread == 0.0:
+                            dist += lam * lens_angle
+                        else:
+                            norm = np.sqrt(dx * dx + dy * dy + 1.0)
+                            ex, ey, ez = dx / norm - rx, dy / norm - ry, 1.0 / norm - rz
+                            chord = np.sqrt(ex * ex + ey * ey + ez * ez)
+                            dist += lam * 2.0 * np.arcsin(min(1.0, 0.5 * chord))
+                    cand_d[n_cand] = dist
+                    cand_i[n_cand] = v * width + u
+                    n_cand += 1
+        if n_cand == 0:
+            continue
+        _select_best(cand_d, cand_i, n_cand, k)
+        for j in range(min(n_cand, k)):
+            sel_index[s, j] = cand_i[j]
+            sel_dist[s, j] = cand_d[j]
+
+
+@numba.njit(cache=True, nogil=True)
+def merge_rows(sel_index, sel_dist, samples_per_pixel, out_index, out_weight, out_count):
+    """Rows of the warp map from each sample's selected captured rays.
+
+    Per sample the selected rays get weights 1/D (D floored at D_FLOOR_M) normalised to 1; the
+    samples of a pixel that found any ray are averaged, entries of the same raw pixel merged, and
+    the row ordered by raw index. ``sel_index`` (n_samples, k) holds -1 in unused slots.
+    ``out_index`` / ``out_weight`` (n_pixels * samples_per_pixel * k,) receive the rows back to
+    back, ``out_count`` (n_pixels,) their lengths; returns the number of entries written.
+    """
+    k = sel_index.shape[1]
+    n_pixels = out_count.shape[0]
+    cand_rows = np.empty(samples_per_pixel * k, dtype=np.int64)
+    w_buf = np.empty(samples_per_pixel * k, dtype=np.float64)
+    table_size = 1 << int(np.ceil(np.log2(2 * samples_per_pixel * k)))  # at most half full
+    table_mask = table_size - 1
+    table_key = np.full(table_size, -1, dtype=np.int64)
+    table_slot = np.empty(table_size, dtype=np.int64)
+    pos = 0
+    for p in range(n_pixels):
         n_buf = 0
         n_used_samples = 0
         for q in range(samples_per_pixel):
             s = p * samples_per_pixel + q
-            if not usable[s]:
-                continue
-            px, py, pz = points[s, 0], points[s, 1], points[s, 2]
-            qx, qy = aim_points[s, 0], aim_points[s, 1]
-            rx, ry, rz = dirs[s, 0], dirs[s, 1], dirs[s, 2]
-            beta = f_prime / f_mla + pz * (1.0 / f_mla - f_prime / (f_mla * f))
-            for j in range(k):
-                best_d[j] = np.inf
-                best_i[j] = -1
-            for o in range(n_off):
-                ci = lens0[s, 0] + lens_offsets[o, 0]
-                cj = lens0[s, 1] + lens_offsets[o, 1]
-                c_xi = off_x + a1x * ci + a2x * cj
-                c_eta = off_y + a1y * ci + a2y * cj
-                cx, cy = -c_xi, -c_eta  # camera frame
-                # Predicted sensor point: the pixel of this lens whose chief ray passes P (plane z = P_z).
-                ax = cx * g + pz * (cx / f_mla - cx * g / f)
-                ay = cy * g + pz * (cy / f_mla - cy * g / f)
-                sx, sy = (ax - qx) / beta, (ay - qy) / beta
-                u0 = int(np.floor(-sx / pitch + cu + 0.5))
-                v0 = int(np.floor(-sy / pitch + cv + 0.5))
-                for dv in range(-window, window + 1):
-                    v = v0 + dv
-                    if v < 0 or v >= height:
-                        continue
-                    for du in range(-window, window + 1):
-                        u = u0 + du
-                        if u < 0 or u >= width:
-                            continue
-                        xi = (u - cu) * pitch
-                        eta = (v - cv) * pitch
-                        sin_x = (xi - c_xi) / f_mla  # slope behind the main lens, camera frame
-                        sin_y = (eta - c_eta) / f_mla
-                        hx = cx + sin_x * f_prime
-                        hy = cy + sin_y * f_prime
-                        # Inside the (shrunk) aperture means inside this lens's micro-image disc,
-                        # which lies inside the lens's own cell (the camera's f-numbers are
-                        # validated to match), so the pixel belongs to this lens.
-                        if hx * hx + hy * hy > r_ok2:
-                            continue
-                        dx = sin_x - hx / f
-                        dy = sin_y - hy / f
-                        norm = np.sqrt(dx * dx + dy * dy + 1.0)
-                        dx, dy, dz = dx / norm, dy / norm, 1.0 / norm
-                        denom = nx * dx + ny * dy + nz * dz
-                        if denom <= 0.0:
-                            continue
-                        t = (plane_d - (nx * hx + ny * hy)) / denom
-                        ex = hx + t * dx - px
-                        ey = hy + t * dy - py
-                        ez = t * dz - pz
-                        dist = np.sqrt(ex * ex + ey * ey + ez * ez)
-                        if lam != 0.0:
-                            cos_a = min(1.0, max(-1.0, dx * rx + dy * ry + dz * rz))
-                            dist += lam * np.arccos(cos_a)
-                        if dist < best_d[k - 1]:
-                            j = k - 1
-                            while j > 0 and best_d[j - 1] > dist:
-                                best_d[j] = best_d[j - 1]
-                                best_i[j] = best_i[j - 1]
-                                j -= 1
-                            best_d[j] = dist
-                            best_i[j] = v * width + u
             total = 0.0
             for j in range(k):
-                if best_i[j] >= 0:
-                    total += 1.0 / max(best_d[j], D_FLOOR_M)
+                if sel_index[s, j] >= 0:
+                    total += 1.0 / max(sel_dist[s, j], D_FLOOR_M)
             if total == 0.0:
                 continue
             n_used_samples += 1
             for j in range(k):
-                if best_i[j] >= 0:
-                    idx_buf[n_buf] = best_i[j]
-                    w_buf[n_buf] = (1.0 / max(best_d[j], D_FLOOR_M)) / total
+                if sel_index[s, j] >= 0:
+                    cand_rows[n_buf] = sel_index[s, j]
+                    w_buf[n_buf] = (1.0 / max(sel_dist[s, j], D_FLOOR_M)) / total
                     n_buf += 1
-        if n_buf == 0:
-            out_count[p] = 0
-            continue
-        order = np.argsort(idx_buf[:n_buf], kind="mergesort")
+        # Merge the sub-samples' entries by raw pixel (open addressing on the raw index), then
+        # order the row by raw index for the gather's memory access.
         m = 0
-        last = -1
         for r in range(n_buf):
-            idx = idx_buf[order[r]]
-            w = w_buf[order[r]] / n_used_samples
-            if idx == last:
-                out_weight[p, m - 1] += w
+            idx = cand_rows[r]
+            w = w_buf[r] / n_used_samples
+            h = (idx * 2654435761) & table_mask
+            while table_key[h] != -1 and table_key[h] != idx:
+                h = (h + 1) & table_mask
+            if table_key[h] == idx:
+                out_weight[pos + table_slot[h]] += w
             else:
-                out_index[p, m] = idx
-                out_weight[p, m] = w
-                last = idx
+                table_key[h] = idx
+                table_slot[h] = m
+                out_index[pos + m] = idx
+                out_weight[pos + m] = w
                 m += 1
+        for r in range(n_buf):  # clear the table for the next pixel
+            h = (cand_rows[r] * 2654435761) & table_mask
+            while table_key[h] != -1:
+                table_key[h] = -1
+                h = (h + 1) & table_mask
+        _sort_row(out_index, out_weight, pos, pos + m)
         out_count[p] = m
+        pos += m
+    return pos
 
 
 @numba.njit(cache=True, parallel=True)
 def gather(indptr, indices, weights, gain, raw_flat, out):
     """``out[p, c] = gain[p] * sum_j weights[j] * raw_flat[indices[j], c]`` over row p's entries."""
     n_channels = raw_flat.shape[1]
+    if n_channels == 3:  # the common case without a per-pixel accumulator array
+        for p in numba.prange(out.shape[0]):
+            a0 = np.float32(0.0)
+            a1 = np.float32(0.0)
+            a2 = np.float32(0.0)
+            for j in range(indptr[p], indptr[p + 1]):
+                w = weights[j]
+                row = indices[j]
+                a0 += w * raw_flat[row, 0]
+                a1 += w * raw_flat[row, 1]
+                a2 += w * raw_flat[row, 2]
+            out[p, 0] = a0 * gain[p]
+            out[p, 1] = a1 * gain[p]
+            out[p, 2] = a2 * gain[p]
+        return
     for p in numba.prange(out.shape[0]):
-        acc = np.zeros(n_channels, dtype=np.float32)
-        for j in range(indptr[p], indptr[p + 1]):
-            w = weights[j]
-            row = indices[j]
-            for c in range(n_channels):
-                acc[c] += w * raw_flat[row, c]
         for c in range(n_channels):
-            out[p, c] = acc[c] * gain[p]
+            acc = np.float32(0.0)
+            for j in range(indptr[p], indptr[p + 1]):
+                acc += weights[j] * raw_flat[indices[j], c]
+            out[p, c] = acc * gain[p]

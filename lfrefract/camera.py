@@ -117,14 +117,12 @@ class MicrolensArray:
         pts = np.asarray(points_m, dtype=np.float64).reshape(-1, 2)
         frac = np.linalg.solve(self.basis_m, (pts - np.asarray(self.offset_m)).T).T
         base = np.floor(frac)
-        best = np.zeros_like(base)
-        best_d2 = np.full(pts.shape[0], np.inf)
-        for corner in ((0, 0), (1, 0), (0, 1), (1, 1)):
-            cand = base + np.asarray(corner, dtype=np.float64)
-            d2 = np.sum((self.centres_m(cand) - pts) ** 2, axis=1)
-            closer = d2 < best_d2
-            best[closer] = cand[closer]
-            best_d2[closer] = d2[closer]
+        corners = np.array([(0, 0), (1, 0), (0, 1), (1, 1)], dtype=np.float64)
+        # Squared distance from the point to each corner of its parallelogram (N, 4); argmin
+        # keeps the first corner on ties.
+        residual = (frac - base) @ self.basis_m.T
+        d2 = np.sum((residual[:, None, :] - (corners @ self.basis_m.T)[None]) ** 2, axis=2)
+        best = base + corners[np.argmin(d2, axis=1)]
         return best.astype(np.int64)
 
     def cell_offsets_m(self, samples: np.ndarray) -> np.ndarray:

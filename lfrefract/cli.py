@@ -32,7 +32,7 @@ from lfrefract import (
     virtual_camera_for,
 )
 from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_json
-from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map, warp_map_key
+from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
 from lfrefract.views import naive_view
 
 __all__ = ["describe", "main", "naive", "synth"]
@@ -73,7 +73,7 @@ def synth(args: argparse.Namespace) -> int:
     if not meta.get("port"):
         raise ParameterError(f"{args.raw!r}: its meta.json has no port; nothing to remove")
     port = FlatPort.from_dict(meta["port"])
-    options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam)
+    options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
     output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
     key = warp_map_key(camera, port, output, options)
     cached = Path(args.map_cache) / f"{key}.npz" if args.map_cache else None
@@ -82,7 +82,7 @@ def synth(args: argparse.Namespace) -> int:
         warp = WarpMap.load(cached, expected_key=key)
         how = f"loaded {cached}"
     else:
-        warp = build_warp_map(camera, port, output=output, options=options)
+        warp = build_warp_map(camera, port, output=output, options=options, progress=not args.quiet)
         how = "built"
         if cached is not None:
             warp.save(cached)
@@ -167,7 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     syn.add_argument("--k", type=int, default=32, help="captured rays averaged per necessary ray")
     syn.add_argument("--supersample", type=int, default=2, help="necessary rays per pixel along each axis")
     syn.add_argument("--lambda", dest="lam", type=float, default=0.3, help="angle weight of D, metres per radian")
+    syn.add_argument("--search", choices=SEARCH_METHODS, default="auto", help="candidate search (default: auto)")
     syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
+    syn.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
     nv = sub.add_parser("naive", help="conventional view with no refraction handling")
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")

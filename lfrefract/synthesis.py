@@ -29,14 +29,17 @@ import hashlib
 import json
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from lfrefract import __version__
-from lfrefract._kernels import build_rows, gather
-from lfrefract._validate import ParameterError, non_negative_float, positive_int
+from lfrefract._kernels import gather, merge_rows, select_candidates
+from lfrefract._raytree import LazyRayTree
+from lfrefract._validate import ParameterError, non_negative_float, one_of, positive_int
 from lfrefract.camera import LightFieldCamera
 from lfrefract.io import FileFormatError
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
@@ -45,7 +48,13 @@ from lfrefract.port import FlatPort
 __all__ = ["SynthesisOptions", "WarpMap", "build_warp_map", "necessary_air_rays", "warp_map_key"]
 
 #: Version of the warp-map algorithm and file layout; part of every map's key.
-WARP_MAP_VERSION = 1
+WARP_MAP_VERSION = 2
+
+#: Candidate searches of :class:`SynthesisOptions`.
+SEARCH_METHODS = ("auto", "analytic", "kdtree")
+
+#: Output pixels per block of the build (a block's buffers: BLOCK_PIXELS x s^2 x k entries).
+BLOCK_PIXELS = 8192
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -75,6 +84,12 @@ class SynthesisOptions:
         Divide by the port's radiometric factor along the necessary ray (Fresnel transmittance
         times ``(n_air / n_water)^2``), so the output is radiance in the water, comparable with
         the simulator's ideal image.
+    search : {"auto", "analytic", "kdtree"}
+        How candidates are found. ``"analytic"``: the lens and pixel window search above (an
+        error where the port's air-side face is conjugate to the MLA, so that every pixel of a
+        lens sees the same point of the face). ``"kdtree"``: the exact k nearest by D among all
+        captured rays, through a k-d tree (memory: about 60 bytes per raw pixel).
+        ``"auto"``: analytic, with the k-d tree for the necessary rays where it is undefined.
     """
 
     k: int = 32
@@ -84,6 +99,7 @@ class SynthesisOptions:
     window: int = 2
     rim_margin_px: float = 1.0
     compensate_port: bool = True
+    search: str = "auto"
 
     def __post_init__(self) -> None:
         positive_int("k", self.k)
@@ -95,6 +111,7 @@ class SynthesisOptions:
         non_negative_float("rim_margin_px", self.rim_margin_px)
         if not isinstance(self.compensate_port, bool):
             raise ParameterError(f"compensate_port must be True or False, got {self.compensate_port!r}")
+        one_of("search", self.search, SEARCH_METHODS)
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             raise ParameterError(
@@ -319,43 +336,40 @@ def _lattice_scalars(camera: LightFieldCamera) -> np.ndarray:
     return np.array([b[0, 0], b[1, 0], b[0, 1], b[1, 1], *camera.mla.offset_m])
 
 
-def build_warp_map(
-    camera: LightFieldCamera,
-    port: FlatPort,
-    *,
-    output: PinholeCamera | None = None,
-    options: SynthesisOptions | None = None,
-) -> WarpMap:
-    """Build the warp map for a camera behind a port.
+@dataclass(frozen=True)
+class _Block:
+    """Rows of one block of output pixels."""
 
-    Parameters
-    ----------
-    camera : LightFieldCamera
-    port : FlatPort
-        The port; equal indices model no refraction.
-    output : PinholeCamera, optional
-        Geometry of the refraction-free image; default :func:`virtual_camera_for` ``(camera)``
-        (the simulator's ideal image uses the same).
-    options : SynthesisOptions, optional
+    counts: np.ndarray  # (n,) entries per row
+    indices: np.ndarray  # (nnz,) int32
+    weights: np.ndarray  # (nnz,) float32
+    factor: np.ndarray  # (n,) mean port factor over the sub-samples that pass the port (0: none)
+    coverage: np.ndarray  # (n,) fraction of sub-samples recorded by the camera
 
-    Returns
-    -------
-    WarpMap
-    """
-    if not isinstance(camera, LightFieldCamera):
-        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
-    if not isinstance(port, FlatPort):
-        raise ParameterError(f"port must be a FlatPort, got {port!r}")
-    output = output if output is not None else virtual_camera_for(camera)
-    options = options if options is not None else SynthesisOptions()
-    if port.clearance_m(camera.aperture_radius_m) <= 0.0:
-        raise ParameterError(f"port.distance_m={port.distance_m!r} cuts the main-lens aperture")
+
+@dataclass(frozen=True)
+class _Search:
+    """Everything the blocks of one build share."""
+
+    camera: LightFieldCamera
+    port: FlatPort
+    output: PinholeCamera
+    options: SynthesisOptions
+    lens_offsets: np.ndarray
+    camera_scalars: np.ndarray
+    lattice_scalars: np.ndarray
+    tree: LazyRayTree
+
+
+def _build_block(search: _Search, first: int, stop: int) -> _Block:
+    """Necessary rays, coverage and rows of output pixels ``first:stop`` (row-major)."""
+    camera, port, output, options = search.camera, search.port, search.output, search.options
     s = options.supersample
     offsets = (np.arange(s) + 0.5) / s - 0.5
-    vv, uu = np.mgrid[0 : output.height_px, 0 : output.width_px]
-    sub_u = (uu.ravel()[:, None, None] + offsets[None, None, :]).repeat(s, axis=1)
-    sub_v = (vv.ravel()[:, None, None] + offsets[None, :, None]).repeat(s, axis=2)
-    uv = np.stack([sub_u.ravel(), sub_v.ravel()], axis=1)  # pixel-major, s*s samples per pixel
+    pixel = np.arange(first, stop)
+    sub_u = (pixel % output.width_px)[:, None, None] + offsets[None, None, :]
+    sub_v = (pixel // output.width_px)[:, None, None] + offsets[None, :, None]
+    uv = np.stack(np.broadcast_arrays(sub_u, sub_v), axis=-1).reshape(-1, 2)  # pixel-major, s*s each
     points, dirs, transmittance, valid = necessary_air_rays(port, output.pixel_directions(uv))
 
     # Follow the necessary air ray back through the thin main lens to the MLA.
@@ -363,7 +377,7 @@ def build_warp_map(
     with np.errstate(invalid="ignore", divide="ignore"):
         tau = -points[:, 2] / dirs[:, 2]
         hit = points[:, :2] + tau[:, None] * dirs[:, :2]
-    radius = np.sqrt(np.sum(hit**2, axis=1))
+    radius = np.hypot(hit[:, 0], hit[:, 1])
     covered = valid & (radius <= camera.aperture_radius_m)
     # A necessary ray that misses the aperture (or its usable part) has no captured twin: aim the
     # search at the parallel ray through the nearest usable point of the aperture instead (paper
@@ -383,62 +397,134 @@ def build_warp_map(
         sensor_px = camera.sensor.image_plane_to_pixels(
             _mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale
         )
-    on_sensor = (
+    covered &= (
         (sensor_px[:, 0] >= -0.5)
         & (sensor_px[:, 0] <= camera.sensor.width_px - 0.5)
         & (sensor_px[:, 1] >= -0.5)
         & (sensor_px[:, 1] <= camera.sensor.height_px - 0.5)
     )
-    covered &= on_sensor
 
+    # The analytic search predicts, per lens, the pixel whose chief ray passes P: undefined where
+    # the air-side face is conjugate to the MLA (beta = 0: all pixels of a lens see one point).
     beta = f_prime / camera.mla.focal_length_m + points[:, 2] * (1 - f_prime / f) / camera.mla.focal_length_m
-    degenerate = usable & (np.abs(beta) * camera.sensor.pixel_pitch_m < 1e-12)
-    if np.any(degenerate):
+    by_tree = usable & (np.abs(beta) * camera.sensor.pixel_pitch_m < 1e-12)
+    if options.search == "kdtree":
+        by_tree = usable
+    elif options.search == "analytic" and np.any(by_tree):
         raise ParameterError(
             "the port's air-side face is conjugate to the MLA through the main lens "
-            f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there"
+            f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there; "
+            "use search='auto' or 'kdtree'"
         )
-
-    n_pixels = output.width_px * output.height_px
-    width = s * s * options.k
-    out_index = np.zeros((n_pixels, width), dtype=np.int32)
-    out_weight = np.zeros((n_pixels, width), dtype=np.float32)
-    out_count = np.zeros(n_pixels, dtype=np.int32)
-    build_rows(
+    n = stop - first
+    sel_index = np.empty((len(uv), options.k), dtype=np.int64)
+    sel_dist = np.empty((len(uv), options.k), dtype=np.float64)
+    select_candidates(
         np.nan_to_num(points),
         np.nan_to_num(aim_points),
         np.nan_to_num(dirs),
-        usable,
+        usable & ~by_tree,
         lens0,
-        _lens_offsets(camera, options.lens_rings),
-        s * s,
+        search.lens_offsets,
         options.k,
         options.window,
         options.lambda_m_per_rad,
-        _camera_scalars(camera, options.rim_margin_px),
-        _lattice_scalars(camera),
+        search.camera_scalars,
+        search.lattice_scalars,
         port.normal,
         port.distance_m,
         camera.sensor.width_px,
         camera.sensor.height_px,
-        out_index,
-        out_weight,
-        out_count,
+        sel_index,
+        sel_dist,
     )
-    indptr = np.zeros(n_pixels + 1, dtype=np.int64)
-    np.cumsum(out_count, out=indptr[1:])
-    keep = np.arange(width)[None, :] < out_count[:, None]
-    indices = out_index[keep]
-    weights = out_weight[keep]
-    del out_index, out_weight
-
-    factor = (transmittance * port.radiance_scale).reshape(n_pixels, s * s)
+    if np.any(by_tree):
+        sel_index[by_tree], sel_dist[by_tree] = search.tree.get().nearest(points[by_tree], dirs[by_tree], options.k)
+    capacity = n * s * s * options.k
+    indices = np.empty(capacity, dtype=np.int32)
+    weights = np.empty(capacity, dtype=np.float32)
+    counts = np.zeros(n, dtype=np.int64)
+    nnz = merge_rows(sel_index, sel_dist, s * s, indices, weights, counts)
+    factor = (transmittance * port.radiance_scale).reshape(n, s * s)
     passing = (factor > 0).sum(axis=1)
-    mean_factor = factor.sum(axis=1) / np.maximum(passing, 1)
+    return _Block(
+        counts=counts,
+        indices=indices[:nnz].copy(),
+        weights=weights[:nnz].copy(),
+        factor=factor.sum(axis=1) / np.maximum(passing, 1),
+        coverage=covered.reshape(n, s * s).mean(axis=1),
+    )
+
+
+def build_warp_map(
+    camera: LightFieldCamera,
+    port: FlatPort,
+    *,
+    output: PinholeCamera | None = None,
+    options: SynthesisOptions | None = None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> WarpMap:
+    """Build the warp map for a camera behind a port.
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    port : FlatPort
+        The port; equal indices model no refraction.
+    output : PinholeCamera, optional
+        Geometry of the refraction-free image; default :func:`virtual_camera_for` ``(camera)``
+        (the simulator's ideal image uses the same).
+    options : SynthesisOptions, optional
+    workers : int, optional
+        Threads that build blocks of output pixels in parallel; default: the CPUs this process
+        may use. The map does not depend on it.
+    progress : bool
+        Show a progress bar over the blocks (tqdm, on stderr).
+
+    Returns
+    -------
+    WarpMap
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    if not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort, got {port!r}")
+    output = output if output is not None else virtual_camera_for(camera)
+    if not isinstance(output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
+    options = options if options is not None else SynthesisOptions()
+    workers = _available_cpus() if workers is None else positive_int("workers", workers)
+    if port.clearance_m(camera.aperture_radius_m) <= 0.0:
+        raise ParameterError(f"port.distance_m={port.distance_m!r} cuts the main-lens aperture")
+    search = _Search(
+        camera=camera,
+        port=port,
+        output=output,
+        options=options,
+        lens_offsets=_lens_offsets(camera, options.lens_rings),
+        camera_scalars=_camera_scalars(camera, options.rim_margin_px),
+        lattice_scalars=_lattice_scalars(camera),
+        tree=LazyRayTree(
+            camera,
+            port,
+            usable_radius_m=_usable_aperture_radius_m(camera, options.rim_margin_px),
+            lambda_m_per_rad=options.lambda_m_per_rad,
+        ),
+    )
+    n_pixels = output.width_px * output.height_px
+    starts = range(0, n_pixels, BLOCK_PIXELS)
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        jobs = pool.map(lambda first: _build_block(search, first, min(first + BLOCK_PIXELS, n_pixels)), starts)
+        blocks = list(tqdm(jobs, total=len(starts), desc="warp map", unit="block", disable=not progress))
+
+    indptr = np.zeros(n_pixels + 1, dtype=np.int64)
+    np.cumsum(np.concatenate([b.counts for b in blocks]), out=indptr[1:])
+    mean_factor = np.concatenate([b.factor for b in blocks])
     gain = np.ones(n_pixels, dtype=np.float32)
     if options.compensate_port:
         gain = np.where(mean_factor > 0, 1.0 / np.where(mean_factor > 0, mean_factor, 1.0), 0.0).astype(np.float32)
-    coverage = covered.reshape(n_pixels, s * s).mean(axis=1).reshape(output.height_px, output.width_px)
+    coverage = np.concatenate([b.coverage for b in blocks]).reshape(output.height_px, output.width_px)
     meta = {
         "version": WARP_MAP_VERSION,
         "lfrefract": __version__,
@@ -451,10 +537,17 @@ def build_warp_map(
         output=output,
         raw_shape=(camera.sensor.height_px, camera.sensor.width_px),
         indptr=indptr,
-        indices=indices,
-        weights=weights,
+        indices=np.concatenate([b.indices for b in blocks]),
+        weights=np.concatenate([b.weights for b in blocks]),
         gain=gain,
         coverage=coverage,
         key=warp_map_key(camera, port, output, options),
         meta=meta,
     )
+
+
+def _available_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1

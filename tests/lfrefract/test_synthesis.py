@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfrefract.synthesis as synthesis
-from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
+from lfrefract import FlatPort, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
+from lfrefract._raytree import RayTree
 from lfrefract.io import FileFormatError
 from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map, necessary_air_rays, warp_map_key
 from tests.tolerances import FLOAT32_WEIGHT_SUM, FLOAT64_UNIT
@@ -194,6 +197,7 @@ def test_apply_accepts_rgb_grey_and_integers(warp):
         ({"window": -1}, "window must be a non-negative integer, got -1"),
         ({"k": 500, "window": 1}, "k=500 exceeds the candidates searched"),
         ({"compensate_port": "yes"}, "compensate_port must be True or False, got 'yes'"),
+        ({"search": "brute"}, "search must be one of"),
     ],
 )
 def test_bad_options(kwargs, message):
@@ -206,3 +210,67 @@ def test_bad_geometry():
         build_warp_map(TINY, FlatPort.from_degrees(distance_m=0.0005, tilt_x_deg=60.0))
     with pytest.raises(ParameterError, match="camera must be a LightFieldCamera"):
         build_warp_map("tiny", PORT)
+
+
+# ---------------------------------------------------------------------------- k-d tree search
+def test_analytic_search_finds_the_global_nearest_ray_inside_the_exact_coverage():
+    """k = 1: inside the exact coverage the analytic search (a window of pixels under a ring of
+    lenses) picks the same captured ray as the exact search over all rays (k-d tree)."""
+    options = SynthesisOptions(k=1, supersample=1)
+    analytic = build_warp_map(TINY, PORT, options=options)
+    tree = build_warp_map(TINY, PORT, options=dataclasses.replace(options, search="kdtree"))
+    exact = analytic.exact.ravel()
+    assert exact.mean() > 0.3
+    first = analytic.indptr[:-1]
+    np.testing.assert_array_equal(analytic.indices[first[exact]], tree.indices[tree.indptr[:-1][exact]])
+    # The tree also fills pixels outside the coverage, with the globally nearest rays.
+    assert tree.filled.all()
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 12), lam=st.sampled_from([0.0, 0.01, 0.3]))
+def test_ray_tree_matches_brute_force(seed, k, lam):
+    rng = np.random.default_rng(seed)
+    tree = RayTree(TINY, PORT, usable_radius_m=TINY.aperture_radius_m, lambda_m_per_rad=lam)
+    # Necessary rays near captured ones (jittered), and some far away.
+    pick = rng.integers(0, len(tree.raw_index), size=40)
+    points = tree.points_cam[pick] + rng.normal(scale=2e-4, size=(40, 3)) * [1, 1, 0]
+    directions = tree.directions_cam[pick] + rng.normal(scale=0.02, size=(40, 3))
+    points[:5, :2] += 0.01
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    index, dist = tree.nearest(points, directions, k)
+    all_rows = np.broadcast_to(np.arange(len(tree.raw_index)), (40, len(tree.raw_index)))
+    brute = tree.distances(all_rows, points, directions)
+    order = np.lexsort((np.broadcast_to(tree.raw_index, brute.shape), brute), axis=-1)[:, :k]
+    np.testing.assert_array_equal(index, tree.raw_index[order])
+    np.testing.assert_allclose(dist, np.take_along_axis(brute, order, axis=1), rtol=1e-12)
+
+
+def test_conjugate_port_face_falls_back_to_the_tree():
+    """f' != f puts the MLA's conjugate plane in front of the camera; an air-side face there sends
+    every pixel of a lens through one point, where the analytic prediction is undefined."""
+    camera = dataclasses.replace(TINY, lens_to_mla_m=6.3e-3)
+    f, f_prime = camera.focal_length_m, camera.lens_to_mla_m
+    port = FlatPort(distance_m=f * f_prime / (f_prime - f), thickness_m=0.004, n_glass=1.5, n_water=1.333)
+    small = PinholeCamera(focal_px=60.0, cx_px=11.5, cy_px=8.5, width_px=24, height_px=18)
+    with pytest.raises(ParameterError, match=r"conjugate to the MLA.*use search='auto' or 'kdtree'"):
+        build_warp_map(camera, port, output=small, options=SynthesisOptions(search="analytic"))
+    warp = build_warp_map(camera, port, output=small, options=SynthesisOptions(supersample=1))
+    assert warp.filled.all()
+    rows = np.diff(warp.indptr)
+    np.testing.assert_allclose(
+        np.add.reduceat(warp.weights.astype(np.float64), warp.indptr[:-1]), 1.0, atol=FLOAT32_WEIGHT_SUM
+    )
+    assert rows.max() <= 32
+
+
+def test_map_does_not_depend_on_blocks_or_threads(monkeypatch, warp):
+    monkeypatch.setattr(synthesis, "BLOCK_PIXELS", 777)
+    for workers in (1, 3):
+        other = build_warp_map(TINY, PORT, workers=workers)
+        for name in ("indptr", "indices", "weights", "gain", "coverage"):
+            np.testing.assert_array_equal(getattr(other, name), getattr(warp, name))
+    with pytest.raises(ParameterError, match="workers must be positive, got 0"):
+        build_warp_map(TINY, PORT, workers=0)
+    with pytest.raises(ParameterError, match="output must be a PinholeCamera"):
+        build_warp_map(TINY, PORT, output=(92, 69))
