@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -227,20 +228,25 @@ def test_analytic_search_finds_the_global_nearest_ray_inside_the_exact_coverage(
     assert tree.filled.all()
 
 
-@settings(max_examples=10, deadline=None)
+@functools.cache
+def _ray_tree(lam: float) -> RayTree:
+    return RayTree(TINY, PORT, usable_radius_m=TINY.aperture_radius_m, lambda_m_per_rad=lam)
+
+
+@settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 12), lam=st.sampled_from([0.0, 0.01, 0.3]))
 def test_ray_tree_matches_brute_force(seed, k, lam):
     rng = np.random.default_rng(seed)
-    tree = RayTree(TINY, PORT, usable_radius_m=TINY.aperture_radius_m, lambda_m_per_rad=lam)
-    # Necessary rays near captured ones (jittered), and some far away.
-    pick = rng.integers(0, len(tree.raw_index), size=40)
-    points = tree.points_cam[pick] + rng.normal(scale=2e-4, size=(40, 3)) * [1, 1, 0]
-    directions = tree.directions_cam[pick] + rng.normal(scale=0.02, size=(40, 3))
-    points[:5, :2] += 0.01
+    tree = _ray_tree(lam)
+    n = 16  # necessary rays near captured ones (jittered), a few far away
+    pick = rng.integers(0, len(tree.raw_index), size=n)
+    points = tree.points_cam[pick] + rng.normal(scale=2e-4, size=(n, 3)) * [1, 1, 0]
+    directions = tree.directions_cam[pick] + rng.normal(scale=0.02, size=(n, 3))
+    points[:3, :2] += 0.01
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     index, dist = tree.nearest(points, directions, k)
-    all_rows = np.broadcast_to(np.arange(len(tree.raw_index)), (40, len(tree.raw_index)))
-    brute = tree.distances(all_rows, points, directions)
+    every = np.broadcast_to(np.arange(len(tree.raw_index)), (n, len(tree.raw_index)))
+    brute = tree.distances(every, points, directions)
     order = np.lexsort((np.broadcast_to(tree.raw_index, brute.shape), brute), axis=-1)[:, :k]
     np.testing.assert_array_equal(index, tree.raw_index[order])
     np.testing.assert_allclose(dist, np.take_along_axis(brute, order, axis=1), rtol=1e-12)

@@ -1,8 +1,11 @@
-"""Small scene configs for simulator tests (not fixtures: plain builders)."""
+"""Small scene configs for simulator tests (not fixtures: plain builders), and their ground truth."""
 
 from __future__ import annotations
 
-from simulator.config import SceneConfig, parse_scene
+import numpy as np
+
+from simulator import assets
+from simulator.config import Chessboard, SceneConfig, parse_scene
 
 LIGHTS = [
     {"type": "point", "position_m": [-0.2, -0.3, 0.15], "intensity_w_sr": 0.4},
@@ -18,14 +21,15 @@ def scene(
     lights: list[dict] | None = None,
     spp: int = 16,
     seed: int = 0,
-    camera: str = "tiny",
+    camera: str | dict = "tiny",
 ) -> SceneConfig:
     """A scene with the given port table (None: no port), objects and (default) point lights.
 
-    Relative mesh paths are resolved against ``base_dir``.
+    ``camera`` is a preset name or a full camera table (every field of
+    ``LightFieldCamera.to_dict()``). Relative mesh paths are resolved against ``base_dir``.
     """
     data = {
-        "camera": {"preset": camera},
+        "camera": {"preset": camera} if isinstance(camera, str) else camera,
         "render": {"spp": spp, "seed": seed},
         "light": LIGHTS if lights is None else lights,
         "object": objects,
@@ -46,3 +50,16 @@ def port(tilt_x_deg: float = 0.0, tilt_y_deg: float = 0.0, thickness_m: float = 
         "n_glass": 1.5,
         "n_water": 1.333,
     }
+
+
+def chessboard_corners_world(board: Chessboard) -> np.ndarray:
+    """World positions (N, 3), metres, of a chessboard object's inner corners.
+
+    In the order of :func:`simulator.assets.chessboard_inner_corners` (row by row from the top-left
+    corner, x fastest: OpenCV's order for pattern size ``(columns - 1, rows - 1)`` on an upright
+    board). With an identity camera pose these are camera-frame points.
+    """
+    local = assets.chessboard_inner_corners(
+        squares=board.squares, square_size_m=board.square_size_m, margin_squares=board.margin_squares
+    )
+    return board.placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))

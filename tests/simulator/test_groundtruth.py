@@ -9,7 +9,7 @@ import pytest
 from lfrefract import PinholeCamera, Pose
 from simulator import assets, groundtruth
 from simulator.scene import build_scene
-from tests.simulator.scenes import port, scene
+from tests.simulator.scenes import chessboard_corners_world, port, scene
 from tests.tolerances import DEPTH_FLOAT32_RELATIVE, IDEAL_CHESSBOARD_RMS_PX
 
 pytestmark = pytest.mark.render
@@ -66,9 +66,7 @@ def test_chessboard_corners_in_ideal_image_at_pinhole_projection(mi):
         gray, corners, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     ).reshape(-1, 2)
     obj = config.objects[0]
-    local = assets.chessboard_inner_corners(squares=(8, 6), square_size_m=0.025, margin_squares=obj.margin_squares)
-    world = obj.placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))
-    expected = BIG.project(world)
+    expected = BIG.project(chessboard_corners_world(obj))
     # OpenCV may report the grid from either end; compare with the matching order.
     rms = min(np.sqrt(np.mean(np.sum((corners - e) ** 2, axis=1))) for e in (expected, expected[::-1]))
     assert rms < IDEAL_CHESSBOARD_RMS_PX
