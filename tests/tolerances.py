@@ -216,12 +216,13 @@ SYNTH_SHIFT_PX = 0.3
 # the synthesized image against the pinhole projection (K of the warp map's output) of the board's
 # 3D corners: a slanted 7 x 5 board at ~9 px per square, 0.15 and 0.6 m away, behind a 0 and a
 # 26.8 deg port (the tiny camera at twice its focal length and sensor, 16 spp, default options).
-# Measured over seeds 0-2: 0.16-0.19 / 0.08-0.10 px at 0 deg (near / far), 0.30-0.33 / 0.14 px at
-# 26.8 deg; the detector alone on the ideal image of the same scenes gives 0.10-0.13 px. The worst
-# case carries a 0.2 px bias (under 0.05 px with rim_margin_px = 0): behind the tilted port the
-# necessary rays cross the aperture 1.1-1.7 mm off-centre, so the +-2 px candidate window under each
+# Measured over seeds 0-2 (rim_margin_px = 1.0): 0.16-0.19 / 0.08-0.10 px at 0 deg (near / far),
+# 0.30-0.33 / 0.14 px at 26.8 deg; seed 0 with the default 0.71 px margin: 0.17 / 0.09 and
+# 0.23 / 0.11 px. The detector alone on the ideal image of the same scenes gives 0.10-0.13 px. The
+# tilted near case carries a bias (0.2 px with a 1 px margin, under 0.05 px with none): the
+# necessary rays cross the aperture well off-centre, so the +-2 px candidate window under each
 # lens reaches the skipped rim pixels on its outer side only, and the k = 32 average leans towards
-# the aperture centre (an offset of a fraction of a mm, which shifts the image as 1 / depth).
+# the aperture centre (a fraction of a mm, which shifts the image as 1 / depth).
 # 0.45 px still fails a half-pixel convention error (0.50-0.55 px at 0 deg) and a port tilt wrong
 # by 1 deg (about 1 px in every case).
 SYNTH_CORNER_RMS_PX = 0.45

@@ -42,9 +42,9 @@ CAMERA = {
 
 # Port tilts (tilt_x_deg, tilt_y_deg): straight, and 26.8 deg in all (like the reference port's
 # 26.6 deg) about both axes. Each comes with the line of sight (x / z, y / z) of the board's centre,
-# chosen to keep the board at least 9 px inside the exact coverage (the tilted port turns the
+# chosen to keep the board inside the exact coverage (at least 17 / 2 px from its edge) (the tilted port turns the
 # covered field up and to the right).
-TILTS = {(0.0, 0.0): (0.0, 0.0), (25.0, 10.0): (0.13, -0.11)}
+TILTS = {(0.0, 0.0): (0.0, 0.0), (25.0, 10.0): (0.16, -0.125)}
 DEPTHS_M = (0.15, 0.6)
 SQUARES = (7, 5)
 PX_PER_SQUARE = 9.0  # at the board's centre, in the refraction-free image

@@ -64,7 +64,7 @@ def test_synthesis_matches_ideal_image_inside_exact_coverage(mi, tilt_x_deg):
     config, raw, ideal, warp = _render(mi, tilt_x_deg)
     image = warp.apply(raw)
     exact = warp.exact
-    assert exact.sum() > 300
+    assert exact.sum() > 100  # 30 deg: 2.6 % of the 92 x 69 image
     peak = float(np.percentile(ideal, 99.5))
     assert psnr(image, ideal, data_range=peak, mask=exact) > SYNTH_PSNR_DB
     assert ssim(image, ideal, data_range=peak, mask=exact) > SYNTH_SSIM
