@@ -253,27 +253,41 @@ def merge_rows(sel_index, sel_dist, samples_per_pixel, out_index, out_weight, ou
 
 
 @numba.njit(cache=True, parallel=True)
-def gather(indptr, indices, weights, gain, raw_flat, out):
-    """``out[p, c] = gain[p] * sum_j weights[j] * raw_flat[indices[j], c]`` over row p's entries."""
+def gather(chunks, indptr, indices, weights, gain, raw_flat, out):
+    """``out[p, c] = gain[p] * sum_j weights[j] * raw_flat[indices[j], c]`` over row p's entries.
+
+    ``chunks`` (n + 1,) bounds blocks of rows with about equal numbers of entries, one task each
+    (rows differ a lot in length: empty outside the coverage). Within a row two accumulators take
+    alternate entries, which halves the dependency chain of the additions.
+    """
     n_channels = raw_flat.shape[1]
-    if n_channels == 3:  # the common case without a per-pixel accumulator array
-        for p in numba.prange(out.shape[0]):
-            a0 = np.float32(0.0)
-            a1 = np.float32(0.0)
-            a2 = np.float32(0.0)
-            for j in range(indptr[p], indptr[p + 1]):
-                w = weights[j]
-                row = indices[j]
-                a0 += w * raw_flat[row, 0]
-                a1 += w * raw_flat[row, 1]
-                a2 += w * raw_flat[row, 2]
-            out[p, 0] = a0 * gain[p]
-            out[p, 1] = a1 * gain[p]
-            out[p, 2] = a2 * gain[p]
-        return
-    for p in numba.prange(out.shape[0]):
-        for c in range(n_channels):
-            acc = np.float32(0.0)
-            for j in range(indptr[p], indptr[p + 1]):
-                acc += weights[j] * raw_flat[indices[j], c]
-            out[p, c] = acc * gain[p]
+    for c in numba.prange(chunks.shape[0] - 1):
+        for p in range(chunks[c], chunks[c + 1]):
+            first, stop = indptr[p], indptr[p + 1]
+            if n_channels == 3:  # the common case, without a per-pixel accumulator array
+                a0 = a1 = a2 = b0 = b1 = b2 = np.float32(0.0)
+                j = first
+                while j + 1 < stop:
+                    w, r = weights[j], indices[j]
+                    v, q = weights[j + 1], indices[j + 1]
+                    a0 += w * raw_flat[r, 0]
+                    a1 += w * raw_flat[r, 1]
+                    a2 += w * raw_flat[r, 2]
+                    b0 += v * raw_flat[q, 0]
+                    b1 += v * raw_flat[q, 1]
+                    b2 += v * raw_flat[q, 2]
+                    j += 2
+                if j < stop:
+                    w, r = weights[j], indices[j]
+                    a0 += w * raw_flat[r, 0]
+                    a1 += w * raw_flat[r, 1]
+                    a2 += w * raw_flat[r, 2]
+                out[p, 0] = (a0 + b0) * gain[p]
+                out[p, 1] = (a1 + b1) * gain[p]
+                out[p, 2] = (a2 + b2) * gain[p]
+            else:
+                for ch in range(n_channels):
+                    acc = np.float32(0.0)
+                    for j in range(first, stop):
+                        acc += weights[j] * raw_flat[indices[j], ch]
+                    out[p, ch] = acc * gain[p]

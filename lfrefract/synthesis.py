@@ -33,6 +33,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba
 import numpy as np
 from tqdm import tqdm
 
@@ -254,7 +255,11 @@ class WarpMap:
         if not np.issubdtype(flat.dtype, np.floating):
             flat = flat.astype(np.float32)
         out = np.empty((len(self.indptr) - 1, flat.shape[1]), dtype=np.float32)
-        gather(self.indptr, self.indices, self.weights, self.gain, flat, out)
+        # Blocks of rows with equal shares of the entries, several per thread for balance.
+        shares = np.linspace(0, self.indptr[-1], 16 * numba.get_num_threads() + 1)
+        chunks = np.searchsorted(self.indptr, shares, side="right") - 1
+        chunks[0], chunks[-1] = 0, len(self.indptr) - 1
+        gather(np.unique(chunks), self.indptr, self.indices, self.weights, self.gain, flat, out)
         shape = (self.output.height_px, self.output.width_px)
         return out.reshape(shape) if arr.ndim == 2 else out.reshape(*shape, flat.shape[1])
 
