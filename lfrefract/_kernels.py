@@ -98,6 +98,8 @@ def select_candidates(
     # focal plane: then all rays of a lens are parallel and share one angle to the necessary ray).
     spread = 1.0 - f_prime / f
     step = pitch * f_prime / f_mla  # main-lens distance between neighbouring pixels' rays
+    inv_step = 1.0 / step
+    slope_step = pitch / f_mla  # slope change between neighbouring pixels under one lens
     side = 2 * window + 1
     cand_d = np.empty(n_off * side * side, dtype=np.float64)
     cand_i = np.empty(n_off * side * side, dtype=np.int64)
@@ -128,12 +130,22 @@ def select_candidates(
             sin0_y = ((v0 - cv) * pitch - c_eta) / f_mla
             h0x = cx + sin0_x * f_prime
             h0y = cy + sin0_y * f_prime
+            # Direction (dx, dy, 1) of pixel (u0, v0)'s ray in front of the main lens; with
+            # spread == 0 it is every pixel's of this lens, and so are its angle to the
+            # necessary ray and 1 / (n . d) for the face intersection.
+            dx0 = sin0_x * spread - cx / f
+            dy0 = sin0_y * spread - cy / f
             lens_angle = 0.0
-            if lam != 0.0 and spread == 0.0:
-                dx, dy = -cx / f, -cy / f
-                norm = np.sqrt(dx * dx + dy * dy + 1.0)
-                ex, ey, ez = dx / norm - rx, dy / norm - ry, 1.0 / norm - rz
-                lens_angle = 2.0 * np.arcsin(min(1.0, 0.5 * np.sqrt(ex * ex + ey * ey + ez * ez)))
+            lens_inv_denom = 0.0
+            if spread == 0.0:
+                denom = nx * dx0 + ny * dy0 + nz
+                if denom <= 0.0:
+                    continue
+                lens_inv_denom = 1.0 / denom
+                if lam != 0.0:
+                    norm = np.sqrt(dx0 * dx0 + dy0 * dy0 + 1.0)
+                    ex, ey, ez = dx0 / norm - rx, dy0 / norm - ry, 1.0 / norm - rz
+                    lens_angle = 2.0 * np.arcsin(min(1.0, 0.5 * np.sqrt(ex * ex + ey * ey + ez * ez)))
             for dv in range(-window, window + 1):
                 v = v0 + dv
                 if v < 0 or v >= height:
@@ -145,8 +157,8 @@ def select_candidates(
                 # Columns whose main-lens point can lie inside the usable aperture (one pixel
                 # of slack each side; the exact test below decides).
                 half = np.sqrt(half2)
-                du_lo = max(-window, int(np.floor((-half - h0x) / step)) - 1)
-                du_hi = min(window, int(np.ceil((half - h0x) / step)) + 1)
+                du_lo = max(-window, int(np.floor((-half - h0x) * inv_step)) - 1)
+                du_hi = min(window, int(np.ceil((half - h0x) * inv_step)) + 1)
                 for du in range(du_lo, du_hi + 1):
                     u = u0 + du
                     if u < 0 or u >= width:
@@ -157,14 +169,16 @@ def select_candidates(
                     # validated to match), so the pixel belongs to this lens.
                     if hx * hx + hy * hy > r_ok2:
                         continue
-                    sin_x = sin0_x + du * pitch / f_mla
-                    sin_y = sin0_y + dv * pitch / f_mla
-                    dx = sin_x * spread - cx / f  # direction (dx, dy, 1), not normalised
-                    dy = sin_y * spread - cy / f
-                    denom = nx * dx + ny * dy + nz
-                    if denom <= 0.0:
-                        continue
-                    t = (plane_d - (nx * hx + ny * hy)) / denom
+                    if spread == 0.0:
+                        dx, dy, inv_denom = dx0, dy0, lens_inv_denom
+                    else:
+                        dx = dx0 + du * slope_step * spread
+                        dy = dy0 + dv * slope_step * spread
+                        denom = nx * dx + ny * dy + nz
+                        if denom <= 0.0:
+                            continue
+                        inv_denom = 1.0 / denom
+                    t = (plane_d - (nx * hx + ny * hy)) * inv_denom
                     ex = hx + t * dx - px
                     ey = hy + t * dy - py
                     ez = t - pz
