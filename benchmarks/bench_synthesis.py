@@ -1,10 +1,12 @@
 """Benchmark the refraction-free synthesis: warp-map build and per-frame apply.
 
-    python benchmarks/bench_synthesis.py                 # illum, k = 32, s = 2
-    python benchmarks/bench_synthesis.py --camera tiny --k 1 8 32 64
+    python benchmarks/bench_synthesis.py                 # illum, k = 1, 8, 32, 64, s = 2
+    python benchmarks/bench_synthesis.py --camera tiny --k 32 --search kdtree
 
-Each configuration runs in a fresh process so its peak memory (max RSS) is its own. The raw
-frame is random RGB float32 of the camera's sensor size (apply time does not depend on content).
+Each configuration runs in a fresh process so its peak memory (max RSS) is its own: "build MB"
+is the peak after building the map, "apply MB" the peak after applying it (map, raw frame and
+output). The raw frame is random RGB float32 of the camera's sensor size (apply time does not
+depend on content).
 Targets (issue 3), Illum, k = 32, s = 2, 2 cores: apply <= 20 ms per frame, build <= 2 s.
 Paper (Intel Xeon E5640, 4 cores, 2010): 53 ms per frame, 8.9 s for the map.
 """
@@ -26,18 +28,19 @@ PAPER_APPLY_MS = 53.0
 PAPER_BUILD_S = 8.9
 
 
-def _worker(camera_name: str, k: int, supersample: int, frames: int) -> dict:
+def _worker(camera_name: str, k: int, supersample: int, frames: int, search: str) -> dict:
     from lfrefract import FlatPort, camera_preset
     from lfrefract.synthesis import SynthesisOptions, build_warp_map
 
     camera = camera_preset(camera_name)
     # The reference set-up: port 59.2 mm away, normal proportional to (0.0085, 0.5004, 1), 5 mm glass.
     port = FlatPort.from_normal([0.0085, 0.5004, 1.0], distance_m=0.0592, thickness_m=0.005)
-    options = SynthesisOptions(k=k, supersample=supersample)
+    options = SynthesisOptions(k=k, supersample=supersample, search=search)
     build_warp_map(camera_preset("tiny"), port, options=options)  # compile / load the kernels
     start = time.perf_counter()
     warp = build_warp_map(camera, port, options=options)
     build_s = time.perf_counter() - start
+    build_rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     raw = np.random.default_rng(0).random((camera.sensor.height_px, camera.sensor.width_px, 3), dtype=np.float32)
     warp.apply(raw)  # warm-up
     times = []
@@ -53,7 +56,8 @@ def _worker(camera_name: str, k: int, supersample: int, frames: int) -> dict:
         "nonzeros": len(warp.indices),
         "build_s": build_s,
         "apply_ms": 1e3 * float(np.median(times)),
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "build_rss_mb": build_rss_mb,
+        "apply_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "exact_fraction": float(warp.exact.mean()),
     }
 
@@ -61,18 +65,19 @@ def _worker(camera_name: str, k: int, supersample: int, frames: int) -> dict:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--camera", default="illum")
-    parser.add_argument("--k", type=int, nargs="+", default=[32])
+    parser.add_argument("--k", type=int, nargs="+", default=[1, 8, 32, 64])
+    parser.add_argument("--search", choices=["auto", "analytic", "kdtree"], default="auto")
     parser.add_argument("--supersample", type=int, default=2)
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        print(json.dumps(_worker(args.camera, args.k[0], args.supersample, args.frames)))
+        print(json.dumps(_worker(args.camera, args.k[0], args.supersample, args.frames, args.search)))
         return 0
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
     print(
         f"{'camera':7} {'k':>3} {'s':>2} {'output':>10} {'nnz':>11} {'build s':>8} {'apply ms':>9} "
-        f"{'peak MB':>8} {'build/paper':>11} {'apply/paper':>11}"
+        f"{'build MB':>9} {'apply MB':>9} {'build/paper':>11} {'apply/paper':>11}"
     )
     for k in args.k:
         cmd = [
@@ -87,11 +92,14 @@ def main() -> int:
             str(args.supersample),
             "--frames",
             str(args.frames),
+            "--search",
+            args.search,
         ]
         r = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1])
         print(
             f"{r['camera']:7} {k:>3} {r['supersample']:>2} {r['output'][0]:>4}x{r['output'][1]:<5} "
-            f"{r['nonzeros']:>11,} {r['build_s']:8.2f} {r['apply_ms']:9.1f} {r['peak_rss_mb']:8.0f} "
+            f"{r['nonzeros']:>11,} {r['build_s']:8.2f} {r['apply_ms']:9.1f} "
+            f"{r['build_rss_mb']:9.0f} {r['apply_rss_mb']:9.0f} "
             f"{r['build_s'] / PAPER_BUILD_S:11.2f} {r['apply_ms'] / PAPER_APPLY_MS:11.2f}"
         )
     return 0

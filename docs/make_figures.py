@@ -40,7 +40,7 @@ from matplotlib.patches import Ellipse, Patch, Polygon
 from lfrefract import camera_preset
 from lfrefract.camera import LightFieldCamera, MicrolensArray, SensorGeometry
 from lfrefract.io import read_exr, read_json
-from lfrefract.metrics import psnr, ssim
+from lfrefract.metrics import psnr, shift_px, ssim
 from lfrefract.port import FlatPort
 from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map
 from lfrefract.views import naive_view
@@ -192,22 +192,6 @@ def _scores(image: np.ndarray, ideal: np.ndarray, mask: np.ndarray, peak: float)
     return psnr(image, ideal, data_range=peak, mask=mask), ssim(image, ideal, data_range=peak, mask=mask)
 
 
-def _shift_px(image: np.ndarray, ideal: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
-    """Translation (dx, dy), pixels, with ``image(x + dx, y + dy) ~ ideal(x, y)`` over ``mask`` (OpenCV ECC, as
-    in tests/simulator/test_synthesis_render.py): a feature of the ideal image appears shifted by it."""
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200, 1e-6)
-    _, warp = cv2.findTransformECC(
-        ideal.mean(axis=2).astype(np.float32),
-        np.nan_to_num(image.mean(axis=2)).astype(np.float32),
-        np.eye(2, 3, dtype=np.float32),
-        cv2.MOTION_TRANSLATION,
-        criteria,
-        mask.astype(np.uint8),
-        3,
-    )
-    return float(warp[0, 2]), float(warp[1, 2])
-
-
 def synthesis_figures(camera_name: str, spp: int) -> None:
     """synthesis_panel.png and synthesis_k.png from a render of the default scene; prints the numbers."""
     camera = camera_preset(camera_name)
@@ -235,7 +219,7 @@ def synthesis_figures(camera_name: str, spp: int) -> None:
         applied = time.perf_counter() - start
         filled[k] = warp_k.filled
         scores[k] = _scores(images[k], ideal, warp_k.exact, peak)
-        dx, dy = _shift_px(images[k], ideal, warp_k.exact)
+        dx, dy = shift_px(images[k], ideal, mask=warp_k.exact)
         print(
             f"  k = {k:2d}: PSNR {scores[k][0]:.2f} dB, SSIM {scores[k][1]:.3f}, shift ({dx:+.2f}, {dy:+.2f}) px "
             f"(exact coverage); map build {built:.1f} s, apply {applied * 1e3:.0f} ms, "

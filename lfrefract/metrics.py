@@ -1,13 +1,14 @@
-"""Image comparison metrics in a region: PSNR and SSIM (Wang et al. 2004), numpy/scipy."""
+"""Image comparison metrics in a region: PSNR, SSIM (Wang et al. 2004) and the aligning shift."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy import ndimage
 
 from lfrefract._validate import ParameterError, positive_float
 
-__all__ = ["psnr", "ssim"]
+__all__ = ["psnr", "shift_px", "ssim"]
 
 
 def _prepare(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -69,3 +70,30 @@ def ssim(
     c1, c2 = (0.01 * peak) ** 2, (0.03 * peak) ** 2
     index = ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx**2 + my**2 + c1) * (vx + vy + c2))
     return float(np.mean(index[m]))
+
+
+def shift_px(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | None = None) -> tuple[float, float]:
+    """Translation ``(dx, dy)``, pixels, with ``image(x + dx, y + dy) ~ reference(x, y)`` over ``mask``.
+
+    A feature of ``reference`` appears moved by ``(dx, dy)`` in ``image``. OpenCV's ECC alignment
+    (translation model, Gaussian pre-smoothing of 3 px) of the channel means; NaN in ``image``
+    counts as 0.
+
+    Parameters
+    ----------
+    image, reference : ndarray, shape (H, W) or (H, W, C)
+    mask : ndarray of bool, shape (H, W), optional
+        Pixels of ``reference`` compared (default all).
+    """
+    x, y, m = _prepare(np.nan_to_num(np.asarray(image, dtype=np.float64)), reference, mask)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200, 1e-6)
+    _, warp = cv2.findTransformECC(
+        y.astype(np.float32),
+        x.astype(np.float32),
+        np.eye(2, 3, dtype=np.float32),
+        cv2.MOTION_TRANSLATION,
+        criteria,
+        m.astype(np.uint8),
+        3,
+    )
+    return float(warp[0, 2]), float(warp[1, 2])

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 
 from lfrefract import virtual_camera_for
-from lfrefract.metrics import psnr, ssim
+from lfrefract.metrics import psnr, shift_px, ssim
 from lfrefract.synthesis import build_warp_map
 from lfrefract.views import naive_view
 from simulator import groundtruth
@@ -50,13 +49,8 @@ def _render(mi, tilt_x_deg: float, *, refracting: bool = True):
 
 
 def _shift_px(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
-    """Translation (px) that best aligns ``a`` with ``b`` over ``mask`` (OpenCV ECC, translation)."""
-    x = np.nan_to_num(a.mean(axis=2)).astype(np.float32)
-    y = b.mean(axis=2).astype(np.float32)
-    warp = np.eye(2, 3, dtype=np.float32)
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200, 1e-6)
-    _, warp = cv2.findTransformECC(y, x, warp, cv2.MOTION_TRANSLATION, criteria, mask.astype(np.uint8), 3)
-    return float(np.hypot(warp[0, 2], warp[1, 2]))
+    """Length (px) of the translation that best aligns ``a`` with ``b`` over ``mask``."""
+    return float(np.hypot(*shift_px(a, b, mask=mask)))
 
 
 @pytest.mark.parametrize("tilt_x_deg", [0.0, 15.0, 30.0])

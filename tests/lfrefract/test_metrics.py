@@ -1,0 +1,55 @@
+"""Image metrics: PSNR, SSIM inside a mask, and the aligning shift."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from lfrefract import ParameterError
+from lfrefract.metrics import psnr, shift_px, ssim
+
+
+def _texture(shape=(80, 100), seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return ndimage.gaussian_filter(rng.random(shape), 2.0)
+
+
+def test_psnr_of_a_known_error():
+    a = np.zeros((10, 10))
+    b = np.full((10, 10), 0.1)
+    assert psnr(a, b, data_range=1.0) == pytest.approx(20.0)
+    assert psnr(a, a, data_range=1.0) == float("inf")
+
+
+def test_ssim_is_one_for_equal_images_and_ignores_pixels_outside_the_mask():
+    img = _texture()
+    assert ssim(img, img, data_range=1.0) == pytest.approx(1.0)
+    other = img.copy()
+    mask = np.zeros(img.shape, dtype=bool)
+    mask[:, :50] = True
+    other[:, 50:] = np.random.default_rng(1).random((80, 50))  # only outside the mask
+    assert ssim(other, img, data_range=1.0, mask=mask) == pytest.approx(1.0)
+    assert psnr(other, img, data_range=1.0, mask=mask) == float("inf")
+    assert ssim(other, img, data_range=1.0) < 0.9
+
+
+@pytest.mark.parametrize(("dx", "dy"), [(0.0, 0.0), (0.3, -0.7), (-1.25, 0.5)])
+def test_shift_px_recovers_a_known_translation(dx, dy):
+    reference = _texture((120, 140))
+    # image(x + dx, y + dy) = reference(x, y): the content moves by (dx, dy).
+    image = ndimage.shift(reference, (dy, dx), order=3, mode="nearest")
+    mask = np.zeros(reference.shape, dtype=bool)
+    mask[10:-10, 10:-10] = True
+    got = shift_px(np.stack([image] * 3, axis=2), np.stack([reference] * 3, axis=2), mask=mask)
+    np.testing.assert_allclose(got, (dx, dy), atol=0.05)  # spline shift and ECC convergence
+
+
+def test_bad_input():
+    a = np.zeros((4, 4))
+    with pytest.raises(ParameterError, match="same shape"):
+        psnr(a, np.zeros((4, 5)), data_range=1.0)
+    with pytest.raises(ParameterError, match="mask selects no pixel"):
+        ssim(a, a, data_range=1.0, mask=np.zeros((4, 4), dtype=bool))
+    with pytest.raises(ParameterError, match="data_range must be positive"):
+        psnr(a, a + 1, data_range=0.0)
