@@ -1,0 +1,420 @@
+"""Flat-port calibration from underwater chessboard views (paper section 4.2; Agrawal et al. 2012).
+
+The camera behind the port is a pinhole in air whose intrinsics are known from in-air
+calibration: for a light-field camera, its central sub-aperture view (the ray through the
+main-lens centre and each microlens centre), resampled onto a ``K`` by
+:func:`lfrefract.views.naive_view`. A pixel's line of sight ``K^-1 p`` is refracted by the port
+(its normal and distance unknown; glass thickness and refractive indices known) and meets the
+board somewhere in the water. The unknowns are the port's two tilt angles and its distance, and
+one board pose per view.
+
+Initialisation (no ground truth): for a flat port, whatever its distance and layers, the refracted
+ray stays in the plane spanned by the line of sight ``v`` and the normal ``n`` (the plane of
+refraction), so a board point ``X = R P + t`` seen along ``v`` obeys ``X . (n x v) = 0``. For a
+planar board this is linear in the nine entries of ``[n]x [r1 r2 t]`` (Agrawal et al.'s axial
+constraint), and ``n`` is that matrix's left null vector: one estimate per view, combined. With the
+normal fixed, the distance comes from a one-dimensional search (per-view pose fits at each trial
+distance), and then everything is refined jointly by nonlinear least squares (scipy) on the
+geometric error: where the refracted line of sight meets the board, against the corner, scaled to
+pixels by ``f / depth``. The covariance of the port parameters follows from the Jacobian; a
+calibration whose standard deviations exceed the caller's limits is an error (degenerate views),
+not an answer.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+from scipy.spatial.transform import Rotation
+
+from lfrefract._validate import ParameterError, as_points, positive_float, positive_int
+from lfrefract.pinhole import PinholeCamera
+from lfrefract.port import FlatPort
+from lfrefract.pose import Pose
+
+__all__ = [
+    "BoardView",
+    "CalibrationError",
+    "PortCalibration",
+    "calibrate_port",
+    "estimate_normal",
+    "project_through_port",
+]
+
+
+class CalibrationError(ParameterError):
+    """The observations do not determine the parameters (degenerate or inconsistent views)."""
+
+
+@dataclass(frozen=True, eq=False)
+class BoardView:
+    """Chessboard corners seen in one underwater view.
+
+    Attributes
+    ----------
+    corners_px : ndarray, shape (N, 2)
+        Detected corners in the in-air pinhole image (pixels, OpenCV convention).
+    board_points_m : ndarray, shape (N, 2)
+        The same corners in the board's own frame (metres, on its plane z = 0).
+    """
+
+    corners_px: np.ndarray
+    board_points_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        corners = as_points("corners_px", self.corners_px, 2)
+        board = as_points("board_points_m", self.board_points_m, 2)
+        if len(corners) != len(board):
+            raise ParameterError(
+                f"corners_px and board_points_m must have the same length, got {len(corners)} and {len(board)}"
+            )
+        if len(corners) < 8:
+            raise ParameterError(f"a board view needs at least 8 corners, got {len(corners)}")
+        object.__setattr__(self, "corners_px", corners)
+        object.__setattr__(self, "board_points_m", board)
+
+
+@dataclass(frozen=True, eq=False)
+class PortCalibration:
+    """Result of :func:`calibrate_port`.
+
+    Attributes
+    ----------
+    port : FlatPort
+        The estimated port (with the given thickness and indices).
+    board_poses : tuple of Pose
+        Pose of each view's board in the camera frame: ``Pose.to_world`` maps board coordinates
+        (metres, z = 0 on the board) to the camera frame.
+    rms_px : float
+        Root mean square of the geometric residuals, pixels.
+    view_rms_px : ndarray, shape (V,)
+        The same per view.
+    covariance : ndarray, shape (3, 3)
+        Covariance of ``(tilt_x_rad, tilt_y_rad, distance_m)`` from the Jacobian at the solution,
+        scaled by the residual variance.
+    normal_std_deg : float
+        Standard deviation of the normal's direction (degrees): the larger axis of its covariance.
+    distance_std_m : float
+        Standard deviation of the port distance (metres).
+    """
+
+    port: FlatPort
+    board_poses: tuple[Pose, ...]
+    rms_px: float
+    view_rms_px: np.ndarray
+    covariance: np.ndarray
+    normal_std_deg: float
+    distance_std_m: float
+
+    def to_dict(self) -> dict:
+        """Plain data for a JSON file."""
+        return {
+            "port": self.port.to_dict(),
+            "board_poses": [p.to_dict() for p in self.board_poses],
+            "rms_px": self.rms_px,
+            "view_rms_px": self.view_rms_px.tolist(),
+            "covariance": self.covariance.tolist(),
+            "covariance_parameters": ["tilt_x_rad", "tilt_y_rad", "distance_m"],
+            "normal_std_deg": self.normal_std_deg,
+            "distance_std_m": self.distance_std_m,
+        }
+
+
+def _line_of_sight(camera: PinholeCamera, uv: np.ndarray) -> np.ndarray:
+    return camera.pixel_directions(uv)
+
+
+def _water_rays(port: FlatPort, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the water face and unit directions in the water of lines of sight from the origin."""
+    trace = port.trace_from_air(np.zeros_like(directions), directions)
+    return trace.exit_points_cam, trace.directions_cam
+
+
+def project_through_port(
+    camera: PinholeCamera, port: FlatPort, points_cam: np.ndarray, *, iterations: int = 30
+) -> np.ndarray:
+    """Pixels at which points in the water appear through the port (forward refractive projection).
+
+    Solved per point by Gauss-Newton on the pixel, from the refraction-free projection, with the
+    exact back-projection (:meth:`FlatPort.trace_from_air`) inside: vectorised over all points.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+        The in-air pinhole camera (centre of projection at the origin of the camera frame).
+    port : FlatPort
+    points_cam : array_like, shape (N, 3)
+        Points beyond the port, camera frame, metres.
+    iterations : int
+        Gauss-Newton steps (converges in a handful).
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+        Pixels; NaN where a point cannot be seen (behind the port's water face, or total internal
+        reflection).
+    """
+    x = as_points("points_cam", points_cam, 3)
+    positive_int("iterations", iterations)
+    uv = camera.project(x)
+    eps = 1e-3  # pixels, for the finite-difference Jacobian
+
+    def offsets(q: np.ndarray) -> np.ndarray:
+        """Where each point lies off the refracted line of sight of q: components (metres) in a frame
+        perpendicular to the water ray."""
+        origin, d = _water_rays(port, _line_of_sight(camera, q))
+        rel = x - origin
+        along = np.sum(rel * d, axis=1, keepdims=True)
+        return rel - along * d
+
+    for _ in range(iterations):
+        r = offsets(uv)
+        ju = (offsets(uv + np.array([eps, 0.0])) - r) / eps
+        jv = (offsets(uv + np.array([0.0, eps])) - r) / eps
+        jac = np.stack([ju, jv], axis=2)  # (N, 3, 2)
+        step = _batched_lstsq(jac, -r)
+        uv = uv + step
+        if np.nanmax(np.abs(step), initial=0.0) < 1e-9:
+            break
+    bad = ~np.all(np.isfinite(uv), axis=1)
+    uv[bad] = np.nan
+    return uv
+
+
+def _batched_lstsq(jac: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Least-squares solutions of N small systems jac (N, 3, 2) x = rhs (N, 3)."""
+    jtj = np.einsum("nij,nik->njk", jac, jac)
+    jtr = np.einsum("nij,ni->nj", jac, rhs)
+    det = jtj[:, 0, 0] * jtj[:, 1, 1] - jtj[:, 0, 1] * jtj[:, 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack(
+            [
+                (jtj[:, 1, 1] * jtr[:, 0] - jtj[:, 0, 1] * jtr[:, 1]) / det,
+                (jtj[:, 0, 0] * jtr[:, 1] - jtj[:, 1, 0] * jtr[:, 0]) / det,
+            ],
+            axis=1,
+        )
+
+
+def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray:
+    """Port normal from the axial (coplanarity) constraint, without distance or poses.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Unit normal (camera frame, ``n_z > 0``): the per-view estimates combined by the smallest
+        eigenvector of the sum of their outer-product complements.
+    """
+    scatter = np.zeros((3, 3))
+    for view in views:
+        v = _line_of_sight(camera, view.corners_px)
+        p = np.concatenate([view.board_points_m, np.ones((len(v), 1))], axis=1)
+        # v^T M p = 0 for M = [n]x [r1 r2 t], row-major unknowns M_ij: coefficient v_i p_j.
+        rows = (v[:, :, None] * p[:, None, :]).reshape(len(v), 9)
+        rows /= np.linalg.norm(rows, axis=1, keepdims=True)
+        m = np.linalg.svd(rows)[2][-1].reshape(3, 3)
+        # n^T M = 0: n is M's left null vector.
+        u = np.linalg.svd(m)[0]
+        n = u[:, -1]
+        scatter += np.outer(n, n)
+    vecs = np.linalg.eigh(scatter)[1]
+    n = vecs[:, -1]  # the direction the per-view estimates agree on
+    return n if n[2] > 0 else -n
+
+
+def _port_from_params(params: np.ndarray, template: FlatPort) -> FlatPort:
+    return FlatPort(
+        distance_m=float(params[2]),
+        thickness_m=template.thickness_m,
+        tilt_x_rad=float(params[0]),
+        tilt_y_rad=float(params[1]),
+        n_air=template.n_air,
+        n_glass=template.n_glass,
+        n_water=template.n_water,
+    )
+
+
+class _Problem:
+    """Residuals of all views for port parameters and board poses."""
+
+    def __init__(self, camera: PinholeCamera, views: list[BoardView], template: FlatPort):
+        self.camera = camera
+        self.views = views
+        self.template = template
+        self.directions = [_line_of_sight(camera, v.corners_px) for v in views]
+        self.sizes = [len(v.corners_px) for v in views]
+
+    def view_residuals(self, port: FlatPort, view: int, pose6: np.ndarray) -> np.ndarray:
+        """Residuals (2N,) of one view, pixels: board-plane miss of the refracted line of sight,
+        scaled by focal / depth."""
+        origin, d = _water_rays(port, self.directions[view])
+        rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
+        t = pose6[3:]
+        normal_b = rot[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = ((t - origin) @ normal_b) / (d @ normal_b)
+        hit = origin + s[:, None] * d
+        local = (hit - t) @ rot  # board frame
+        miss = local[:, :2] - self.views[view].board_points_m
+        scale = self.camera.focal_px / np.maximum(hit[:, 2], 1e-6)
+        res = (miss * scale[:, None]).ravel()
+        return np.where(np.isfinite(res), res, 1e3)  # a ray that misses the board costs a lot
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        port = _port_from_params(x[:3], self.template)
+        return np.concatenate([self.view_residuals(port, i, x[3 + 6 * i : 9 + 6 * i]) for i in range(len(self.views))])
+
+    def sparsity(self) -> lil_matrix:
+        n_res = 2 * sum(self.sizes)
+        jac = lil_matrix((n_res, 3 + 6 * len(self.views)), dtype=int)
+        row = 0
+        for i, size in enumerate(self.sizes):
+            jac[row : row + 2 * size, :3] = 1
+            jac[row : row + 2 * size, 3 + 6 * i : 9 + 6 * i] = 1
+            row += 2 * size
+        return jac
+
+
+def _initial_pose(camera: PinholeCamera, view: BoardView) -> np.ndarray:
+    """Board pose ignoring refraction (OpenCV PnP), as (rotation vector, translation)."""
+    obj = np.concatenate([view.board_points_m, np.zeros((len(view.board_points_m), 1))], axis=1)
+    ok, rvec, tvec = cv2.solvePnP(obj, view.corners_px, camera.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise CalibrationError("OpenCV could not estimate an initial board pose for a view")
+    return np.concatenate([rvec.ravel(), tvec.ravel()])
+
+
+def _fit_pose(problem: _Problem, port: FlatPort, view: int, pose6: np.ndarray) -> tuple[np.ndarray, float]:
+    fit = least_squares(lambda p: problem.view_residuals(port, view, p), pose6, method="lm", max_nfev=200)
+    return fit.x, float(np.sum(fit.fun**2))
+
+
+def calibrate_port(
+    camera: PinholeCamera,
+    views: list[BoardView],
+    *,
+    thickness_m: float,
+    n_air: float = 1.0,
+    n_glass: float = 1.5,
+    n_water: float = 1.333,
+    distance_range_m: tuple[float, float] = (0.002, 0.3),
+    max_normal_std_deg: float = 0.5,
+    max_distance_std_m: float = 0.002,
+) -> PortCalibration:
+    """Estimate a flat port's normal and distance from underwater chessboard views.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+        The in-air pinhole model of the images the corners were found in.
+    views : list of BoardView
+        At least two views of a planar board (different poses).
+    thickness_m, n_air, n_glass, n_water : float
+        Known glass thickness and refractive indices.
+    distance_range_m : (float, float)
+        Range searched for the port distance (air-side face along its normal), metres.
+    max_normal_std_deg, max_distance_std_m : float
+        Largest standard deviations accepted; beyond them the views do not determine the port
+        and :class:`CalibrationError` is raised.
+
+    Returns
+    -------
+    PortCalibration
+
+    Raises
+    ------
+    CalibrationError
+        Degenerate views: the normal or distance is not determined to the stated limits.
+    """
+    if not isinstance(camera, PinholeCamera):
+        raise ParameterError(f"camera must be a PinholeCamera, got {camera!r}")
+    views = list(views)
+    if len(views) < 2 or not all(isinstance(v, BoardView) for v in views):
+        raise ParameterError(f"views must be at least two BoardView objects, got {len(views)}")
+    lo = positive_float("distance_range_m[0]", distance_range_m[0])
+    hi = positive_float("distance_range_m[1]", distance_range_m[1])
+    if not lo < hi:
+        raise ParameterError(f"distance_range_m must be increasing, got {distance_range_m!r}")
+    positive_float("max_normal_std_deg", max_normal_std_deg)
+    positive_float("max_distance_std_m", max_distance_std_m)
+    template = FlatPort(distance_m=lo, thickness_m=thickness_m, n_air=n_air, n_glass=n_glass, n_water=n_water)
+    if n_air == n_water and (thickness_m == 0.0 or n_glass == n_air):
+        raise ParameterError("the port does not refract (equal indices): its normal and distance are undefined")
+
+    normal = estimate_normal(camera, views)
+    seed = FlatPort.from_normal(normal, distance_m=lo, thickness_m=thickness_m)
+    problem = _Problem(camera, views, template)
+    poses = [_initial_pose(camera, v) for v in views]
+
+    # The distance: a coarse logarithmic search with per-view pose fits, then the joint refinement.
+    best = (np.inf, lo, poses)
+    for distance in np.geomspace(lo, hi, 12):
+        trial = _port_from_params(np.array([seed.tilt_x_rad, seed.tilt_y_rad, distance]), template)
+        fitted = [_fit_pose(problem, trial, i, p) for i, p in enumerate(poses)]
+        cost = sum(c for _, c in fitted)
+        if cost < best[0]:
+            best = (cost, distance, [p for p, _ in fitted])
+    x0 = np.concatenate([[seed.tilt_x_rad, seed.tilt_y_rad, best[1]], *best[2]])
+    lower = np.full(len(x0), -np.inf)
+    upper = np.full(len(x0), np.inf)
+    lower[:3] = [-math.pi / 2 + 1e-6, -math.pi / 2 + 1e-6, lo]
+    upper[:3] = [math.pi / 2 - 1e-6, math.pi / 2 - 1e-6, hi]
+    fit = least_squares(
+        problem.residuals,
+        x0,
+        jac_sparsity=problem.sparsity(),
+        bounds=(lower, upper),
+        x_scale="jac",
+        method="trf",
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
+        max_nfev=200,
+    )
+    port = _port_from_params(fit.x[:3], template)
+    residuals = fit.fun
+    dof = max(len(residuals) - len(fit.x), 1)
+    sigma2 = float(np.sum(residuals**2)) / dof
+    jac = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
+    try:
+        cov_all = np.linalg.inv(jac.T @ jac) * sigma2
+    except np.linalg.LinAlgError:
+        raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
+    covariance = cov_all[:3, :3]
+    # Direction of the normal: its covariance through d n / d (tilt_x, tilt_y).
+    tx, ty = port.tilt_x_rad, port.tilt_y_rad
+    dn = np.array(
+        [
+            [-math.sin(ty) * math.sin(tx), math.cos(ty) * math.cos(tx)],
+            [-math.cos(tx), 0.0],
+            [-math.cos(ty) * math.sin(tx), -math.sin(ty) * math.cos(tx)],
+        ]
+    )
+    normal_cov = dn @ covariance[:2, :2] @ dn.T
+    normal_std_deg = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(normal_cov)[-1]), 0.0)))
+    distance_std_m = math.sqrt(max(float(covariance[2, 2]), 0.0))
+    if not (normal_std_deg <= max_normal_std_deg and distance_std_m <= max_distance_std_m):
+        raise CalibrationError(
+            f"the views do not determine the port: normal std {normal_std_deg:.3g} deg "
+            f"(limit {max_normal_std_deg:g}), distance std {distance_std_m * 1e3:.3g} mm "
+            f"(limit {max_distance_std_m * 1e3:g}); use more views, tilted towards and away from the camera"
+        )
+    sizes = np.cumsum([0, *[2 * s for s in problem.sizes]])
+    view_rms = np.array([math.sqrt(np.mean(residuals[a:b] ** 2)) for a, b in itertools.pairwise(sizes)])
+    pose6 = fit.x[3:].reshape(-1, 6)
+    board_poses = tuple(Pose(rotation=Rotation.from_rotvec(p[:3]).as_matrix(), position_m=p[3:]) for p in pose6)
+    return PortCalibration(
+        port=port,
+        board_poses=board_poses,
+        rms_px=float(math.sqrt(np.mean(residuals**2))),
+        view_rms_px=view_rms,
+        covariance=covariance,
+        normal_std_deg=normal_std_deg,
+        distance_std_m=distance_std_m,
+    )
