@@ -21,16 +21,22 @@ import numpy as np
 import OpenEXR
 
 from lfrefract._validate import ParameterError
+from lfrefract.port import FlatPort
 
 __all__ = [
     "SCHEMA_VERSION",
     "FileFormatError",
     "read_exr",
+    "read_flat_port",
     "read_json",
     "staged_directory",
     "write_exr",
+    "write_flat_port",
     "write_json",
 ]
+
+#: Field order of a flat port in Refractive COLMAP and calibmar (``FLATPORT`` parameters).
+FLAT_PORT_FIELDS = ("Nx", "Ny", "Nz", "int_dist", "int_thick", "na", "ng", "nw")
 
 #: Version of the sidecar and directory layout written by this package.
 SCHEMA_VERSION = 1
@@ -236,3 +242,43 @@ def staged_directory(out_dir: str | os.PathLike, *, overwrite: bool = False) -> 
     if out.exists():
         shutil.rmtree(out)
     os.replace(stage, out)
+
+
+def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:
+    """Write a port in the flat-port layout of Refractive COLMAP / calibmar, atomically.
+
+    One comment line naming the fields, then ``Nx Ny Nz int_dist int_thick na ng nw``: the unit
+    normal (camera frame, into the water), the distance of the air-side face from the camera
+    centre and the glass thickness (metres), and the refractive indices of air, glass and water.
+    """
+    if not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort, got {port!r}")
+    values = [*port.normal, port.distance_m, port.thickness_m, port.n_air, port.n_glass, port.n_water]
+    text = "# " + " ".join(FLAT_PORT_FIELDS) + "\n" + " ".join(repr(float(v)) for v in values) + "\n"
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_flat_port(path: str | os.PathLike) -> FlatPort:
+    """Read a port written by :func:`write_flat_port` (or any file with that one line)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"no such file: {str(path)!r}")
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    try:
+        values = [float(v) for v in lines[0].split()] if len(lines) == 1 else []
+    except ValueError:
+        values = []
+    if len(values) != len(FLAT_PORT_FIELDS):
+        raise FileFormatError(f"{str(path)!r} is not a flat port ({' '.join(FLAT_PORT_FIELDS)} on one line)")
+    nx, ny, nz, distance, thickness, n_air, n_glass, n_water = values
+    return FlatPort.from_normal(
+        [nx, ny, nz], distance_m=distance, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water
+    )

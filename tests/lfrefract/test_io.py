@@ -266,3 +266,25 @@ def test_staged_directory_accepts_empty_and_refuses_a_file(tmp_path):
     with pytest.raises(FileExistsError, match="exists and is not a directory"), staged_directory(file_out):
         pytest.fail("the block must not run")
     assert file_out.read_text() == "not a dir"
+
+
+def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
+    from lfrefract import FlatPort
+    from lfrefract.io import read_flat_port, write_flat_port
+
+    port = FlatPort.from_degrees(distance_m=0.0592, thickness_m=0.005, tilt_x_deg=26.6, tilt_y_deg=-3.0, n_water=1.34)
+    path = write_flat_port(tmp_path / "port.txt", port)
+    lines = path.read_text().splitlines()
+    assert lines[0] == "# Nx Ny Nz int_dist int_thick na ng nw"
+    values = [float(v) for v in lines[1].split()]
+    np.testing.assert_allclose(values[:3], port.normal, atol=1e-15)
+    assert values[3:] == [0.0592, 0.005, 1.0, 1.5, 1.34]
+    back = read_flat_port(path)
+    np.testing.assert_allclose(back.normal, port.normal, atol=1e-15)
+    assert (back.distance_m, back.thickness_m, back.n_water) == (0.0592, 0.005, 1.34)
+    (tmp_path / "bad.txt").write_text("0 0 1 0.02\n")
+    with pytest.raises(FileFormatError, match="is not a flat port"):
+        read_flat_port(tmp_path / "bad.txt")
+    with pytest.raises(ParameterError, match="port must be a FlatPort"):
+        write_flat_port(tmp_path / "x.txt", {"distance_m": 0.02})
+    assert not (tmp_path / "x.txt").exists()
