@@ -6,6 +6,13 @@ micro-image averaged (what a conventional camera focused on the MLA's conjugate 
 Either is resampled onto a pinhole image: the ray through the main-lens centre and a lens centre
 ``c`` (image plane) leaves along ``(c_xi, c_eta, f')``, so lens ``c`` lands at pixel
 ``K @ (c_xi / f', c_eta / f', 1)``; values between lens positions are interpolated linearly.
+
+Sub-aperture views (:func:`subaperture_view`) sample every micro-image at the same offset
+``delta`` (pixels) from its centre. All those rays pass one point of the main lens,
+``h = delta * pixel_pitch * f' / f_mla`` (:func:`subaperture_centre_m`), so the view is a pinhole
+at ``h`` with the central view's orientation; with the MLA off the focal plane (``f' != f``) its
+rays are also tilted by ``delta * pixel_pitch / f_mla * (1 - f' / f)``, a shift of the principal
+point.
 """
 
 from __future__ import annotations
@@ -14,11 +21,11 @@ import numpy as np
 from scipy import ndimage
 from scipy.interpolate import LinearNDInterpolator
 
-from lfrefract._validate import ParameterError, one_of
+from lfrefract._validate import ParameterError, finite_vector, one_of
 from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 
-__all__ = ["VIEW_KINDS", "naive_view"]
+__all__ = ["VIEW_KINDS", "naive_view", "subaperture_centre_m", "subaperture_view"]
 
 VIEW_KINDS = ("central", "full")
 
@@ -35,18 +42,24 @@ def _row_of(table: np.ndarray, queries: np.ndarray) -> np.ndarray:
     return np.where(found, order[pos], -1)
 
 
+def _micro_image_samples(
+    camera: LightFieldCamera, raw: np.ndarray, idx: np.ndarray, offset_px: tuple[float, float]
+) -> np.ndarray:
+    """Bilinear samples (M, C) of ``raw`` (H, W, C) at each lens's micro-image centre + offset."""
+    points = camera.micro_image_centres_px(idx) + np.asarray(offset_px)
+    return np.stack(
+        [
+            ndimage.map_coordinates(raw[..., c], [points[:, 1], points[:, 0]], order=1, mode="nearest")
+            for c in range(raw.shape[2])
+        ],
+        axis=1,
+    )
+
+
 def _per_lens_values(camera: LightFieldCamera, raw: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
     idx = camera.lens_indices_on_sensor()
     if kind == "central":
-        centres = camera.micro_image_centres_px(idx)
-        values = np.stack(
-            [
-                ndimage.map_coordinates(raw[..., c], [centres[:, 1], centres[:, 0]], order=1, mode="nearest")
-                for c in range(raw.shape[2])
-            ],
-            axis=1,
-        )
-        return idx, values
+        return idx, _micro_image_samples(camera, raw, idx, (0.0, 0.0))
     rays = camera.captured_rays()
     lens_of_pixel = _row_of(idx, rays.lens_indices)
     use = rays.in_aperture & (lens_of_pixel >= 0)
@@ -80,17 +93,88 @@ def naive_view(
         NaN outside the lenses' hull.
     """
     one_of("kind", kind, VIEW_KINDS)
+    image = _as_raw(camera, raw)
+    idx, values = _per_lens_values(camera, image, kind)
+    return _resample(camera, idx, values, output, (0.0, 0.0), grey=np.ndim(raw) == 2)
+
+
+def _as_raw(camera: LightFieldCamera, raw: np.ndarray) -> np.ndarray:
+    """``raw`` as float32 (H, W, C), checked against the sensor size."""
     arr = np.asarray(raw, dtype=np.float32)
     if arr.shape[:2] != (camera.sensor.height_px, camera.sensor.width_px) or arr.ndim not in (2, 3):
         raise ParameterError(
             f"raw must have shape ({camera.sensor.height_px}, {camera.sensor.width_px}) (+ channels), got {arr.shape}"
         )
+    return arr[..., None] if arr.ndim == 2 else arr
+
+
+def _resample(
+    camera: LightFieldCamera,
+    idx: np.ndarray,
+    values: np.ndarray,
+    output: PinholeCamera | None,
+    slope_shift: tuple[float, float],
+    *,
+    grey: bool,
+) -> np.ndarray:
+    """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``."""
     output = output if output is not None else virtual_camera_for(camera)
-    image = arr[..., None] if arr.ndim == 2 else arr
-    idx, values = _per_lens_values(camera, image, kind)
-    centres = camera.mla.centres_m(idx)
-    positions = output.focal_px * centres / camera.lens_to_mla_m + np.array([output.cx_px, output.cy_px])
+    centres = camera.mla.centres_m(idx) / camera.lens_to_mla_m + np.asarray(slope_shift)
+    positions = output.focal_px * centres + np.array([output.cx_px, output.cy_px])
     interp = LinearNDInterpolator(positions, values, fill_value=np.nan)
     vv, uu = np.mgrid[0 : output.height_px, 0 : output.width_px]
     out = interp(uu.ravel(), vv.ravel()).reshape(output.height_px, output.width_px, -1).astype(np.float32)
-    return out[..., 0] if arr.ndim == 2 else out
+    return out[..., 0] if grey else out
+
+
+def subaperture_centre_m(camera: LightFieldCamera, offset_px: tuple[float, float]) -> np.ndarray:
+    """Centre of projection (3,), camera frame, metres, of the sub-aperture view at ``offset_px``.
+
+    ``offset_px = (du, dv)``: the sensor offset from every micro-image centre, pixels. The point
+    is on the main-lens plane: ``(du, dv, 0) * pixel_pitch * f' / f_mla``.
+    """
+    du, dv = finite_vector("offset_px", offset_px, 2)
+    scale = camera.sensor.pixel_pitch_m * camera.lens_to_mla_m / camera.mla.focal_length_m
+    return np.array([du * scale, dv * scale, 0.0])
+
+
+def subaperture_view(
+    camera: LightFieldCamera,
+    raw: np.ndarray,
+    offset_px: tuple[float, float],
+    *,
+    output: PinholeCamera | None = None,
+) -> np.ndarray:
+    """The sub-aperture view at ``offset_px`` from the micro-image centres, as a pinhole image.
+
+    Its centre of projection is :func:`subaperture_centre_m` ``(camera, offset_px)``; pixel
+    ``p`` of the result looks along ``K^-1 p`` from there (camera-frame orientation), like the
+    central view (``offset_px = (0, 0)``, which equals :func:`naive_view` ``kind="central"``).
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    raw : ndarray, shape (H, W) or (H, W, C)
+    offset_px : (float, float)
+        ``(du, dv)``, pixels; at most the micro-image radius less one pixel, so that no sample is
+        vignetted.
+    output : PinholeCamera, optional
+        Output geometry; default :func:`virtual_camera_for` ``(camera)``.
+
+    Returns
+    -------
+    ndarray, float32, shape (height, width) or (height, width, C)
+        NaN outside the lenses' hull.
+    """
+    du, dv = finite_vector("offset_px", offset_px, 2)
+    limit = camera.micro_image_radius_px - 1.0
+    if np.hypot(du, dv) > limit:
+        raise ParameterError(
+            f"offset_px={offset_px!r} reaches the micro-image rim (at most {limit:.3g} px from its centre)"
+        )
+    image = _as_raw(camera, raw)
+    idx = camera.lens_indices_on_sensor()
+    values = _micro_image_samples(camera, image, idx, (du, dv))
+    spread = 1.0 - camera.lens_to_mla_m / camera.focal_length_m
+    tilt = camera.sensor.pixel_pitch_m / camera.mla.focal_length_m * spread
+    return _resample(camera, idx, values, output, (du * tilt, dv * tilt), grey=np.ndim(raw) == 2)

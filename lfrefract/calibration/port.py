@@ -33,7 +33,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from lfrefract._validate import ParameterError, as_points, positive_float, positive_int
+from lfrefract._validate import ParameterError, as_points, finite_vector, positive_float, positive_int
 from lfrefract.pinhole import PinholeCamera
 from lfrefract.port import FlatPort
 from lfrefract.pose import Pose
@@ -56,16 +56,26 @@ class CalibrationError(ParameterError):
 class BoardView:
     """Chessboard corners seen in one underwater view.
 
+    One board pose, seen by one or several in-air pinhole cameras that share the intrinsics and
+    orientation of ``camera`` in :func:`calibrate_port` but may sit elsewhere: a light-field
+    camera's sub-aperture views are pinholes at points of the main-lens plane
+    (:func:`lfrefract.views.subaperture_centre_m`), so each corner carries the centre of the view
+    it was found in.
+
     Attributes
     ----------
     corners_px : ndarray, shape (N, 2)
-        Detected corners in the in-air pinhole image (pixels, OpenCV convention).
+        Detected corners (pixels, OpenCV convention).
     board_points_m : ndarray, shape (N, 2)
         The same corners in the board's own frame (metres, on its plane z = 0).
+    centres_m : ndarray, shape (N, 3), optional
+        Centre of projection of the view each corner was found in, camera frame, metres
+        (default: the origin, the main-lens centre).
     """
 
     corners_px: np.ndarray
     board_points_m: np.ndarray
+    centres_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         corners = as_points("corners_px", self.corners_px, 2)
@@ -76,8 +86,17 @@ class BoardView:
             )
         if len(corners) < 8:
             raise ParameterError(f"a board view needs at least 8 corners, got {len(corners)}")
+        centres = np.zeros((len(corners), 3)) if self.centres_m is None else as_points("centres_m", self.centres_m, 3)
+        if len(centres) != len(corners):
+            raise ParameterError(f"centres_m must have one row per corner ({len(corners)}), got {len(centres)}")
         object.__setattr__(self, "corners_px", corners)
         object.__setattr__(self, "board_points_m", board)
+        object.__setattr__(self, "centres_m", centres)
+
+    @property
+    def central(self) -> np.ndarray:
+        """Rows seen from the main-lens centre, boolean (N,)."""
+        return np.all(self.centres_m == 0.0, axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,18 +145,19 @@ class PortCalibration:
         }
 
 
-def _line_of_sight(camera: PinholeCamera, uv: np.ndarray) -> np.ndarray:
-    return camera.pixel_directions(uv)
-
-
-def _water_rays(port: FlatPort, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points on the water face and unit directions in the water of lines of sight from the origin."""
-    trace = port.trace_from_air(np.zeros_like(directions), directions)
+def _water_rays(port: FlatPort, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the water face and unit directions in the water of lines of sight."""
+    trace = port.trace_from_air(origins, directions)
     return trace.exit_points_cam, trace.directions_cam
 
 
 def project_through_port(
-    camera: PinholeCamera, port: FlatPort, points_cam: np.ndarray, *, iterations: int = 30
+    camera: PinholeCamera,
+    port: FlatPort,
+    points_cam: np.ndarray,
+    *,
+    centre_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    iterations: int = 30,
 ) -> np.ndarray:
     """Pixels at which points in the water appear through the port (forward refractive projection).
 
@@ -151,6 +171,8 @@ def project_through_port(
     port : FlatPort
     points_cam : array_like, shape (N, 3)
         Points beyond the port, camera frame, metres.
+    centre_m : (float, float, float)
+        Centre of projection of the pinhole (its orientation is the camera frame's), metres.
     iterations : int
         Gauss-Newton steps (converges in a handful).
 
@@ -161,14 +183,16 @@ def project_through_port(
         reflection).
     """
     x = as_points("points_cam", points_cam, 3)
+    centre = finite_vector("centre_m", centre_m, 3)
+    origins = np.broadcast_to(np.asarray(centre), x.shape)
     positive_int("iterations", iterations)
-    uv = camera.project(x)
+    uv = camera.project(x - centre)
     eps = 1e-3  # pixels, for the finite-difference Jacobian
 
     def offsets(q: np.ndarray) -> np.ndarray:
         """Where each point lies off the refracted line of sight of q: components (metres) in a frame
         perpendicular to the water ray."""
-        origin, d = _water_rays(port, _line_of_sight(camera, q))
+        origin, d = _water_rays(port, origins, camera.pixel_directions(q))
         rel = x - origin
         along = np.sum(rel * d, axis=1, keepdims=True)
         return rel - along * d
@@ -212,9 +236,14 @@ def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray
         eigenvector of the sum of their outer-product complements.
     """
     scatter = np.zeros((3, 3))
+    used = 0
     for view in views:
-        v = _line_of_sight(camera, view.corners_px)
-        p = np.concatenate([view.board_points_m, np.ones((len(v), 1))], axis=1)
+        central = view.central
+        if central.sum() < 8:
+            continue
+        used += 1
+        v = camera.pixel_directions(view.corners_px[central])
+        p = np.concatenate([view.board_points_m[central], np.ones((len(v), 1))], axis=1)
         # v^T M p = 0 for M = [n]x [r1 r2 t], row-major unknowns M_ij: coefficient v_i p_j.
         rows = (v[:, :, None] * p[:, None, :]).reshape(len(v), 9)
         rows /= np.linalg.norm(rows, axis=1, keepdims=True)
@@ -223,6 +252,8 @@ def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray
         u = np.linalg.svd(m)[0]
         n = u[:, -1]
         scatter += np.outer(n, n)
+    if used == 0:
+        raise CalibrationError("no view has 8 or more corners seen from the main-lens centre (centres_m = 0)")
     vecs = np.linalg.eigh(scatter)[1]
     n = vecs[:, -1]  # the direction the per-view estimates agree on
     return n if n[2] > 0 else -n
@@ -247,13 +278,13 @@ class _Problem:
         self.camera = camera
         self.views = views
         self.template = template
-        self.directions = [_line_of_sight(camera, v.corners_px) for v in views]
+        self.directions = [camera.pixel_directions(v.corners_px) for v in views]
         self.sizes = [len(v.corners_px) for v in views]
 
     def view_residuals(self, port: FlatPort, view: int, pose6: np.ndarray) -> np.ndarray:
         """Residuals (2N,) of one view, pixels: board-plane miss of the refracted line of sight,
         scaled by focal / depth."""
-        origin, d = _water_rays(port, self.directions[view])
+        origin, d = _water_rays(port, self.views[view].centres_m, self.directions[view])
         rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
         t = pose6[3:]
         normal_b = rot[:, 2]
@@ -282,9 +313,10 @@ class _Problem:
 
 
 def _initial_pose(camera: PinholeCamera, view: BoardView) -> np.ndarray:
-    """Board pose ignoring refraction (OpenCV PnP), as (rotation vector, translation)."""
-    obj = np.concatenate([view.board_points_m, np.zeros((len(view.board_points_m), 1))], axis=1)
-    ok, rvec, tvec = cv2.solvePnP(obj, view.corners_px, camera.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
+    """Board pose ignoring refraction (OpenCV PnP on the central rows), as (rotation vector, translation)."""
+    rows = view.central if view.central.sum() >= 8 else np.ones(len(view.corners_px), dtype=bool)
+    obj = np.concatenate([view.board_points_m[rows], np.zeros((rows.sum(), 1))], axis=1)
+    ok, rvec, tvec = cv2.solvePnP(obj, view.corners_px[rows], camera.K, None, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok:
         raise CalibrationError("OpenCV could not estimate an initial board pose for a view")
     return np.concatenate([rvec.ravel(), tvec.ravel()])

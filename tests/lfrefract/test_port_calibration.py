@@ -107,3 +107,31 @@ def test_bad_input():
         BoardView(corners_px=np.zeros((9, 2)), board_points_m=np.zeros((10, 2)))
     with pytest.raises(ParameterError, match="corners_px"):
         BoardView(corners_px=np.full((9, 2), np.nan), board_points_m=np.zeros((9, 2)))
+
+
+def test_views_from_several_centres_share_a_board_pose():
+    """Sub-aperture views: each board seen from five centres on the main-lens plane (+-2 mm), one
+    pose per board; noiseless corners give the port exactly, and the central rows alone seed it."""
+    true = FlatPort.from_degrees(distance_m=0.02, thickness_m=0.005, tilt_x_deg=-12.0, tilt_y_deg=18.0)
+    centres = [(0.0, 0.0, 0.0), (0.002, 0.0, 0.0), (-0.002, 0.0, 0.0), (0.0, 0.002, 0.0), (0.0, -0.002, 0.0)]
+    rng = np.random.default_rng(6)
+    multi = []
+    for _ in range(3):
+        pose = Pose.from_euler_xyz_deg(rng.uniform(-30, 30, 3) * [1, 1, 0.3], [0.0, 0.0, rng.uniform(0.2, 0.4)])
+        points = pose.to_world(np.c_[BOARD, np.zeros(len(BOARD))])
+        corners, board, origin = [], [], []
+        for c in centres:
+            corners.append(project_through_port(CAMERA, true, points, centre_m=c))
+            board.append(BOARD)
+            origin.append(np.tile(c, (len(BOARD), 1)))
+        multi.append(
+            BoardView(
+                corners_px=np.concatenate(corners),
+                board_points_m=np.concatenate(board),
+                centres_m=np.concatenate(origin),
+            )
+        )
+    result = calibrate_port(CAMERA, multi, thickness_m=0.005)
+    assert _angle_deg(result.port.normal, true.normal) < 1e-6
+    assert result.port.distance_m == pytest.approx(true.distance_m, abs=1e-9)
+    assert len(result.board_poses) == 3
