@@ -1,6 +1,6 @@
 """Regenerate the figures in docs/figures/ from fresh renders (a few minutes on 2 cores).
 
-    python docs/make_figures.py [--only simulator synthesis diagram] [--camera f01] [--spp 16]
+    python docs/make_figures.py [--only simulator synthesis diagram mla] [--camera f01] [--spp 16]
                                 [--synthesis-spp 64]
 
 Renders the embedded default scene (and, for the simulator figures, the white scene) with the given
@@ -14,8 +14,10 @@ camera and writes:
   the exact coverage); figures of docs/synthesis.md. Prints the measurements and timings quoted
   there.
 * ``diagram``: synthesis_diagram.png, a side view of the method (no render).
+* ``mla``: mla_calibration.png, MLA calibration from a white image (detected lattice over a crop at
+  the corner, errors against ground truth); figure of docs/calibration.md. Prints the accuracy.
 
-By default all three; ``--only synthesis`` regenerates just the synthesis figures.
+By default all parts; ``--only synthesis`` regenerates just the synthesis figures.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from matplotlib.colors import ListedColormap
 from matplotlib.patches import Ellipse, Patch, Polygon
 
 from lfrefract import camera_preset
+from lfrefract.calibration.mla import LENS_STATUS, calibrate_mla
 from lfrefract.camera import LightFieldCamera, MicrolensArray, SensorGeometry
 from lfrefract.io import read_exr, read_json
 from lfrefract.metrics import psnr, shift_px, ssim
@@ -49,7 +52,7 @@ from simulator.job import render_job
 from simulator.previews import display_rgb, downsample, white_level
 
 FIGURES = Path(__file__).resolve().parent / "figures"
-PARTS = ("simulator", "synthesis", "diagram")
+PARTS = ("simulator", "synthesis", "diagram", "mla", "port")
 
 #: The k of the side-by-side figure (paper Fig. 9).
 K_VALUES = (1, 8, 64)
@@ -552,7 +555,124 @@ def diagram_figure() -> None:
     _save(fig, FIGURES / "synthesis_diagram.png", dpi=110, colours=None)
 
 
+# ---------------------------------------------------------------------------- MLA calibration
+def mla_figure(camera_name: str, spp: int) -> None:
+    """mla_calibration.png: the lattice calibrated from a white image; prints its accuracy."""
+    camera = camera_preset(camera_name)
+    white = load_scene(embedded_scenes()["white"]).with_overrides(camera=camera, render=RenderSettings(spp=spp, seed=0))
+    with tempfile.TemporaryDirectory() as tmp:
+        seconds = _render(white, Path(tmp) / "white")
+        raw = read_exr(Path(tmp) / "white" / "raw.exr", role="raw").mean(axis=2)
+    start = time.perf_counter()
+    cal = calibrate_mla(raw)
+    took = time.perf_counter() - start
+    truth = camera.micro_image_centres_px(camera.lens_indices_for_pixels(cal.centres_px))
+    fitted_error = np.linalg.norm(cal.centres_px - truth, axis=1)
+    measured_error = np.linalg.norm(cal.measured_px[cal.used] - truth[cal.used], axis=1)
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2)))
+
+    print(
+        f"white image, {camera_name} camera ({raw.shape[1]} x {raw.shape[0]} px), {spp} spp, "
+        f"rendered in {seconds:.1f} s; calibrated in {took:.2f} s: {cal.grid}, "
+        f"pitch {cal.pitch_px:.5f} px (true {camera.micro_image_pitch_px:.5f}), "
+        f"rotation {math.degrees(cal.rotation_rad):.5f} deg (true {math.degrees(camera.mla.rotation_rad):.5f}), "
+        f"{len(cal.indices)} lenses {cal.status_counts()}\n"
+        f"  fitted centres vs truth: {rms(fitted_error):.4f} px RMS, {fitted_error.max():.4f} px max; "
+        f"measured centroids: {rms(measured_error):.4f} px RMS, {measured_error.max():.4f} px max"
+    )
+
+    fig, (ax, hist) = plt.subplots(1, 2, figsize=(12, 5.4), gridspec_kw={"width_ratios": [1, 1.15]})
+    pitch = cal.pitch_px
+    crop = (-0.5 - 0.3 * pitch, -0.5 + 7.5 * pitch)  # u and v range at the top-left corner
+    ax.imshow(raw, cmap="gray", interpolation="nearest")
+    edge = cal.status == LENS_STATUS.index("edge")
+    used = cal.used
+    ax.plot(*cal.centres_px[~edge].T, "r+", ms=10, mew=1.5, label="fitted lattice")
+    ax.plot(*cal.measured_px[used].T, "x", color="#00c8ff", ms=6, mew=1.2, label="measured centroid")
+    ax.plot(*cal.centres_px[edge].T, "o", mfc="none", color="orange", ms=9, mew=1.5, label="window off the sensor")
+    base = cal.centres_px[np.argmin(np.linalg.norm(cal.centres_px - 3.5 * pitch, axis=1))]
+    for vector, name in zip(cal.basis_px.T, ("a1", "a2"), strict=True):
+        ax.annotate("", xy=base + vector, xytext=base, arrowprops={"arrowstyle": "-|>", "color": "yellow", "lw": 1.8})
+        ax.text(*(base + 1.08 * vector), name, color="yellow", fontsize=11, weight="bold")
+    ax.set_xlim(*crop)
+    ax.set_ylim(*crop[::-1])
+    ax.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    ax.set_title(f"white image, {camera_name}, top-left corner ({spp} spp)")
+
+    bins = np.logspace(-4.5, 0, 60)
+    for errors, colour, name in ((fitted_error, "#d62728", "fitted lattice"), (measured_error, "#1f77b4", "measured")):
+        hist.hist(errors, bins=bins, color=colour, alpha=0.75, label=f"{name}: {rms(errors):.4f} px RMS")
+    hist.set_xscale("log")
+    hist.set_xlabel("distance to the true micro-image centre [px]")
+    hist.set_ylabel("lenses")
+    hist.legend(loc="upper left", fontsize=9)
+    hist.set_title(
+        f"{len(cal.indices)} lenses, {cal.grid} lattice, "
+        f"pitch error {cal.pitch_px - camera.micro_image_pitch_px:+.1e} px"
+    )
+    fig.tight_layout()
+    _save(fig, FIGURES / "mla_calibration.png", dpi=90)
+
+
 # ---------------------------------------------------------------------------------- main
+def port_noise_figure(seeds: int = 2) -> None:
+    """Port calibration error against corner noise (synthetic views, no render): port_noise.png."""
+    import math
+
+    from lfrefract import FlatPort, PinholeCamera, Pose
+    from lfrefract.calibration.port import BoardView, calibrate_port, project_through_port
+
+    camera = PinholeCamera(focal_px=600.0, cx_px=399.5, cy_px=299.5, width_px=800, height_px=600)
+    xx, yy = np.meshgrid(np.arange(9) * 0.03 - 0.12, np.arange(6) * 0.03 - 0.075)
+    board = np.stack([xx.ravel(), yy.ravel()], axis=1)
+    noises = [0.0, 0.05, 0.1, 0.2, 0.4]
+    tilts = {"0 deg": (0.0, 0.0), "15 deg": (15.0, 0.0), "30 deg": (20.0, 22.0)}
+    results = {}
+    for label, (tx, ty) in tilts.items():
+        true = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.01, tilt_x_deg=tx, tilt_y_deg=ty)
+        rows = []
+        for noise in noises:
+            for seed in range(seeds):
+                rng = np.random.default_rng(seed)
+                views = []
+                while len(views) < 10:
+                    pose = Pose.from_euler_xyz_deg(
+                        rng.uniform(-35, 35, 3) * [1, 1, 0.3],
+                        [rng.uniform(-0.1, 0.1), rng.uniform(-0.08, 0.08), rng.uniform(0.2, 0.5)],
+                    )
+                    uv = project_through_port(camera, true, pose.to_world(np.c_[board, np.zeros(len(board))]))
+                    if np.all(np.isfinite(uv)) and np.all((uv >= 0) & (uv <= [799, 599])):
+                        noisy = uv + rng.normal(scale=noise, size=uv.shape)
+                        views.append(BoardView(corners_px=noisy, board_points_m=board))
+                r = calibrate_port(camera, views, thickness_m=0.01, max_normal_std_deg=90.0, max_distance_std_m=1.0)
+                n = r.port.normal
+                sine = float(np.linalg.norm(np.cross(n, true.normal)))
+                angle = math.degrees(math.atan2(sine, float(n @ true.normal)))
+                rows.append((noise, angle, abs(r.port.distance_m - true.distance_m) * 1e3))
+                print(f"  port {label}, noise {noise} px, seed {seed}: normal {angle:.4f} deg, {rows[-1][2]:.3f} mm")
+        results[label] = np.array(rows)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
+    for label, rows in results.items():
+        for ax, col in zip(axes, (1, 2), strict=True):
+            worst = [rows[rows[:, 0] == x, col].max() for x in noises]
+            ax.plot(noises, worst, "o-", label=f"port tilted {label}")
+    axes[0].axhline(0.1, color="grey", ls="--", lw=1, label="issue target")
+    axes[1].axhline(0.5, color="grey", ls="--", lw=1, label="issue target")
+    axes[0].set(xlabel="corner noise [px] (sigma)", ylabel="normal error [deg]", title="port normal")
+    axes[1].set(xlabel="corner noise [px] (sigma)", ylabel="distance error [mm]", title="port distance")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(
+        f"Port calibration from 10 synthetic views (f = 600 px, 9 x 6 board 0.2-0.5 m, port 30 mm, "
+        f"10 mm glass); worst of {seeds} seeds",
+        fontsize=9,
+    )
+    _save(fig, FIGURES / "port_noise.png")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", nargs="+", choices=PARTS, default=list(PARTS), help="figures to make (default all)")
@@ -567,6 +687,10 @@ def main() -> None:
         synthesis_figures(args.camera, args.synthesis_spp)
     if "diagram" in args.only:
         diagram_figure()
+    if "mla" in args.only:
+        mla_figure(args.camera, args.spp)
+    if "port" in args.only:
+        port_noise_figure()
     print(f"wrote figures to {FIGURES}")
 
 

@@ -12,9 +12,12 @@ Initialisation (no ground truth): for a flat port, whatever its distance and lay
 ray stays in the plane spanned by the line of sight ``v`` and the normal ``n`` (the plane of
 refraction), so a board point ``X = R P + t`` seen along ``v`` obeys ``X . (n x v) = 0``. For a
 planar board this is linear in the nine entries of ``[n]x [r1 r2 t]`` (Agrawal et al.'s axial
-constraint), and ``n`` is that matrix's left null vector: one estimate per view, combined. With the
-normal fixed, the distance comes from a one-dimensional search (per-view pose fits at each trial
-distance), and then everything is refined jointly by nonlinear least squares (scipy) on the
+constraint), and ``n`` is that matrix's left null vector: one estimate per view, combined. The
+constraint rests on how far the refracted rays pass from the camera centre (millimetres at a
+board's distance), so corner noise easily turns it by tens of degrees; it is therefore one start
+among a robust search: it, the optical axis and normals 10-40 deg off it in eight directions, each
+with six distances over ``distance_range_m`` and per-view pose fits, scored by the residual. The
+three best are refined jointly by nonlinear least squares (scipy) on the
 geometric error: where the refracted line of sight meets the board, against the corner, scaled to
 pixels by ``f / depth``. The covariance of the port parameters follows from the Jacobian; a
 calibration whose standard deviations exceed the caller's limits is an error (degenerate views),
@@ -312,6 +315,35 @@ class _Problem:
         return jac
 
 
+def _linear_pose(problem: _Problem, port: FlatPort, view: int) -> np.ndarray | None:
+    """Board pose from the refracted rays in closed form (linear least squares), or None.
+
+    A board point ``X = x r1 + y r2 + t`` on the water ray through ``q`` along ``w`` satisfies
+    ``w x (x r1 + y r2 + t) = w x q``: linear in ``(r1, r2, t)``. The rotation is the nearest
+    one to ``(r1, r2, r1 x r2)``, and ``t`` is solved again with it.
+    """
+    q, w = _water_rays(port, problem.views[view].centres_m, problem.directions[view])
+    if not np.all(np.isfinite(w)):
+        return None
+    board = problem.views[view].board_points_m
+    cross = np.zeros((len(w), 3, 3))  # [w]x
+    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    cross -= cross.transpose(0, 2, 1)
+    a = np.concatenate([cross * board[:, 0, None, None], cross * board[:, 1, None, None], cross], axis=2)
+    b = np.einsum("nij,nj->ni", cross, q)
+    solution = np.linalg.lstsq(a.reshape(-1, 9), b.ravel(), rcond=None)[0]
+    r1, r2 = solution[:3], solution[3:6]
+    if min(np.linalg.norm(r1), np.linalg.norm(r2)) < 1e-6:
+        return None
+    u, _, vt = np.linalg.svd(np.stack([r1, r2, np.cross(r1, r2)], axis=1))
+    rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    rhs = b - np.einsum("nij,nj->ni", cross, board @ rot[:, :2].T)
+    t = np.linalg.lstsq(cross.reshape(-1, 3), rhs.ravel(), rcond=None)[0]
+    if t[2] <= 0.0:
+        return None
+    return np.concatenate([Rotation.from_matrix(rot).as_rotvec(), t])
+
+
 def _initial_pose(camera: PinholeCamera, view: BoardView) -> np.ndarray:
     """Board pose ignoring refraction (OpenCV PnP on the central rows), as (rotation vector, translation)."""
     rows = view.central if view.central.sum() >= 8 else np.ones(len(view.corners_px), dtype=bool)
@@ -322,9 +354,24 @@ def _initial_pose(camera: PinholeCamera, view: BoardView) -> np.ndarray:
     return np.concatenate([rvec.ravel(), tvec.ravel()])
 
 
-def _fit_pose(problem: _Problem, port: FlatPort, view: int, pose6: np.ndarray) -> tuple[np.ndarray, float]:
-    fit = least_squares(lambda p: problem.view_residuals(port, view, p), pose6, method="lm", max_nfev=200)
+def _fit_pose(
+    problem: _Problem, port: FlatPort, view: int, pose6: np.ndarray, *, max_nfev: int = 200
+) -> tuple[np.ndarray, float]:
+    fit = least_squares(lambda p: problem.view_residuals(port, view, p), pose6, method="lm", max_nfev=max_nfev)
     return fit.x, float(np.sum(fit.fun**2))
+
+
+def _candidate_tilts(axial_normal: np.ndarray) -> list[tuple[float, float]]:
+    """(tilt_x, tilt_y) radians to start from: the axial estimate, the optical axis, and normals
+    10-40 deg off it in eight directions."""
+    axial = FlatPort.from_normal(axial_normal, distance_m=1.0)
+    tilts = [(axial.tilt_x_rad, axial.tilt_y_rad), (0.0, 0.0)]
+    for total in np.radians([10.0, 20.0, 30.0, 40.0]):
+        for azimuth in np.radians(np.arange(0.0, 360.0, 45.0)):
+            n = [math.sin(total) * math.cos(azimuth), math.sin(total) * math.sin(azimuth), math.cos(total)]
+            p = FlatPort.from_normal(n, distance_m=1.0)
+            tilts.append((p.tilt_x_rad, p.tilt_y_rad))
+    return tilts
 
 
 def calibrate_port(
@@ -379,36 +426,47 @@ def calibrate_port(
     if n_air == n_water and (thickness_m == 0.0 or n_glass == n_air):
         raise ParameterError("the port does not refract (equal indices): its normal and distance are undefined")
 
-    normal = estimate_normal(camera, views)
-    seed = FlatPort.from_normal(normal, distance_m=lo, thickness_m=thickness_m)
     problem = _Problem(camera, views, template)
-    poses = [_initial_pose(camera, v) for v in views]
-
-    # The distance: a coarse logarithmic search with per-view pose fits, then the joint refinement.
-    best = (np.inf, lo, poses)
-    for distance in np.geomspace(lo, hi, 12):
-        trial = _port_from_params(np.array([seed.tilt_x_rad, seed.tilt_y_rad, distance]), template)
-        fitted = [_fit_pose(problem, trial, i, p) for i, p in enumerate(poses)]
-        cost = sum(c for _, c in fitted)
-        if cost < best[0]:
-            best = (cost, distance, [p for p, _ in fitted])
-    x0 = np.concatenate([[seed.tilt_x_rad, seed.tilt_y_rad, best[1]], *best[2]])
-    lower = np.full(len(x0), -np.inf)
-    upper = np.full(len(x0), np.inf)
+    lower = np.full(3 + 6 * len(views), -np.inf)
+    upper = np.full(3 + 6 * len(views), np.inf)
     lower[:3] = [-math.pi / 2 + 1e-6, -math.pi / 2 + 1e-6, lo]
     upper[:3] = [math.pi / 2 - 1e-6, math.pi / 2 - 1e-6, hi]
-    fit = least_squares(
-        problem.residuals,
-        x0,
-        jac_sparsity=problem.sparsity(),
-        bounds=(lower, upper),
-        x_scale="jac",
-        method="trf",
-        xtol=1e-10,
-        ftol=1e-10,
-        gtol=1e-10,
-        max_nfev=200,
-    )
+    # Starting points: the axial estimate and a grid of normals, each with a coarse logarithmic
+    # search of the distance, scored with the linear pose of every view; the best few get
+    # per-view pose fits and are refined jointly.
+    pnp = [_initial_pose(camera, v) for v in views]  # where the linear pose is undetermined
+    starts = []
+    for tilt_x, tilt_y in _candidate_tilts(estimate_normal(camera, views)):
+        for distance in np.geomspace(lo, hi, 8):
+            trial = _port_from_params(np.array([tilt_x, tilt_y, distance]), template)
+            linear = [_linear_pose(problem, trial, i) for i in range(len(views))]
+            linear = [p if p is not None else pnp[i] for i, p in enumerate(linear)]
+            cost = sum(float(np.sum(problem.view_residuals(trial, i, p) ** 2)) for i, p in enumerate(linear))
+            starts.append((cost, [tilt_x, tilt_y, distance], linear))
+    starts.sort(key=lambda item: item[0])
+    refined = []
+    for cost, params, linear in starts[:4]:
+        trial = _port_from_params(np.array(params), template)
+        refined.append((cost, params, [_fit_pose(problem, trial, i, p)[0] for i, p in enumerate(linear)]))
+    starts = refined
+
+    def refine(x0: np.ndarray, max_nfev: int):
+        return least_squares(
+            problem.residuals,
+            np.clip(x0, lower + 1e-9, upper - 1e-9),
+            jac_sparsity=problem.sparsity(),
+            bounds=(lower, upper),
+            x_scale="jac",
+            method="trf",
+            xtol=1e-10,
+            ftol=1e-10,
+            gtol=1e-10,
+            max_nfev=max_nfev,
+        )
+
+    # A few steps from each start, then the best to convergence.
+    trials = [refine(np.concatenate([params, *poses]), 20) for _, params, poses in starts]
+    fit = refine(min(trials, key=lambda t: t.cost).x, 200)
     port = _port_from_params(fit.x[:3], template)
     residuals = fit.fun
     dof = max(len(residuals) - len(fit.x), 1)

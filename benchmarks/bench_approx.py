@@ -1,0 +1,105 @@
+"""Measure the approximation baseline against the proposed synthesis: corner RMS by method, port tilt, depth.
+
+    python benchmarks/bench_approx.py                      # seeds 0-2, the table of docs/calibration.md
+    python benchmarks/bench_approx.py --seeds 0 --depths 0.2 0.6
+
+The set-up of tests/simulator/test_approx_baseline.py (its scenes come from
+tests/simulator/chessboards.py): the tiny camera at twice its focal length and sensor
+(188 x 141 px refraction-free image, f = 240 px), a port 12 mm away with 4 mm of glass, tilted
+0 or 26.8 deg, 16 spp. ``approx@D`` is calibrated from 6 board views at D metres with their 3D
+corners known; ``proposed+distortion`` fits its residual distortion on the synthesized images of
+the 0.2 m views. A slanted 7 x 5 test board, off the axis and inside the synthesis's exact
+coverage, is rendered at each depth; the figure is the RMS distance (px) between the corners found
+in each method's image and the K-projections of the ground-truth corners, as mean (min-max) over
+the seeds. Needs the simulator (Mitsuba); prints a Markdown table and the timings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from lfrefract import virtual_camera_for
+from lfrefract.methods import CalibrationViews, build_projector
+from simulator.backend import load_mitsuba
+from simulator.job import render_raw
+from tests.simulator import chessboards as cb
+from tests.simulator.scenes import chessboard_corners_world
+from tests.simulator.test_approx_baseline import DIRECTIONS, STRAIGHT, TILTED
+
+
+def _views(mi, tilt, depth_m: float, seed: int) -> CalibrationViews:
+    camera = cb.empty_scene(tilt).camera
+    boards = cb.calibration_boards(tilt, depth_m, virtual_camera_for(camera))
+    configs = [cb.board_scene(tilt, table, seed=seed) for table in boards]
+    return CalibrationViews(
+        raws=[render_raw(mi, c, progress=False) for c in configs],
+        pattern=cb.PATTERN,
+        square_size_m=boards[0]["square_size_m"],
+        corners_cam=[chessboard_corners_world(c.objects[0]) for c in configs],
+    )
+
+
+def measure(mi, tilt, depths, calibration_depths, seed: int) -> dict[tuple[str, float], float]:
+    """Corner RMS (px) by (method label, depth) for one tilt and seed (NaN: board not found)."""
+    config = cb.empty_scene(tilt)
+    camera, port = config.camera, config.port
+    proposed = build_projector("proposed", camera, port)
+    projectors = {"naive": build_projector("naive", camera, port)}
+    for depth_m in calibration_depths:
+        views = _views(mi, tilt, depth_m, seed)
+        projectors[f"approx@{depth_m:g}"] = build_projector("approx", camera, port, calibration=views)
+        if depth_m == calibration_depths[0]:
+            projectors["proposed"] = proposed
+            projectors["proposed+distortion"] = build_projector(
+                "proposed+distortion", camera, port, calibration=views, warp=proposed.warp
+            )
+    errors = {}
+    for depth_m in depths:
+        scene = cb.board_scene(tilt, cb.slanted_board(depth_m, DIRECTIONS[tilt], proposed.output.focal_px), seed=seed)
+        raw = render_raw(mi, scene, progress=False)
+        truth = chessboard_corners_world(scene.objects[0])
+        for label, projector in projectors.items():
+            found = cb.find_corners(projector.apply(raw))
+            errors[label, depth_m] = (
+                np.nan if found is None else cb.corner_rms_px(found, projector.output.project(truth))
+            )
+    return errors
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--depths", type=float, nargs="+", default=[0.1, 0.15, 0.2, 0.3, 0.6, 1.0])
+    parser.add_argument("--calibration-depths", type=float, nargs="+", default=[0.2, 0.6])
+    args = parser.parse_args(argv)
+    mi = load_mitsuba("llvm_ad_rgb")
+    start = time.perf_counter()
+    rows = {}
+    for tilt in (STRAIGHT, TILTED):
+        runs = [measure(mi, tilt, args.depths, args.calibration_depths, seed) for seed in args.seeds]
+        for key in runs[0]:
+            rows[tilt, *key] = np.array([r[key] for r in runs])
+    labels = list(dict.fromkeys(k[1] for k in rows))
+    print("| method | port tilt | " + " | ".join(f"{d:g} m" for d in args.depths) + " |")
+    print("| --- | --- | " + " | ".join("---" for _ in args.depths) + " |")
+    for label in labels:
+        for tilt in (STRAIGHT, TILTED):
+            tilt_deg = np.degrees(np.arccos(np.cos(np.radians(tilt[0])) * np.cos(np.radians(tilt[1]))))
+            cells = []
+            for depth_m in args.depths:
+                v = rows[tilt, label, depth_m]
+                cells.append(f"{np.mean(v):.2f} ({np.min(v):.2f}-{np.max(v):.2f})" if len(v) > 1 else f"{v[0]:.2f}")
+            print(f"| {label} | {tilt_deg:.1f} deg | " + " | ".join(cells) + " |")
+    print(f"\n{len(args.seeds)} seed(s), {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

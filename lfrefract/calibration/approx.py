@@ -1,0 +1,619 @@
+"""The approximation baseline: a pinhole plus lens distortion fitted at one depth (paper section 3.1).
+
+Ferreira et al. (2005) and the approaches after them treat a camera behind a flat port as an
+ordinary pinhole camera whose lens happens to be distorted: chessboard views taken through the
+port, at about one distance, are calibrated with the usual model (OpenCV's ``K`` with
+``fx, fy, cx, cy`` and radial-tangential distortion ``k1, k2, p1, p2, k3``), and later images are
+undistorted with it. Refraction is not a lens distortion: the lines of sight in the water do not
+meet in one point, and the virtual focal length depends on the depth, so the model is right only
+near the calibration depth, and worse the more the port is tilted (paper section 3.1).
+
+Here the conventional image of a light-field camera is its central sub-aperture view (see
+:func:`lfrefract.methods.conventional_image`), but nothing in this module knows about light
+fields: :func:`calibrate_approx` calibrates any set of images of a chessboard, and
+:class:`ApproxCalibration` undistorts images onto a chosen pinhole ``K``
+(``cv2.initUndistortRectifyMap`` and ``cv2.remap``).
+
+The fit determines the model's frame only as well as the views do: boards at one distance and a
+narrow field of view let the focal length trade off against the board distances, and the
+principal point against a rotation of every board pose; a tilted port deflects the whole field,
+which the fit puts into the poses (``docs/calibration.md``: from 6 views at 0.2 m the focal
+length came out 318-531 px between render seeds where 315-387 px fit). Undistorted images then
+come out in the fit's own frame, which is what the method gives a user (a later stereo
+calibration absorbs it). Where the boards' corners are known in the real camera's frame
+(``corners_cam``: a simulator's ground truth, or a surveyed rig), the model is instead fitted with
+the camera's pose, as the approximation claims it: a pinhole at the camera centre, turned by a
+rotation (the port's mean deflection), with its own ``K`` and distortion, fitted to the known 3D
+corners by nonlinear least squares (scipy) from the OpenCV result. That removes the calibration's
+ambiguities from comparisons, leaving the approximation's own error: small at the calibration
+depth, growing away from it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from lfrefract._validate import (
+    ParameterError,
+    as_points,
+    finite_float,
+    positive_float,
+    positive_int,
+    reject_unknown_keys,
+    require_keys,
+)
+from lfrefract.io import read_json, write_json
+from lfrefract.pinhole import PinholeCamera
+
+__all__ = ["DISTORTION_MODEL", "ApproxCalibration", "calibrate_approx", "detect_chessboard"]
+
+#: Names of the distortion coefficients, in OpenCV's order.
+DISTORTION_MODEL = ("k1", "k2", "p1", "p2", "k3")
+
+#: Names of :attr:`ApproxCalibration.intrinsic_std`, in order.
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", *DISTORTION_MODEL)
+
+#: The ``kind`` entry of :meth:`ApproxCalibration.to_dict`.
+KIND = "approx_calibration"
+
+_KEYS = frozenset(
+    {
+        "kind",
+        "K",
+        "dist_coeffs",
+        "distortion_model",
+        "image_size",
+        "pattern",
+        "square_size_m",
+        "depth_m",
+        "view_depths_m",
+        "rms_px",
+        "view_rms_px",
+        "intrinsic_std",
+        "fixed_intrinsics",
+        "rotation",
+        "known_corners",
+    }
+)
+
+
+def _pattern(pattern: object) -> tuple[int, int]:
+    try:
+        items = tuple(pattern)  # type: ignore[arg-type]
+    except TypeError:
+        raise ParameterError(f"pattern must be (columns, rows) of inner corners, got {pattern!r}") from None
+    if len(items) != 2:
+        raise ParameterError(f"pattern must be (columns, rows) of inner corners, got {pattern!r}")
+    cols, rows = (positive_int(f"pattern[{i}]", n) for i, n in enumerate(items))
+    if cols < 2 or rows < 2:
+        raise ParameterError(f"pattern must have at least 2 inner corners per side, got {pattern!r}")
+    return cols, rows
+
+
+def _as_image(name: str, image: object) -> np.ndarray:
+    arr = np.asarray(image)
+    if arr.ndim not in (2, 3) or arr.shape[0] < 2 or arr.shape[1] < 2:
+        raise ParameterError(f"{name} must be an (H, W) or (H, W, C) image, got shape {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ParameterError(f"{name} must be a real image, got dtype {arr.dtype}")
+    return arr
+
+
+def _gray8(name: str, image: np.ndarray) -> np.ndarray:
+    """8-bit grey image for the detector: channel mean, NaN as black, scaled to the 99th percentile."""
+    grey = image.astype(np.float64)
+    if grey.ndim == 3:
+        grey = grey.mean(axis=2)
+    finite = np.isfinite(grey)
+    if not finite.any():
+        raise ParameterError(f"{name} has no finite pixel")
+    white = float(np.percentile(grey[finite], 99))
+    if not white > 0.0:
+        raise ParameterError(f"{name} is blank (99th percentile {white!r})")
+    return (np.clip(np.where(finite, grey, 0.0) / white, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def detect_chessboard(
+    image: np.ndarray, pattern: tuple[int, int], *, refine_half_window_px: int = 3, name: str = "image"
+) -> np.ndarray | None:
+    """Find a chessboard's inner corners in an image.
+
+    OpenCV's sector-based detector (``findChessboardCornersSB``, exhaustive, accurate) refined on
+    the saddle point by ``cornerSubPix``: the detector's own estimate leans towards the board's
+    edge on blurred images (0.2 px RMS on refraction-free images of 9 px squares).
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        Linear radiance (any scale; colour is averaged). NaN (no data) counts as black.
+    pattern : (int, int)
+        Inner corners per row and per column (OpenCV's ``patternSize``): a board of
+        ``c x r`` squares has pattern ``(c - 1, r - 1)``.
+    refine_half_window_px : int
+        Half-size of the ``cornerSubPix`` search window, pixels; keep it below a square's size.
+    name : str
+        How errors name the image.
+
+    Returns
+    -------
+    ndarray, float64, shape (columns * rows, 2), or None
+        Corner pixels ``(u, v)`` (OpenCV convention: pixel centres at integers), row by row with
+        u fastest in the detector's order (which may be the reverse of the board's own order on a
+        board that looks the same after a half turn); None if no board was found.
+    """
+    cols, rows = _pattern(pattern)
+    half = positive_int("refine_half_window_px", refine_half_window_px)
+    gray8 = _gray8(name, _as_image(name, image))
+    found, corners = cv2.findChessboardCornersSB(
+        gray8, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+    )
+    if not found:
+        return None
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
+    refined = cv2.cornerSubPix(gray8, corners.astype(np.float32), (half, half), (-1, -1), criteria)
+    return refined.reshape(-1, 2).astype(np.float64)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ApproxCalibration:
+    """A pinhole with radial-tangential distortion fitted to chessboard views at one depth.
+
+    Attributes
+    ----------
+    K : ndarray, shape (3, 3)
+        Intrinsic matrix of the calibrated images (OpenCV form; ``fx`` and ``fy`` may differ:
+        a tilted port magnifies more across its tilt axis), pixels.
+    dist_coeffs : ndarray, shape (5,)
+        ``k1, k2, p1, p2, k3`` (:data:`DISTORTION_MODEL`), OpenCV's model on normalised coordinates.
+    image_size : (int, int)
+        ``(width, height)`` of the calibrated images, pixels; images to undistort must have it.
+    pattern : (int, int)
+        Inner corners per row and column of the board.
+    square_size_m : float
+        Edge length of a square, metres.
+    depth_m : float
+        Calibration depth: the median over views of the board centre's z, metres, in the camera
+        frame (from ``corners_cam`` where given, else from the fitted poses).
+    view_depths_m : ndarray, shape (V,)
+        The same per view.
+    rms_px : float
+        RMS reprojection error of the fit over all corners, pixels.
+    view_rms_px : ndarray, shape (V,)
+        RMS reprojection error per view, pixels.
+    intrinsic_std : ndarray, shape (9,)
+        Standard deviations of ``fx, fy, cx, cy, k1, k2, p1, p2, k3`` (:data:`INTRINSIC_NAMES`)
+        from OpenCV's Jacobian (0 for fixed ones): a large ``cx``/``cy`` spread means the views
+        hardly fix the principal point (and with it the frame's orientation).
+    fixed_intrinsics : bool
+        ``K`` was given and only the distortion was fitted.
+    rotation : ndarray, shape (3, 3)
+        Rotation from the camera frame to the model's frame (``d_model = rotation @ d_cam``);
+        identity unless fitted with ``corners_cam``.
+    known_corners : bool
+        Fitted to corners known in the camera frame (``corners_cam``): the model's pinhole is at
+        the camera centre, turned by :attr:`rotation`, and :attr:`rms_px` is its error at the
+        calibration depth in the camera's frame. Otherwise the model's frame is the fit's own.
+    """
+
+    K: np.ndarray
+    dist_coeffs: np.ndarray
+    image_size: tuple[int, int]
+    pattern: tuple[int, int]
+    square_size_m: float
+    depth_m: float
+    view_depths_m: np.ndarray
+    rms_px: float
+    view_rms_px: np.ndarray
+    intrinsic_std: np.ndarray
+    fixed_intrinsics: bool = False
+    rotation: np.ndarray | None = None
+    known_corners: bool = False
+
+    def __post_init__(self) -> None:
+        k = np.asarray(self.K, dtype=np.float64)
+        upper = k.shape == (3, 3) and np.allclose(k[[1, 2, 2, 2], [0, 0, 1, 2]], [0, 0, 0, 1])
+        if not upper or not np.all(np.isfinite(k)):
+            raise ParameterError(f"K must be a finite upper-triangular OpenCV intrinsic matrix, got {k.tolist()}")
+        if k[0, 0] <= 0 or k[1, 1] <= 0:
+            raise ParameterError(f"K must have positive focal lengths, got fx={k[0, 0]!r}, fy={k[1, 1]!r}")
+        dist = np.asarray(self.dist_coeffs, dtype=np.float64).ravel()
+        if dist.shape != (len(DISTORTION_MODEL),) or not np.all(np.isfinite(dist)):
+            raise ParameterError(
+                f"dist_coeffs must be {len(DISTORTION_MODEL)} finite numbers {DISTORTION_MODEL}, got {dist.tolist()}"
+            )
+        size = tuple(self.image_size)
+        if len(size) != 2:
+            raise ParameterError(f"image_size must be (width, height), got {self.image_size!r}")
+        size = tuple(positive_int(f"image_size[{i}]", s) for i, s in enumerate(size))
+        rotation = np.eye(3) if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
+        if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9):
+            raise ParameterError(f"rotation must be a 3 x 3 rotation matrix, got {rotation.tolist()}")
+        if np.linalg.det(rotation) < 0:
+            raise ParameterError(f"rotation must be proper (det +1), got {rotation.tolist()}")
+        views = np.asarray(self.view_rms_px, dtype=np.float64).ravel()
+        depths = np.asarray(self.view_depths_m, dtype=np.float64).ravel()
+        if len(depths) != len(views):
+            raise ParameterError(
+                f"view_depths_m and view_rms_px must have one entry per view, got {len(depths)} and {len(views)}"
+            )
+        std = np.asarray(self.intrinsic_std, dtype=np.float64).ravel()
+        if std.shape != (len(INTRINSIC_NAMES),):
+            raise ParameterError(f"intrinsic_std must have {len(INTRINSIC_NAMES)} entries, got {std.tolist()}")
+        if not isinstance(self.fixed_intrinsics, bool):
+            raise ParameterError(f"fixed_intrinsics must be True or False, got {self.fixed_intrinsics!r}")
+        object.__setattr__(self, "K", k)
+        object.__setattr__(self, "dist_coeffs", dist)
+        object.__setattr__(self, "image_size", size)
+        object.__setattr__(self, "pattern", _pattern(self.pattern))
+        object.__setattr__(self, "square_size_m", positive_float("square_size_m", self.square_size_m))
+        object.__setattr__(self, "depth_m", positive_float("depth_m", self.depth_m))
+        object.__setattr__(self, "view_depths_m", depths)
+        object.__setattr__(self, "rms_px", finite_float("rms_px", self.rms_px))
+        object.__setattr__(self, "view_rms_px", views)
+        object.__setattr__(self, "intrinsic_std", std)
+        object.__setattr__(self, "rotation", rotation)
+        if not isinstance(self.known_corners, bool):
+            raise ParameterError(f"known_corners must be True or False, got {self.known_corners!r}")
+
+    # ------------------------------------------------------------------ undistortion
+    def _check_output(self, output: PinholeCamera) -> PinholeCamera:
+        if not isinstance(output, PinholeCamera):
+            raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
+        return output
+
+    def undistort_maps(self, output: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+        """Where each output pixel samples the calibrated image.
+
+        Parameters
+        ----------
+        output : PinholeCamera
+            The undistorted image's geometry: a pinhole at the camera centre, camera orientation
+            (with :attr:`known_corners`; else the fit's own), ``output.K``.
+
+        Returns
+        -------
+        map_u, map_v : ndarray, float32, shape (output.height_px, output.width_px)
+            Source pixel coordinates in the calibrated image (``cv2.remap`` maps).
+        """
+        output = self._check_output(output)
+        # OpenCV's R takes output rays to the source camera's frame as R^-1: ours is `rotation`.
+        return cv2.initUndistortRectifyMap(
+            self.K,
+            self.dist_coeffs,
+            self.rotation.T,
+            output.K,
+            (output.width_px, output.height_px),
+            cv2.CV_32FC1,
+        )
+
+    def undistort(
+        self, image: np.ndarray, output: PinholeCamera, *, maps: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """Resample a calibrated-geometry image onto the undistorted pinhole ``output``.
+
+        Parameters
+        ----------
+        image : ndarray, shape (height, width) or (height, width, C)
+            An image of :attr:`image_size`; NaN marks pixels with no value.
+        output : PinholeCamera
+        maps : (ndarray, ndarray), optional
+            :meth:`undistort_maps` ``(output)``, if already computed.
+
+        Returns
+        -------
+        ndarray, float32, shape (output.height_px, output.width_px) (+ channels)
+            Bilinear interpolation; NaN where the source is NaN or outside the image.
+        """
+        arr = _as_image("image", image)
+        width, height = self.image_size
+        if arr.shape[:2] != (height, width):
+            raise ParameterError(f"image must have shape ({height}, {width}) (+ channels), got {arr.shape}")
+        map_u, map_v = self.undistort_maps(output) if maps is None else maps
+        src = arr.astype(np.float32)
+        planes = [src] if src.ndim == 2 else [src[..., c] for c in range(src.shape[2])]
+        out = [
+            cv2.remap(p, map_u, map_v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=math.nan)
+            for p in planes
+        ]
+        return out[0] if src.ndim == 2 else np.stack(out, axis=-1)
+
+    def undistort_points(self, uv: np.ndarray, output: PinholeCamera) -> np.ndarray:
+        """Map pixels (N, 2) of the calibrated image to the undistorted image ``output`` (N, 2)."""
+        output = self._check_output(output)
+        pts = as_points("uv", uv, 2)
+        out = cv2.undistortPoints(pts.reshape(-1, 1, 2), self.K, self.dist_coeffs, R=self.rotation.T, P=output.K)
+        return out.reshape(-1, 2).astype(np.float64)
+
+    def project(self, points_cam: np.ndarray) -> np.ndarray:
+        """Project camera-frame points (N, 3), metres, into the calibrated image (N, 2) with the model.
+
+        The model's pinhole sits at the camera centre, turned by :attr:`rotation`.
+        """
+        p = as_points("points_cam", points_cam, 3)
+        rvec, _ = cv2.Rodrigues(self.rotation)
+        uv, _ = cv2.projectPoints(p, rvec, np.zeros(3), self.K, self.dist_coeffs)
+        return uv.reshape(-1, 2).astype(np.float64)
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        """Plain data for a JSON file (:meth:`save`)."""
+        return {
+            "kind": KIND,
+            "K": self.K.tolist(),
+            "dist_coeffs": self.dist_coeffs.tolist(),
+            "distortion_model": list(DISTORTION_MODEL),
+            "image_size": list(self.image_size),
+            "pattern": list(self.pattern),
+            "square_size_m": self.square_size_m,
+            "depth_m": self.depth_m,
+            "view_depths_m": self.view_depths_m.tolist(),
+            "rms_px": self.rms_px,
+            "view_rms_px": self.view_rms_px.tolist(),
+            "intrinsic_std": dict(zip(INTRINSIC_NAMES, self.intrinsic_std.tolist(), strict=True)),
+            "fixed_intrinsics": self.fixed_intrinsics,
+            "rotation": self.rotation.tolist(),
+            "known_corners": self.known_corners,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> ApproxCalibration:
+        """Inverse of :meth:`to_dict` (a ``schema_version`` entry, as files carry, is ignored)."""
+        if not isinstance(data, dict):
+            raise ParameterError(f"an approximation calibration must be a dict, got {type(data).__name__}")
+        data = {k: v for k, v in data.items() if k != "schema_version"}
+        reject_unknown_keys("approximation calibration", data, _KEYS)
+        require_keys("approximation calibration", data, _KEYS)
+        if data["kind"] != KIND:
+            raise ParameterError(f"kind must be {KIND!r}, got {data['kind']!r}")
+        if list(data["distortion_model"]) != list(DISTORTION_MODEL):
+            raise ParameterError(f"distortion_model must be {list(DISTORTION_MODEL)}, got {data['distortion_model']!r}")
+        std = data["intrinsic_std"]
+        if not isinstance(std, dict) or set(std) != set(INTRINSIC_NAMES):
+            raise ParameterError(f"intrinsic_std must name {list(INTRINSIC_NAMES)}, got {std!r}")
+        return cls(
+            K=np.asarray(data["K"], dtype=np.float64),
+            dist_coeffs=np.asarray(data["dist_coeffs"], dtype=np.float64),
+            image_size=tuple(data["image_size"]),
+            pattern=tuple(data["pattern"]),
+            square_size_m=data["square_size_m"],
+            depth_m=data["depth_m"],
+            view_depths_m=np.asarray(data["view_depths_m"], dtype=np.float64),
+            rms_px=data["rms_px"],
+            view_rms_px=np.asarray(data["view_rms_px"], dtype=np.float64),
+            intrinsic_std=np.array([std[n] for n in INTRINSIC_NAMES], dtype=np.float64),
+            fixed_intrinsics=data["fixed_intrinsics"],
+            rotation=np.asarray(data["rotation"], dtype=np.float64),
+            known_corners=data["known_corners"],
+        )
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write :meth:`to_dict` as a JSON sidecar (with the schema version), atomically."""
+        return write_json(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> ApproxCalibration:
+        """Read a file written by :meth:`save`."""
+        return cls.from_dict(read_json(path))
+
+
+def _board_points(pattern: tuple[int, int], square_size_m: float) -> np.ndarray:
+    """Inner corners in the board frame (N, 3), metres, row by row with x fastest."""
+    cols, rows = pattern
+    jj, ii = np.mgrid[0:rows, 0:cols]
+    return np.stack([ii.ravel() * square_size_m, jj.ravel() * square_size_m, np.zeros(cols * rows)], axis=1)
+
+
+def _wahba(model_dirs: np.ndarray, cam_dirs: np.ndarray) -> np.ndarray:
+    """Rotation R minimising sum |model - R cam|^2 over direction vectors (Kabsch / Wahba, SVD)."""
+    u, _, vt = np.linalg.svd(model_dirs.T @ cam_dirs)
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    return u @ d @ vt
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _k_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def _fit_known(
+    points_cam: np.ndarray, corners_px: np.ndarray, k: np.ndarray, dist: np.ndarray, rotation: np.ndarray, fix_k: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares fit of (K,) distortion and rotation to known camera-frame corners.
+
+    The pinhole sits at the camera centre. Returns K, distortion, rotation, the per-corner pixel
+    residuals (N, 2) and the standard deviations of fx, fy, cx, cy, k1..k3 (0 where fixed).
+    """
+    rvec0, _ = cv2.Rodrigues(rotation)
+    k0 = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2]])
+    x0 = np.concatenate([dist, rvec0.ravel()]) if fix_k else np.concatenate([k0, dist, rvec0.ravel()])
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if fix_k:
+            return k, x[:5], x[5:8]
+        return _k_matrix(*x[:4]), x[4:9], x[9:12]
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        kx, dx, rx = unpack(x)
+        projected, _ = cv2.projectPoints(points_cam, rx, np.zeros(3), kx, dx)
+        return (projected.reshape(-1, 2) - corners_px).ravel()
+
+    solution = least_squares(residuals, x0, method="lm", x_scale="jac")
+    if not np.all(np.isfinite(solution.x)):
+        raise ParameterError("the calibration with known corners did not converge (non-finite result)")
+    kx, dx, rx = unpack(solution.x)
+    jac = solution.jac
+    dof = max(len(solution.fun) - len(solution.x), 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cov = np.linalg.pinv(jac.T @ jac) * float(solution.fun @ solution.fun) / dof
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    std_all = np.concatenate([np.zeros(4), std[:5]]) if fix_k else std[:9]
+    return kx, np.asarray(dx, dtype=np.float64), cv2.Rodrigues(rx)[0], solution.fun.reshape(-1, 2), std_all
+
+
+def _rms(residuals: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
+
+
+def calibrate_approx(
+    images: Sequence[np.ndarray],
+    *,
+    pattern: tuple[int, int],
+    square_size_m: float,
+    corners_cam: Sequence[np.ndarray] | None = None,
+    intrinsics: PinholeCamera | None = None,
+    min_views: int = 3,
+    refine_half_window_px: int = 3,
+) -> ApproxCalibration:
+    """Calibrate a pinhole with radial-tangential distortion from chessboard views (Ferreira et al. 2005).
+
+    Every view must show the whole board (detected by :func:`detect_chessboard`); the boards
+    should sit at about one distance (the calibration depth) and cover the image in varied
+    orientations. ``cv2.calibrateCameraExtended`` fits ``K`` (``fx, fy, cx, cy``), the distortion
+    ``k1, k2, p1, p2, k3`` and one pose per view. With ``corners_cam`` the model is then refitted
+    with the camera's pose (see the module docstring).
+
+    Parameters
+    ----------
+    images : sequence of ndarray, each shape (H, W) or (H, W, C)
+        The views, all of one size: linear radiance, NaN where there is no value (e.g. outside the
+        lenses' hull of a central view).
+    pattern : (int, int)
+        Inner corners per row and column (OpenCV's ``patternSize``; a board of ``c x r`` squares
+        has ``(c - 1, r - 1)``).
+    square_size_m : float
+        Edge length of a square, metres.
+    corners_cam : sequence of ndarray, each shape (columns * rows, 3), optional
+        The boards' inner corners in the camera frame, metres, one array per view, in the board's
+        order (row by row, x fastest, as :func:`simulator.assets.chessboard_inner_corners`; the
+        detector's half-turned order is recognised). With them ``K``, the distortion and a
+        rotation are fitted with the pinhole at the camera centre and the corners where they are
+        (:attr:`ApproxCalibration.known_corners`), and the calibration depth comes from them.
+    intrinsics : PinholeCamera, optional
+        A known ``K`` (of the images' size): only the distortion (and, with ``corners_cam``, the
+        rotation) is fitted. For images that are already nearly central projections with a known
+        ``K``, such as refraction-free ones (paper condition (d)), where a free ``K`` would only
+        add the principal point's ambiguity.
+    min_views : int
+        Fewest views accepted (default 3).
+    refine_half_window_px : int
+        ``cornerSubPix`` half window, pixels (see :func:`detect_chessboard`).
+
+    Returns
+    -------
+    ApproxCalibration
+
+    Raises
+    ------
+    ParameterError
+        Too few views, views of different sizes or shapes, a view without a finite pixel, a view
+        where the board is not found (the error names its index), ``corners_cam`` of the wrong
+        count or shape, or a fit that does not converge to finite values.
+    """
+    cols, rows = _pattern(pattern)
+    square = positive_float("square_size_m", square_size_m)
+    minimum = positive_int("min_views", min_views)
+    if isinstance(images, np.ndarray) and images.dtype != object:
+        raise ParameterError(f"images must be a sequence of images, got one array of shape {images.shape}")
+    try:
+        views = [_as_image(f"images[{i}]", im) for i, im in enumerate(images)]
+    except TypeError:
+        raise ParameterError(f"images must be a sequence of images, got {type(images).__name__}") from None
+    if len(views) < minimum:
+        raise ParameterError(f"calibration needs at least {minimum} views (min_views), got {len(views)}")
+    height, width = views[0].shape[:2]
+    for i, v in enumerate(views):
+        if v.shape != views[0].shape:
+            raise ParameterError(f"images[{i}] has shape {v.shape}, images[0] has {views[0].shape}: all must match")
+    if intrinsics is not None:
+        if not isinstance(intrinsics, PinholeCamera):
+            raise ParameterError(f"intrinsics must be a PinholeCamera, got {intrinsics!r}")
+        if (intrinsics.width_px, intrinsics.height_px) != (width, height):
+            raise ParameterError(
+                f"intrinsics is {intrinsics.width_px} x {intrinsics.height_px} px, the images are {width} x {height}"
+            )
+    known = None
+    if corners_cam is not None:
+        if len(corners_cam) != len(views):
+            raise ParameterError(f"corners_cam must have one array per view ({len(views)}), got {len(corners_cam)}")
+        known = [as_points(f"corners_cam[{i}]", c, 3) for i, c in enumerate(corners_cam)]
+        for i, c in enumerate(known):
+            if len(c) != cols * rows:
+                raise ParameterError(
+                    f"corners_cam[{i}] must have {cols * rows} corners (pattern {cols} x {rows}), got {len(c)}"
+                )
+            if np.any(c[:, 2] <= 0):
+                raise ParameterError(f"corners_cam[{i}] has corners behind the camera (z <= 0)")
+
+    detected = []
+    for i, v in enumerate(views):
+        corners = detect_chessboard(v, (cols, rows), refine_half_window_px=refine_half_window_px, name=f"images[{i}]")
+        if corners is None:
+            raise ParameterError(f"images[{i}]: no chessboard with {cols} x {rows} inner corners found")
+        detected.append(corners)
+
+    board = _board_points((cols, rows), square)
+    flags, k_init = 0, None
+    if intrinsics is not None:
+        flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_FOCAL_LENGTH
+        k_init = intrinsics.K.copy()
+    rms, k, dist, rvecs, tvecs, std_intr, _, per_view = cv2.calibrateCameraExtended(
+        [board.astype(np.float32)] * len(views),
+        [c.reshape(-1, 1, 2).astype(np.float32) for c in detected],
+        (width, height),
+        k_init,
+        None,
+        flags=flags,
+    )
+    dist = np.asarray(dist, dtype=np.float64).ravel()[: len(DISTORTION_MODEL)]
+    if not (np.all(np.isfinite(k)) and np.all(np.isfinite(dist)) and math.isfinite(rms)):
+        raise ParameterError("the calibration did not converge (non-finite result): check the views")
+    fitted_cam = [
+        board @ cv2.Rodrigues(r)[0].T + np.asarray(t).reshape(1, 3) for r, t in zip(rvecs, tvecs, strict=True)
+    ]
+    rotation = np.eye(3)
+    std = np.nan_to_num(np.asarray(std_intr, dtype=np.float64).ravel()[: len(INTRINSIC_NAMES)])
+    view_rms = np.asarray(per_view, dtype=np.float64).ravel()
+    if known is None:
+        depths = np.array([float(np.mean(f[:, 2])) for f in fitted_cam])
+    else:
+        # Match the board's order to the detector's: a half turn reverses the list, and flips the
+        # vector from the first corner to the last (the two frames differ by a few degrees only).
+        truth = [
+            t[::-1] if np.dot(f[-1] - f[0], t[-1] - t[0]) < 0 else t for f, t in zip(fitted_cam, known, strict=True)
+        ]
+        points = np.concatenate(truth)
+        corners_px = np.concatenate(detected)
+        # Start from the rotation that best turns the known directions into the fitted model's.
+        model = cv2.undistortPoints(corners_px.reshape(-1, 1, 2), k, dist).reshape(-1, 2)
+        model_dirs = np.concatenate([model, np.ones((len(model), 1))], axis=1)
+        rotation = _wahba(_unit(model_dirs), _unit(points))
+        k, dist, rotation, residuals, std = _fit_known(points, corners_px, k, dist, rotation, intrinsics is not None)
+        rms = _rms(residuals)
+        view_rms = np.array([_rms(r) for r in np.split(residuals, np.cumsum([len(c) for c in detected])[:-1])])
+        depths = np.array([float(np.mean(t[:, 2])) for t in known])
+    return ApproxCalibration(
+        K=k,
+        dist_coeffs=dist,
+        image_size=(width, height),
+        pattern=(cols, rows),
+        square_size_m=square,
+        depth_m=float(np.median(depths)),
+        view_depths_m=depths,
+        rms_px=float(rms),
+        view_rms_px=view_rms,
+        intrinsic_std=std,
+        fixed_intrinsics=intrinsics is not None,
+        rotation=rotation,
+        known_corners=known is not None,
+    )
