@@ -3,12 +3,23 @@
     lfrefract describe (PRESET | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full]
+    lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square]
+    lfrefract calibrate port BOARD.exr... --squares C R --square-size-m S --out PORT.json
+    lfrefract calibrate approx BOARD.exr... --squares C R --square-size-m S --out APPROX.json
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
 refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (K, size, pose, options, coverage
 statistics), the coverage map ``OUT.coverage.exr`` and a figure ``OUT.png``. ``naive`` writes the
 conventional view with no refraction handling, for comparison.
+
+``calibrate`` estimates what the pipeline would otherwise be told: ``mla`` the microlens lattice
+and every micro-image centre from a white image; ``port`` the port's normal and distance from
+underwater chessboard captures (corners found in their central views; the glass thickness and
+refractive indices are known, from the options or the first capture's ``meta.json``), also written
+in the Refractive COLMAP / calibmar flat-port layout (``PORT.txt``); ``approx`` the approximation
+baseline (a pinhole with distortion from views at one depth). ``synth --port PORT.json
+--mla MLA.json`` uses the estimates instead of the capture's ``meta.json``.
 """
 
 from __future__ import annotations
@@ -31,11 +42,23 @@ from lfrefract import (
     camera_preset,
     virtual_camera_for,
 )
-from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_json
+from lfrefract._validate import positive_float
+from lfrefract.calibration import BoardView, MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
+from lfrefract.calibration.approx import detect_chessboard
+from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_flat_port, write_json
+from lfrefract.methods import ConventionalView
 from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
 from lfrefract.views import naive_view
 
-__all__ = ["describe", "main", "naive", "synth"]
+__all__ = [
+    "calibrate_approx_command",
+    "calibrate_mla_command",
+    "calibrate_port_command",
+    "describe",
+    "main",
+    "naive",
+    "synth",
+]
 
 
 def describe(camera: LightFieldCamera, port: FlatPort | None = None) -> dict:
@@ -70,9 +93,14 @@ def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
     raw, meta = _capture(Path(args.raw))
     camera = LightFieldCamera.from_dict(meta["camera"])
-    if not meta.get("port"):
-        raise ParameterError(f"{args.raw!r}: its meta.json has no port; nothing to remove")
-    port = FlatPort.from_dict(meta["port"])
+    if args.mla:
+        camera = MlaCalibration.from_dict(read_json(Path(args.mla))["mla"]).calibrated_camera(camera)
+    if args.port:
+        port = FlatPort.from_dict(read_json(Path(args.port))["port"])
+    elif meta.get("port"):
+        port = FlatPort.from_dict(meta["port"])
+    else:
+        raise ParameterError(f"{args.raw!r}: its meta.json has no port and no --port was given; nothing to remove")
     options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
     output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
     key = warp_map_key(camera, port, output, options)
@@ -154,6 +182,76 @@ def naive(args: argparse.Namespace) -> int:
     return 0
 
 
+def calibrate_mla_command(args: argparse.Namespace) -> int:
+    """``lfrefract calibrate mla``."""
+    white = read_exr(Path(args.white))
+    result = calibrate_mla(white, grid=args.grid)
+    data = {"kind": "lfrefract.calibrate.mla", "source": str(args.white), "mla": result.to_dict()}
+    meta_path = Path(args.white).parent / "meta.json"
+    if meta_path.is_file():
+        data["camera"] = result.calibrated_camera(LightFieldCamera.from_dict(read_json(meta_path)["camera"])).to_dict()
+    write_json(Path(args.out), data)
+    counts = result.status_counts()
+    print(
+        f"{result.grid} lattice, pitch {result.pitch_px:.4f} px, rotation {math.degrees(result.rotation_rad):.4f} deg; "
+        f"{counts.get('used', 0)} micro-images used, residual {result.residual_rms_px:.4f} px RMS; wrote {args.out}"
+    )
+    return 0
+
+
+def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, list[np.ndarray], PinholeCamera]:
+    """The boards' central views (one camera, from the first capture's meta.json) and their geometry."""
+    meta = read_json(Path(args.boards[0]).parent / "meta.json")
+    camera = LightFieldCamera.from_dict(meta["camera"])
+    view = virtual_camera_for(camera)
+    conventional = ConventionalView(camera=camera, view=view)
+    images = [conventional.apply(read_exr(Path(path))) for path in args.boards]
+    return camera, meta, images, view
+
+
+def calibrate_port_command(args: argparse.Namespace) -> int:
+    """``lfrefract calibrate port``: corners in the central views, then :func:`calibrate_port`."""
+    _, meta, images, view = _board_captures(args)
+    known = meta.get("port") or {}
+    try:
+        thickness = args.thickness_m if args.thickness_m is not None else known["thickness_m"]
+        n_glass = args.n_glass if args.n_glass is not None else known["n_glass"]
+        n_water = args.n_water if args.n_water is not None else known["n_water"]
+    except KeyError as exc:
+        raise ParameterError(
+            f"--{exc.args[0].replace('_', '-')} is needed (the capture's meta.json has no port)"
+        ) from None
+    pattern = (args.squares[0] - 1, args.squares[1] - 1)
+    jj, ii = np.mgrid[0 : pattern[1], 0 : pattern[0]]
+    board = np.stack([ii.ravel(), jj.ravel()], axis=1) * positive_float("square_size_m", args.square_size_m)
+    views = []
+    for path, image in zip(args.boards, images, strict=True):
+        corners = detect_chessboard(image, pattern, name=str(path))
+        if corners is None:
+            raise ParameterError(f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found")
+        views.append(BoardView(corners_px=corners, board_points_m=board))
+    result = calibrate_port(view, views, thickness_m=thickness, n_glass=n_glass, n_water=n_water)
+    out = Path(args.out)
+    write_json(out, {"kind": "lfrefract.calibrate.port", "sources": [str(p) for p in args.boards], **result.to_dict()})
+    write_flat_port(out.with_suffix(".txt"), result.port)
+    print(
+        f"port normal {np.round(result.port.normal, 5).tolist()} (+- {result.normal_std_deg:.3f} deg), distance "
+        f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}), "
+        f"residual {result.rms_px:.3f} px RMS; wrote {out} and {out.with_suffix('.txt')}"
+    )
+    return 0
+
+
+def calibrate_approx_command(args: argparse.Namespace) -> int:
+    """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
+    _, _, images, _ = _board_captures(args)
+    pattern = (args.squares[0] - 1, args.squares[1] - 1)
+    result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
+    result.save(Path(args.out))
+    print(f"pinhole + distortion from {len(images)} views, {result.rms_px:.3f} px RMS; wrote {args.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = argparse.ArgumentParser(prog="lfrefract", description="Refraction-free light-field imaging (core).")
@@ -170,6 +268,26 @@ def main(argv: list[str] | None = None) -> int:
     syn.add_argument("--search", choices=SEARCH_METHODS, default="auto", help="candidate search (default: auto)")
     syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     syn.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
+    syn.add_argument("--port", help="port from `lfrefract calibrate port` (default: the capture's meta.json)")
+    syn.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
+    cal = sub.add_parser("calibrate", help="estimate the MLA, the port or the approximation baseline")
+    cal_sub = cal.add_subparsers(dest="target", required=True)
+    cal_mla = cal_sub.add_parser("mla", help="microlens lattice and micro-image centres from a white image")
+    cal_mla.add_argument("white", help="white image (EXR)")
+    cal_mla.add_argument("--out", required=True, help="output JSON")
+    cal_mla.add_argument("--grid", choices=["hex", "square"], help="lattice type (default: detected)")
+    for target, what in (("port", "port normal and distance"), ("approx", "pinhole + distortion at one depth")):
+        board = cal_sub.add_parser(target, help=f"{what} from underwater chessboard captures")
+        board.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
+        board.add_argument(
+            "--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board"
+        )
+        board.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
+        board.add_argument("--out", required=True, help="output JSON")
+    cal_port = cal_sub.choices["port"]
+    cal_port.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
+    cal_port.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
+    cal_port.add_argument("--n-water", type=float, help="water index (default: meta.json)")
     nv = sub.add_parser("naive", help="conventional view with no refraction handling")
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")
@@ -180,6 +298,10 @@ def main(argv: list[str] | None = None) -> int:
             return synth(args)
         if args.command == "naive":
             return naive(args)
+        if args.command == "calibrate":
+            return {"mla": calibrate_mla_command, "port": calibrate_port_command, "approx": calibrate_approx_command}[
+                args.target
+            ](args)
         if args.source in PRESETS:
             info = describe(camera_preset(args.source))
         else:
