@@ -201,7 +201,13 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
 
 def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, list[np.ndarray], PinholeCamera]:
     """The boards' central views (one camera, from the first capture's meta.json) and their geometry."""
-    meta = read_json(Path(args.boards[0]).parent / "meta.json")
+    if min(args.squares) < 2:
+        raise ParameterError(f"--squares must be at least 2 x 2, got {args.squares!r}")
+    metas = [read_json(Path(path).parent / "meta.json") for path in args.boards]
+    meta = metas[0]
+    for path, other in zip(args.boards, metas, strict=True):
+        if other["camera"] != meta["camera"]:
+            raise ParameterError(f"{path!r} was taken with another camera than {args.boards[0]!r}")
     camera = LightFieldCamera.from_dict(meta["camera"])
     view = virtual_camera_for(camera)
     conventional = ConventionalView(camera=camera, view=view)
@@ -214,6 +220,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     _, meta, images, view = _board_captures(args)
     known = meta.get("port") or {}
     try:
+        n_air = known.get("n_air", 1.0)
         thickness = args.thickness_m if args.thickness_m is not None else known["thickness_m"]
         n_glass = args.n_glass if args.n_glass is not None else known["n_glass"]
         n_water = args.n_water if args.n_water is not None else known["n_water"]
@@ -230,7 +237,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         if corners is None:
             raise ParameterError(f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found")
         views.append(BoardView(corners_px=corners, board_points_m=board))
-    result = calibrate_port(view, views, thickness_m=thickness, n_glass=n_glass, n_water=n_water)
+    result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     out = Path(args.out)
     write_json(out, {"kind": "lfrefract.calibrate.port", "sources": [str(p) for p in args.boards], **result.to_dict()})
     write_flat_port(out.with_suffix(".txt"), result.port)

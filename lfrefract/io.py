@@ -279,6 +279,8 @@ def read_flat_port(path: str | os.PathLike) -> FlatPort:
     if len(values) != len(FLAT_PORT_FIELDS):
         raise FileFormatError(f"{str(path)!r} is not a flat port ({' '.join(FLAT_PORT_FIELDS)} on one line)")
     nx, ny, nz, distance, thickness, n_air, n_glass, n_water = values
+    if abs(np.hypot(np.hypot(nx, ny), nz) - 1.0) > 1e-6:
+        raise FileFormatError(f"{str(path)!r}: the normal ({nx!r}, {ny!r}, {nz!r}) is not a unit vector")
     return FlatPort.from_normal(
         [nx, ny, nz], distance_m=distance, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water
     )

@@ -16,8 +16,9 @@ constraint), and ``n`` is that matrix's left null vector: one estimate per view,
 constraint rests on how far the refracted rays pass from the camera centre (millimetres at a
 board's distance), so corner noise easily turns it by tens of degrees; it is therefore one start
 among a robust search: it, the optical axis and normals 10-40 deg off it in eight directions, each
-with six distances over ``distance_range_m`` and per-view pose fits, scored by the residual. The
-three best are refined jointly by nonlinear least squares (scipy) on the
+with eight distances over ``distance_range_m`` and each view's board pose in closed form, scored
+by the residual. The four best get per-view pose fits, a few joint steps each, and the best of
+them is refined to convergence by nonlinear least squares (scipy) on the
 geometric error: where the refracted line of sight meets the board, against the corner, scaled to
 pixels by ``f / depth``. The covariance of the port parameters follows from the Jacobian; a
 calibration whose standard deviations exceed the caller's limits is an error (degenerate views),
@@ -114,7 +115,9 @@ class PortCalibration:
         Pose of each view's board in the camera frame: ``Pose.to_world`` maps board coordinates
         (metres, z = 0 on the board) to the camera frame.
     rms_px : float
-        Root mean square of the geometric residuals, pixels.
+        Root mean square of the geometric residuals: where each refracted line of sight misses its
+        corner on the board, scaled by focal length / depth. In air that is the image error in
+        pixels; through water it is about ``n_air / n_water`` of it (angles shrink in the water).
     view_rms_px : ndarray, shape (V,)
         The same per view.
     covariance : ndarray, shape (3, 3)
@@ -186,31 +189,44 @@ def project_through_port(
         reflection).
     """
     x = as_points("points_cam", points_cam, 3)
-    centre = finite_vector("centre_m", centre_m, 3)
-    origins = np.broadcast_to(np.asarray(centre), x.shape)
+    centre = np.asarray(finite_vector("centre_m", centre_m, 3))
     positive_int("iterations", iterations)
-    uv = camera.project(x - centre)
     eps = 1e-3  # pixels, for the finite-difference Jacobian
+    # Only points in the water, in front of the centre, can be seen; the others stay NaN.
+    water = (x @ port.normal > port.distance_m + port.thickness_m) & (x[:, 2] > centre[2])
+    uv = np.full((len(x), 2), np.nan)
+    uv[water] = camera.project(x[water] - centre)
 
-    def offsets(q: np.ndarray) -> np.ndarray:
-        """Where each point lies off the refracted line of sight of q: components (metres) in a frame
-        perpendicular to the water ray."""
-        origin, d = _water_rays(port, origins, camera.pixel_directions(q))
-        rel = x - origin
+    def offsets(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far points ``rows`` lie off the refracted lines of sight of pixels ``q`` (metres,
+        perpendicular to the water ray), and how far along it they are."""
+        origin, d = _water_rays(port, np.broadcast_to(centre, (len(q), 3)), camera.pixel_directions(q))
+        rel = x[rows] - origin
         along = np.sum(rel * d, axis=1, keepdims=True)
-        return rel - along * d
+        return rel - along * d, along[:, 0]
 
+    active = water.copy()
     for _ in range(iterations):
-        r = offsets(uv)
-        ju = (offsets(uv + np.array([eps, 0.0])) - r) / eps
-        jv = (offsets(uv + np.array([0.0, eps])) - r) / eps
-        jac = np.stack([ju, jv], axis=2)  # (N, 3, 2)
-        step = _batched_lstsq(jac, -r)
-        uv = uv + step
-        if np.nanmax(np.abs(step), initial=0.0) < 1e-9:
+        rows = np.flatnonzero(active & np.all(np.isfinite(uv), axis=1))
+        if len(rows) == 0:
             break
-    bad = ~np.all(np.isfinite(uv), axis=1)
-    uv[bad] = np.nan
+        q = uv[rows]
+        with np.errstate(invalid="ignore"):
+            r, _ = offsets(q, rows)
+            ju = (offsets(q + np.array([eps, 0.0]), rows)[0] - r) / eps
+            jv = (offsets(q + np.array([0.0, eps]), rows)[0] - r) / eps
+        step = _batched_lstsq(np.stack([ju, jv], axis=2), -r)
+        uv[rows] = q + step
+        active[rows] = ~(np.all(np.abs(step) < 1e-9, axis=1))
+    # Keep only converged solutions with the point ahead on the water ray.
+    seen = np.flatnonzero(water & np.all(np.isfinite(uv), axis=1))
+    ok = np.zeros(len(x), dtype=bool)
+    if len(seen):
+        with np.errstate(invalid="ignore"):
+            miss, along = offsets(uv[seen], seen)
+        scale = np.linalg.norm(x[seen] - centre, axis=1)
+        ok[seen] = (np.linalg.norm(miss, axis=1) <= 1e-9 * np.maximum(scale, 1.0)) & (along > 0.0)
+    uv[~ok] = np.nan
     return uv
 
 
@@ -235,8 +251,8 @@ def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray
     Returns
     -------
     ndarray, shape (3,)
-        Unit normal (camera frame, ``n_z > 0``): the per-view estimates combined by the smallest
-        eigenvector of the sum of their outer-product complements.
+        Unit normal (camera frame, ``n_z > 0``): the direction the per-view estimates agree on
+        (the principal eigenvector of the sum of their outer products).
     """
     scatter = np.zeros((3, 3))
     used = 0
@@ -259,7 +275,10 @@ def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray
         raise CalibrationError("no view has 8 or more corners seen from the main-lens centre (centres_m = 0)")
     vecs = np.linalg.eigh(scatter)[1]
     n = vecs[:, -1]  # the direction the per-view estimates agree on
-    return n if n[2] > 0 else -n
+    n = n if n[2] > 0 else -n
+    if n[2] < 1e-6:
+        raise CalibrationError(f"the axial constraint gives a normal across the optical axis, {n.round(6).tolist()}")
+    return n
 
 
 def _port_from_params(params: np.ndarray, template: FlatPort) -> FlatPort:
@@ -335,6 +354,8 @@ def _linear_pose(problem: _Problem, port: FlatPort, view: int) -> np.ndarray | N
     r1, r2 = solution[:3], solution[3:6]
     if min(np.linalg.norm(r1), np.linalg.norm(r2)) < 1e-6:
         return None
+    # Noise shrinks the solved scale of r1, r2: normalise before the third column is formed.
+    r1, r2 = r1 / np.linalg.norm(r1), r2 / np.linalg.norm(r2)
     u, _, vt = np.linalg.svd(np.stack([r1, r2, np.cross(r1, r2)], axis=1))
     rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
     rhs = b - np.einsum("nij,nj->ni", cross, board @ rot[:, :2].T)
@@ -429,8 +450,8 @@ def calibrate_port(
     problem = _Problem(camera, views, template)
     lower = np.full(3 + 6 * len(views), -np.inf)
     upper = np.full(3 + 6 * len(views), np.inf)
-    lower[:3] = [-math.pi / 2 + 1e-6, -math.pi / 2 + 1e-6, lo]
-    upper[:3] = [math.pi / 2 - 1e-6, math.pi / 2 - 1e-6, hi]
+    lower[:3] = [-math.radians(80.0), -math.radians(80.0), lo]  # the normal stays well in front
+    upper[:3] = [math.radians(80.0), math.radians(80.0), hi]
     # Starting points: the axial estimate and a grid of normals, each with a coarse logarithmic
     # search of the distance, scored with the linear pose of every view; the best few get
     # per-view pose fits and are refined jointly.
@@ -477,6 +498,14 @@ def calibrate_port(
     except np.linalg.LinAlgError:
         raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
     covariance = cov_all[:3, :3]
+    if not np.all(np.isfinite(covariance)):
+        raise CalibrationError("the views do not determine the port: its covariance is not finite")
+    at_bound = np.isclose(fit.x[2], [lo, hi], rtol=1e-6, atol=1e-9)
+    if np.any(at_bound):
+        raise CalibrationError(
+            f"the port distance ended at {fit.x[2] * 1e3:.4g} mm, the end of distance_range_m={distance_range_m!r}: "
+            "widen the range (or the views do not determine the distance)"
+        )
     # Direction of the normal: its covariance through d n / d (tilt_x, tilt_y).
     tx, ty = port.tilt_x_rad, port.tilt_y_rad
     dn = np.array(

@@ -282,6 +282,9 @@ def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
     back = read_flat_port(path)
     np.testing.assert_allclose(back.normal, port.normal, atol=1e-15)
     assert (back.distance_m, back.thickness_m, back.n_water) == (0.0592, 0.005, 1.34)
+    (tmp_path / "long.txt").write_text("0 0 2 0.02 0.005 1 1.5 1.333\n")
+    with pytest.raises(FileFormatError, match="is not a unit vector"):
+        read_flat_port(tmp_path / "long.txt")
     (tmp_path / "bad.txt").write_text("0 0 1 0.02\n")
     with pytest.raises(FileFormatError, match="is not a flat port"):
         read_flat_port(tmp_path / "bad.txt")

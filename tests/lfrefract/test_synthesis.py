@@ -280,3 +280,20 @@ def test_map_does_not_depend_on_blocks_or_threads(monkeypatch, warp):
         build_warp_map(TINY, PORT, workers=0)
     with pytest.raises(ParameterError, match="output must be a PinholeCamera"):
         build_warp_map(TINY, PORT, output=(92, 69))
+
+
+def test_auto_search_uses_the_tree_off_the_focal_plane():
+    """With f' != f the rays of one microlens fan out and the analytic window can miss the
+    nearest ones, so ``auto`` takes the exact search there (and the analytic one where f' = f)."""
+    camera = dataclasses.replace(TINY, lens_to_mla_m=6.3e-3)
+    small = PinholeCamera(focal_px=60.0, cx_px=11.5, cy_px=8.5, width_px=24, height_px=18)
+    options = SynthesisOptions(k=4, supersample=1)
+    auto = build_warp_map(camera, PORT, output=small, options=options)
+    tree = build_warp_map(camera, PORT, output=small, options=dataclasses.replace(options, search="kdtree"))
+    for name in ("indptr", "indices", "weights"):
+        np.testing.assert_array_equal(getattr(auto, name), getattr(tree, name))
+
+
+def test_a_rim_margin_that_leaves_no_aperture_is_refused():
+    with pytest.raises(ParameterError, match=r"rim_margin_px=5\.0 leaves no usable aperture"):
+        build_warp_map(TINY, PORT, options=SynthesisOptions(rim_margin_px=5.0))
