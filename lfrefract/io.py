@@ -180,9 +180,14 @@ def write_json(path: str | os.PathLike, data: dict) -> Path:
         raise ParameterError(f"data must not set schema_version (got {data['schema_version']!r}); it is added here")
     payload = {"schema_version": SCHEMA_VERSION, **data}
     text = json.dumps(_finite_json(json.loads(json.dumps(payload, default=_json_default))), indent=2)
+    return _write_text_atomically(path, text + "\n")
+
+
+def _write_text_atomically(path: Path, text: str) -> Path:
+    """Write ``text`` to a temporary file beside ``path``, then rename it over ``path``."""
     tmp = _atomic_target(path)
     try:
-        tmp.write_text(text + "\n")
+        tmp.write_text(text)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -255,15 +260,7 @@ def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:
         raise ParameterError(f"port must be a FlatPort, got {port!r}")
     values = [*port.normal, port.distance_m, port.thickness_m, port.n_air, port.n_glass, port.n_water]
     text = "# " + " ".join(FLAT_PORT_FIELDS) + "\n" + " ".join(repr(float(v)) for v in values) + "\n"
-    path = Path(path)
-    tmp = _atomic_target(path)
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    return _write_text_atomically(Path(path), text)
 
 
 def read_flat_port(path: str | os.PathLike) -> FlatPort:
