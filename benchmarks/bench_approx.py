@@ -78,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--depths", type=float, nargs="+", default=[0.1, 0.15, 0.2, 0.3, 0.6, 1.0])
     parser.add_argument("--calibration-depths", type=float, nargs="+", default=[0.2, 0.6])
+    parser.add_argument("--figure", help="also plot the errors against depth into this PNG")
     args = parser.parse_args(argv)
     mi = load_mitsuba("llvm_ad_rgb")
     start = time.perf_counter()
@@ -98,7 +99,36 @@ def main(argv: list[str] | None = None) -> int:
                 cells.append(f"{np.mean(v):.2f} ({np.min(v):.2f}-{np.max(v):.2f})" if len(v) > 1 else f"{v[0]:.2f}")
             print(f"| {label} | {tilt_deg:.1f} deg | " + " | ".join(cells) + " |")
     print(f"\n{len(args.seeds)} seed(s), {time.perf_counter() - start:.0f} s")
+    if args.figure:
+        _plot(rows, labels, args.depths, args.figure)
     return 0
+
+
+def _plot(rows: dict, labels: list[str], depths: list[float], path: str) -> None:
+    """Corner error against depth, one panel per port tilt (mean over seeds, bars: min-max)."""
+    import matplotlib as mpl
+
+    mpl.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), dpi=100, sharey=True)
+    for ax, tilt, title in zip(axes, (STRAIGHT, TILTED), ("port 0 deg", "port 26.8 deg"), strict=True):
+        for label in labels:
+            if label == "naive":
+                continue
+            v = np.array([rows[tilt, label, d] for d in depths])
+            mean = v.mean(axis=1)
+            spread = [mean - v.min(axis=1), v.max(axis=1) - mean]
+            ax.errorbar(depths, mean, yerr=spread, marker="o", capsize=3, label=label)
+        ax.set(xscale="log", yscale="log", xlabel="board depth [m]", title=title)
+        ax.grid(alpha=0.3, which="both")
+    axes[0].set_ylabel("corner error [px RMS] against the K-projection")
+    axes[1].legend(fontsize=8)
+    fig.suptitle("Approximation baseline (calibrated at one depth) vs the refraction-free synthesis", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
