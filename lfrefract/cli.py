@@ -42,9 +42,8 @@ from lfrefract import (
     camera_preset,
     virtual_camera_for,
 )
-from lfrefract._validate import positive_float
-from lfrefract.calibration import BoardView, MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
-from lfrefract.calibration.approx import detect_chessboard
+from lfrefract.calibration import MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
+from lfrefract.calibration.port import board_view_from_light_field
 from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_flat_port, write_json
 from lfrefract.methods import ConventionalView
 from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
@@ -199,8 +198,9 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, list[np.ndarray], PinholeCamera]:
-    """The boards' central views (one camera, from the first capture's meta.json) and their geometry."""
+def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, PinholeCamera]:
+    """The camera of the board captures (one, from the first capture's meta.json), that meta, and
+    the geometry of their conventional views."""
     if min(args.squares) < 2:
         raise ParameterError(f"--squares must be at least 2 x 2, got {args.squares!r}")
     metas = [read_json(Path(path).parent / "meta.json") for path in args.boards]
@@ -209,15 +209,13 @@ def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, l
         if other["camera"] != meta["camera"]:
             raise ParameterError(f"{path!r} was taken with another camera than {args.boards[0]!r}")
     camera = LightFieldCamera.from_dict(meta["camera"])
-    view = virtual_camera_for(camera)
-    conventional = ConventionalView(camera=camera, view=view)
-    images = [conventional.apply(read_exr(Path(path))) for path in args.boards]
-    return camera, meta, images, view
+    return camera, meta, virtual_camera_for(camera)
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:
-    """``lfrefract calibrate port``: corners in the central views, then :func:`calibrate_port`."""
-    _, meta, images, view = _board_captures(args)
+    """``lfrefract calibrate port``: corners in the central (and sub-aperture) views, then
+    :func:`calibrate_port`."""
+    camera, meta, view = _board_captures(args)
     known = meta.get("port") or {}
     try:
         n_air = known.get("n_air", 1.0)
@@ -229,14 +227,22 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
             f"--{exc.args[0].replace('_', '-')} is needed (the capture's meta.json has no port)"
         ) from None
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
-    jj, ii = np.mgrid[0 : pattern[1], 0 : pattern[0]]
-    board = np.stack([ii.ravel(), jj.ravel()], axis=1) * positive_float("square_size_m", args.square_size_m)
+    step = args.subaperture_offset_px
+    offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
     views = []
-    for path, image in zip(args.boards, images, strict=True):
-        corners = detect_chessboard(image, pattern, name=str(path))
-        if corners is None:
+    for path in args.boards:
+        board_view = board_view_from_light_field(
+            camera,
+            read_exr(Path(path)),
+            pattern=pattern,
+            square_size_m=args.square_size_m,
+            view=view,
+            offsets_px=offsets,
+            name=str(path),
+        )
+        if board_view is None:
             raise ParameterError(f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found")
-        views.append(BoardView(corners_px=corners, board_points_m=board))
+        views.append(board_view)
     result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     out = Path(args.out)
     write_json(out, {"kind": "lfrefract.calibrate.port", "sources": [str(p) for p in args.boards], **result.to_dict()})
@@ -251,7 +257,9 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 
 def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
-    _, _, images, _ = _board_captures(args)
+    camera, _, view = _board_captures(args)
+    conventional = ConventionalView(camera=camera, view=view)
+    images = [conventional.apply(read_exr(Path(path))) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
     result.save(Path(args.out))
@@ -295,6 +303,12 @@ def main(argv: list[str] | None = None) -> int:
     cal_port.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
     cal_port.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
     cal_port.add_argument("--n-water", type=float, help="water index (default: meta.json)")
+    cal_port.add_argument(
+        "--subaperture-offset-px",
+        type=float,
+        default=0.0,
+        help="also find corners in the four sub-aperture views this far from the micro-image centres",
+    )
     nv = sub.add_parser("naive", help="conventional view with no refraction handling")
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")

@@ -38,14 +38,18 @@ from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
 from lfrefract._validate import ParameterError, as_points, finite_vector, positive_float, positive_int
+from lfrefract.calibration.approx import detect_chessboard
+from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera
 from lfrefract.port import FlatPort
 from lfrefract.pose import Pose
+from lfrefract.views import subaperture_centre_m, subaperture_view
 
 __all__ = [
     "BoardView",
     "CalibrationError",
     "PortCalibration",
+    "board_view_from_light_field",
     "calibrate_port",
     "estimate_normal",
     "project_through_port",
@@ -149,6 +153,67 @@ class PortCalibration:
             "normal_std_deg": self.normal_std_deg,
             "distance_std_m": self.distance_std_m,
         }
+
+
+def board_view_from_light_field(
+    camera: LightFieldCamera,
+    raw: np.ndarray,
+    *,
+    pattern: tuple[int, int],
+    square_size_m: float,
+    view: PinholeCamera,
+    offsets_px: tuple[tuple[float, float], ...] = ((0.0, 0.0),),
+    name: str = "raw",
+) -> BoardView | None:
+    """Chessboard corners of one light-field capture, in one or several sub-aperture views.
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    raw : ndarray, shape (H, W) or (H, W, C)
+        The raw lenslet image.
+    pattern : (int, int)
+        Inner corners per row and column (OpenCV's ``patternSize``).
+    square_size_m : float
+        Edge of a square, metres.
+    view : PinholeCamera
+        Geometry the sub-aperture views are resampled onto (``K`` of :func:`calibrate_port`).
+    offsets_px : sequence of (float, float)
+        Sub-aperture offsets from the micro-image centres, pixels; the first must be ``(0, 0)``
+        (the central view, whose corners fix the order the others are matched to).
+    name : str
+        How errors name the capture.
+
+    Returns
+    -------
+    BoardView or None
+        Corners of every view where the board was found, each with its view's centre of
+        projection; None if the central view does not show the board. Board coordinates are
+        centred on the inner-corner grid, so a detector's half-turned order is just another pose.
+    """
+    offsets = [tuple(finite_vector("offsets_px[i]", o, 2)) for o in offsets_px]
+    if not offsets or offsets[0] != (0.0, 0.0):
+        raise ParameterError(f"offsets_px must start with (0, 0), the central view; got {offsets_px!r}")
+    cols, rows = pattern
+    jj, ii = np.mgrid[0:rows, 0:cols]
+    board = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
+    board = board * positive_float("square_size_m", square_size_m)
+    corners, centres = [], []
+    for offset in offsets:
+        found = detect_chessboard(subaperture_view(camera, raw, offset, output=view), pattern, name=name)
+        if found is None:
+            if not corners:
+                return None
+            continue
+        if corners and np.linalg.norm(found[::-1] - corners[0]) < np.linalg.norm(found - corners[0]):
+            found = found[::-1]  # the same order as the central view's
+        corners.append(found)
+        centres.append(np.tile(subaperture_centre_m(camera, offset), (len(found), 1)))
+    return BoardView(
+        corners_px=np.concatenate(corners),
+        board_points_m=np.tile(board, (len(corners), 1)),
+        centres_m=np.concatenate(centres),
+    )
 
 
 def _water_rays(port: FlatPort, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -158,3 +158,16 @@ def test_views_from_several_centres_share_a_board_pose():
     assert _angle_deg(result.port.normal, true.normal) < 1e-6
     assert result.port.distance_m == pytest.approx(true.distance_m, abs=1e-9)
     assert len(result.board_poses) == 3
+
+
+def test_light_field_board_views_start_from_the_central_view():
+    from lfrefract import camera_preset, virtual_camera_for
+    from lfrefract.calibration.port import board_view_from_light_field
+
+    tiny = camera_preset("tiny")
+    raw = np.zeros((tiny.sensor.height_px, tiny.sensor.width_px), dtype=np.float32)
+    kwargs = {"pattern": (6, 4), "square_size_m": 0.01, "view": virtual_camera_for(tiny)}
+    with pytest.raises(ParameterError, match="must start with"):
+        board_view_from_light_field(tiny, raw, offsets_px=((2.0, 0.0), (0.0, 0.0)), **kwargs)
+    with pytest.raises(ParameterError, match="blank"):  # a black capture is refused by the detector
+        board_view_from_light_field(tiny, raw, **kwargs)

@@ -54,10 +54,12 @@ def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
     assert approx["rms_px"] < 1.0
     # The central views of this small camera locate corners to ~0.35 px, which does not determine
     # the port (docs/calibration.md): the calibration says so instead of answering.
-    code = core_cli.main(["calibrate", "port", *captures, *board_args, "--out", str(tmp_path / "port.json")])
-    assert code == 2
-    assert "do not determine the" in capsys.readouterr().err
-    assert not (tmp_path / "port.json").exists()
+    for extra in ([], ["--subaperture-offset-px", "2"]):  # central views, and five views per board
+        out = ["--out", str(tmp_path / "port.json")]
+        code = core_cli.main(["calibrate", "port", *captures, *board_args, *out, *extra])
+        assert code == 2
+        assert "do not determine the" in capsys.readouterr().err
+        assert not (tmp_path / "port.json").exists()
     assert (
         core_cli.main(
             [
