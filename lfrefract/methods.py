@@ -39,7 +39,7 @@ from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort
 from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map
-from lfrefract.views import micro_image_samples, naive_view, raw_channels, resampling_matrix
+from lfrefract.views import apply_resampling, micro_image_samples, naive_view, raw_channels, resampling_matrix
 
 __all__ = [
     "METHODS",
@@ -145,11 +145,8 @@ class ConventionalView:
     def apply(self, raw: np.ndarray) -> np.ndarray:
         """The conventional image of ``raw`` (see :func:`conventional_image`)."""
         image = raw_channels(self.camera, raw)
-        samples = micro_image_samples(self.camera, image, self._idx).astype(np.float64)
-        out = np.asarray(self._matrix @ samples, dtype=np.float32)
-        out[~self._inside] = np.nan
-        out = out.reshape(self.view.height_px, self.view.width_px, -1)
-        return out[..., 0] if np.ndim(raw) == 2 else out
+        samples = micro_image_samples(self.camera, image, self._idx)
+        return apply_resampling(self._matrix, self._inside, samples, self.view, grey=np.ndim(raw) == 2)
 
 
 @dataclass(frozen=True, eq=False)

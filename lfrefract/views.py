@@ -27,6 +27,7 @@ from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 
 __all__ = [
     "VIEW_KINDS",
+    "apply_resampling",
     "micro_image_samples",
     "naive_view",
     "raw_channels",
@@ -129,6 +130,14 @@ def _resample(
     """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``."""
     output = output if output is not None else virtual_camera_for(camera)
     _, matrix, inside = resampling_matrix(camera, output, slope_shift=slope_shift, lenses=idx)
+    return apply_resampling(matrix, inside, values, output, grey=grey)
+
+
+def apply_resampling(
+    matrix: sparse.csr_matrix, inside: np.ndarray, values: np.ndarray, output: PinholeCamera, *, grey: bool
+) -> np.ndarray:
+    """Per-lens values (M, C) through a :func:`resampling_matrix` onto the pinhole image, float32,
+    NaN outside the lenses' hull; ``grey`` drops the channel axis."""
     out = np.asarray(matrix @ values.astype(np.float64), dtype=np.float32)
     out[~inside] = np.nan
     out = out.reshape(output.height_px, output.width_px, -1)

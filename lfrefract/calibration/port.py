@@ -520,13 +520,17 @@ def calibrate_port(
     # Starting points: the axial estimate and a grid of normals, each with a coarse logarithmic
     # search of the distance, scored with the linear pose of every view; the best few get
     # per-view pose fits and are refined jointly.
-    pnp = [_initial_pose(camera, v) for v in views]  # where the linear pose is undetermined
+    pnp: dict[int, np.ndarray] = {}  # OpenCV poses where the linear pose is undetermined, on demand
     starts = []
     for tilt_x, tilt_y in _candidate_tilts(estimate_normal(camera, views)):
         for distance in np.geomspace(lo, hi, 8):
             trial = _port_from_params(np.array([tilt_x, tilt_y, distance]), template)
             linear = [_linear_pose(problem, trial, i) for i in range(len(views))]
-            linear = [p if p is not None else pnp[i] for i, p in enumerate(linear)]
+            for i, p in enumerate(linear):
+                if p is None:
+                    if i not in pnp:
+                        pnp[i] = _initial_pose(camera, views[i])
+                    linear[i] = pnp[i]
             cost = sum(float(np.sum(problem.view_residuals(trial, i, p) ** 2)) for i, p in enumerate(linear))
             starts.append((cost, [tilt_x, tilt_y, distance], linear))
     starts.sort(key=lambda item: item[0])
