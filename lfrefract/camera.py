@@ -31,6 +31,7 @@ from lfrefract._validate import (
     as_points,
     finite_float,
     finite_vector,
+    non_negative_float,
     one_of,
     positive_float,
     positive_int,
@@ -307,6 +308,25 @@ class LightFieldCamera:
     def micro_image_radius_px(self) -> float:
         """Radius of a micro-image (the aperture's image through a microlens), pixels."""
         return self.aperture_radius_m * self.mla.focal_length_m / self.lens_to_mla_m / self.sensor.pixel_pitch_m
+
+    def usable_aperture_radius_m(self, rim_margin_px: float) -> float:
+        """Radius on the main lens inside which a pixel's chief ray keeps ``rim_margin_px`` pixels
+        from its micro-image's rim, metres (one sensor pixel spans ``pitch * f' / f_mla`` on the main
+        lens): pixels nearer the rim are partly vignetted.
+
+        Raises
+        ------
+        ParameterError
+            If the margin is negative or leaves no usable aperture.
+        """
+        non_negative_float("rim_margin_px", rim_margin_px)
+        margin_m = rim_margin_px * self.sensor.pixel_pitch_m * self.lens_to_mla_m / self.mla.focal_length_m
+        if margin_m >= self.aperture_radius_m:
+            raise ParameterError(
+                f"rim_margin_px={rim_margin_px!r} leaves no usable aperture (micro-image radius "
+                f"{self.micro_image_radius_px:.3g} px)"
+            )
+        return self.aperture_radius_m - margin_m
 
     # ----------------------------------------------------------------- lenses
     def lens_indices_for_pixels(self, uv: np.ndarray) -> np.ndarray:

@@ -43,7 +43,7 @@ from lfrefract import (
     virtual_camera_for,
 )
 from lfrefract.calibration import MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
-from lfrefract.calibration.port import board_view_from_light_field
+from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
 from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_flat_port, write_json
 from lfrefract.methods import ConventionalView
 from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
@@ -213,8 +213,8 @@ def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, P
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:
-    """``lfrefract calibrate port``: corners in the central (and sub-aperture) views, then
-    :func:`calibrate_port`."""
+    """``lfrefract calibrate port``: corners located in each capture's light field (or in its
+    sub-aperture views), then :func:`calibrate_port`."""
     camera, meta, view = _board_captures(args)
     known = meta.get("port") or {}
     try:
@@ -228,6 +228,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         ) from None
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     step = args.subaperture_offset_px
+    if step != 0 and args.corners != "views":
+        raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
     views = []
     for path in args.boards:
@@ -237,11 +239,15 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
             pattern=pattern,
             square_size_m=args.square_size_m,
             view=view,
+            method=args.corners,
             offsets_px=offsets,
             name=str(path),
         )
         if board_view is None:
-            raise ParameterError(f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found")
+            raise ParameterError(
+                f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found "
+                "(or under 8 of its corners located)"
+            )
         views.append(board_view)
     result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     out = Path(args.out)
@@ -304,10 +310,16 @@ def main(argv: list[str] | None = None) -> int:
     cal_port.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
     cal_port.add_argument("--n-water", type=float, help="water index (default: meta.json)")
     cal_port.add_argument(
+        "--corners",
+        choices=CORNER_METHODS,
+        default="light-field",
+        help="locate corners on every raw pixel around them (default), or in sub-aperture views",
+    )
+    cal_port.add_argument(
         "--subaperture-offset-px",
         type=float,
         default=0.0,
-        help="also find corners in the four sub-aperture views this far from the micro-image centres",
+        help="with --corners views: also the four sub-aperture views this far from the micro-image centres",
     )
     nv = sub.add_parser("naive", help="conventional view with no refraction handling")
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")

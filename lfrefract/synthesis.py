@@ -320,18 +320,6 @@ class WarpMap:
         )
 
 
-def _usable_aperture_radius_m(camera: LightFieldCamera, rim_margin_px: float) -> float:
-    """Radius on the main lens inside which a pixel's chief ray keeps ``rim_margin_px`` pixels from
-    its micro-image's rim (one sensor pixel spans ``pitch * f' / f_mla`` on the main lens)."""
-    margin_m = rim_margin_px * camera.sensor.pixel_pitch_m * camera.lens_to_mla_m / camera.mla.focal_length_m
-    if margin_m >= camera.aperture_radius_m:
-        raise ParameterError(
-            f"rim_margin_px={rim_margin_px!r} leaves no usable aperture (micro-image radius "
-            f"{camera.micro_image_radius_px:.3g} px)"
-        )
-    return camera.aperture_radius_m - margin_m
-
-
 def _mla_points_img(hit: np.ndarray, dirs: np.ndarray, f: float, f_prime: float) -> np.ndarray:
     """Image-plane MLA points (N, 2) of air rays leaving the main lens at ``hit`` along ``dirs``
     (thin lens backwards: slope behind the lens = slope in front + hit / f)."""
@@ -349,7 +337,7 @@ def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarra
             camera.sensor.pixel_pitch_m,
             cu,
             cv,
-            _usable_aperture_radius_m(camera, rim_margin_px) ** 2,
+            camera.usable_aperture_radius_m(rim_margin_px) ** 2,
         ]
     )
 
@@ -403,7 +391,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     radius = np.hypot(hit[:, 0], hit[:, 1])
     # The camera records the necessary ray only inside the usable aperture: rays through its rim
     # (rim_margin_px) are vignetted, so their pixels are never used.
-    r_ok = _usable_aperture_radius_m(camera, options.rim_margin_px)
+    r_ok = camera.usable_aperture_radius_m(options.rim_margin_px)
     covered = valid & (radius <= r_ok)
     # A necessary ray outside it has no captured twin: aim the search at the parallel ray through
     # the nearest usable point of the aperture instead (paper section 6: nearby rays stand in;
@@ -533,7 +521,7 @@ def build_warp_map(
         tree=LazyRayTree(
             camera,
             port,
-            usable_radius_m=_usable_aperture_radius_m(camera, options.rim_margin_px),
+            usable_radius_m=camera.usable_aperture_radius_m(options.rim_margin_px),
             lambda_m_per_rad=options.lambda_m_per_rad,
         ),
     )

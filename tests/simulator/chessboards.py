@@ -8,14 +8,28 @@ refraction-free image (2 px per lens) is 188 x 141 px with f = 240 px.
 
 from __future__ import annotations
 
+import functools
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from lfrefract.calibration.approx import detect_chessboard
-from lfrefract.pinhole import PinholeCamera
+from lfrefract.calibration.port import (
+    PortCalibration,
+    board_view_from_light_field,
+    calibrate_port,
+    project_through_port,
+)
+from lfrefract.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.port import FlatPort
+from lfrefract.views import subaperture_view
 from simulator import assets
+from simulator.backend import load_mitsuba
 from simulator.config import Chessboard, SceneConfig
+from simulator.job import render_raw
 from simulator.scene import check_geometry
-from tests.simulator.scenes import scene
+from tests.simulator.scenes import chessboard_corners_world, scene
 
 CAMERA = {
     "name": "tiny-2x",
@@ -62,9 +76,11 @@ def board(position_m, rotation_xyz_deg, square_size_m: float) -> dict:
     }
 
 
-def board_scene(tilt: tuple[float, float], board_table: dict, *, spp: int = 16, seed: int = 0) -> SceneConfig:
+def board_scene(
+    tilt: tuple[float, float], board_table: dict, *, spp: int = 16, seed: int = 0, lights: list[dict] = LIGHTS
+) -> SceneConfig:
     """One board behind the port of ``tilt``, seen by :data:`CAMERA` (checked geometry)."""
-    config = scene(port=port(tilt), objects=[board_table], lights=LIGHTS, spp=spp, seed=seed, camera=CAMERA)
+    config = scene(port=port(tilt), objects=[board_table], lights=lights, spp=spp, seed=seed, camera=CAMERA)
     check_geometry(config)
     return config
 
@@ -98,21 +114,70 @@ CALIBRATION_PX_PER_SQUARE = 10.0
 
 
 def calibration_boards(tilt: tuple[float, float], depth_m: float, view: PinholeCamera) -> list[dict]:
-    """Board tables for the calibration views at ``depth_m`` behind the port of ``tilt``.
+    """Board tables for the approximation baseline's calibration views at ``depth_m`` behind the
+    port of ``tilt`` (:data:`CALIBRATION_TARGETS`, :data:`CALIBRATION_ROTATIONS_DEG`)."""
+    depths = [depth_m] * len(CALIBRATION_TARGETS)
+    return boards_at_targets(tilt, view, CALIBRATION_TARGETS, depths, CALIBRATION_ROTATIONS_DEG)
 
-    Each board's centre is where the refracted line of sight of its target pixel of the
-    conventional view ``view`` (a pinhole in air at the main-lens centre) reaches ``z = depth_m``,
-    so the board is seen there whatever the port.
+
+# Port calibration views: ten boards over the field and from 0.15 to 0.35 m, turned 15-30 deg
+# about both axes (refraction's departure from a central camera grows with the angle of view
+# and with nearness, and the turns fix each board's pose).
+PORT_TARGETS = (
+    (-0.15, -0.15),
+    (0.15, -0.15),
+    (-0.15, 0.15),
+    (0.15, 0.15),
+    (0.0, 0.0),
+    (-0.15, 0.0),
+    (0.15, 0.0),
+    (0.0, -0.15),
+    (0.0, 0.15),
+    (0.08, 0.08),
+)
+# Large squares (the board spans two thirds of the view): more raw pixels around every corner.
+PORT_PX_PER_SQUARE = 14.0
+PORT_DEPTHS_M = (0.15, 0.35, 0.25, 0.2, 0.3, 0.18, 0.28, 0.22, 0.33, 0.16)
+PORT_ROTATIONS_DEG = (
+    (20, 20, 5),
+    (-20, 25, -5),
+    (25, -20, 0),
+    (-25, -15, 10),
+    (30, 0, 0),
+    (0, 30, -10),
+    (-15, -25, 5),
+    (25, 15, 0),
+    (-20, 20, -5),
+    (15, -30, 0),
+)
+
+
+def port_boards(tilt: tuple[float, float], view: PinholeCamera) -> list[dict]:
+    """Board tables for port calibration behind the port of ``tilt`` (:data:`PORT_TARGETS`)."""
+    return boards_at_targets(
+        tilt, view, PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, px_per_square=PORT_PX_PER_SQUARE
+    )
+
+
+def boards_at_targets(
+    tilt, view: PinholeCamera, targets, depths_m, rotations_deg, *, px_per_square: float = CALIBRATION_PX_PER_SQUARE
+) -> list[dict]:
+    """Board tables behind the port of ``tilt``, one per target.
+
+    Board ``i``'s centre is where the refracted line of sight of target pixel ``i`` of the
+    conventional view ``view`` (a pinhole in air at the main-lens centre; targets as fractions of
+    its size from its centre) reaches ``z = depths_m[i]``, so the board is seen there whatever the
+    port; its squares are about ``px_per_square`` pixels in that view.
     """
     flat_port = empty_scene(tilt).port
-    square = CALIBRATION_PX_PER_SQUARE * depth_m / (flat_port.n_water / flat_port.n_air * view.focal_px)
     tables = []
-    for (fu, fv), rotation in zip(CALIBRATION_TARGETS, CALIBRATION_ROTATIONS_DEG, strict=True):
+    for (fu, fv), depth, rotation in zip(targets, depths_m, rotations_deg, strict=True):
+        square = px_per_square * depth / (flat_port.n_water / flat_port.n_air * view.focal_px)
         uv = np.array([[view.cx_px + fu * view.width_px, view.cy_px + fv * view.height_px]])
         line = view.pixel_directions(uv)
         trace = flat_port.trace_from_air(np.zeros_like(line), line)
         start, direction = trace.exit_points_cam[0], trace.directions_cam[0]
-        tables.append(board(start + direction * (depth_m - start[2]) / direction[2], rotation, square))
+        tables.append(board(start + direction * (depth - start[2]) / direction[2], rotation, square))
     return tables
 
 
@@ -140,3 +205,67 @@ def corner_rms_px(found: np.ndarray, expected: np.ndarray) -> float:
     The detector may report the grid from either end (7 x 5 squares look the same after a half turn).
     """
     return min(float(np.sqrt(np.mean(np.sum((found - e) ** 2, axis=1)))) for e in (expected, expected[::-1]))
+
+
+# Port calibration from renders (tests/simulator/test_port_calibration_render.py and the pipeline
+# with estimated parameters): samples per pixel of the board renders.
+PORT_SPP = 32
+
+
+@dataclass(frozen=True)
+class PortFromRenders:
+    """A port calibrated from the :func:`port_boards` renders behind the port of one tilt.
+
+    ``light_field_rms_px`` and ``central_rms_px``: the light-field corners (main-lens centre) and
+    OpenCV's corners in the central view, against the exact refracted projection of the boards'
+    corners (pixels RMS over all boards).
+    """
+
+    calibration: PortCalibration
+    truth: FlatPort
+    view: PinholeCamera
+    light_field_rms_px: float
+    central_rms_px: float
+
+    @property
+    def normal_error_deg(self) -> float:
+        cos = float(np.clip(self.calibration.port.normal @ self.truth.normal, -1.0, 1.0))
+        return math.degrees(math.acos(cos))
+
+    @property
+    def distance_error_m(self) -> float:
+        return self.calibration.port.distance_m - self.truth.distance_m
+
+
+@functools.cache
+def port_from_renders(tilt: tuple[float, float]) -> PortFromRenders:
+    """Render the ten :func:`port_boards` behind the port of ``tilt`` (:data:`PORT_SPP`), locate their
+    corners in the light field, and calibrate the port (once per tilt per test session)."""
+    mi = load_mitsuba("llvm_ad_rgb")
+    truth = empty_scene(tilt).port
+    camera = empty_scene(tilt).camera
+    view = virtual_camera_for(camera)
+    views, light_field, central = [], [], []
+    for seed, table in enumerate(port_boards(tilt, view)):
+        config = board_scene(tilt, table, spp=PORT_SPP, seed=seed)
+        raw = render_raw(mi, config, progress=False)
+        found = board_view_from_light_field(
+            camera, raw, pattern=PATTERN, square_size_m=table["square_size_m"], view=view
+        )
+        assert found is not None, seed
+        assert found.central.sum() == PATTERN[0] * PATTERN[1], seed
+        views.append(found)
+        expected = project_through_port(view, truth, chessboard_corners_world(config.objects[0]))
+        central_view = find_corners(subaperture_view(camera, raw, (0.0, 0.0), output=view))
+        light_field.append(corner_rms_px(found.corners_px[found.central], expected) ** 2)
+        central.append(corner_rms_px(central_view, expected) ** 2)
+    calibration = calibrate_port(
+        view, views, thickness_m=truth.thickness_m, n_air=truth.n_air, n_glass=truth.n_glass, n_water=truth.n_water
+    )
+    return PortFromRenders(
+        calibration=calibration,
+        truth=truth,
+        view=view,
+        light_field_rms_px=math.sqrt(np.mean(light_field)),
+        central_rms_px=math.sqrt(np.mean(central)),
+    )

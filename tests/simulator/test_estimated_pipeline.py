@@ -1,8 +1,8 @@
-"""The pipeline with estimated parameters: the MLA calibrated from a white image, then synthesis.
+"""The pipeline with estimated parameters: the MLA calibrated from a white image, the port from
+ten rendered chessboard captures (light-field corners), then synthesis.
 
 Issue 4 asks that the refraction-free image's corner error with estimated parameters stay within
-1.5 x the error with ground-truth parameters. Here the MLA is estimated (the port is the known
-one: its calibration from renders is not yet accurate enough, see docs/calibration.md).
+1.5 x the error with ground-truth parameters.
 """
 
 from __future__ import annotations
@@ -25,16 +25,17 @@ TILT = (25.0, 10.0)
 DIRECTION = (0.16, -0.125)  # inside the exact coverage behind this port (test_synthesis_corners)
 
 
-def test_synthesis_with_the_calibrated_mla_matches_ground_truth_parameters(mi):
+def test_synthesis_with_the_calibrated_mla_and_port_matches_ground_truth_parameters(mi):
     camera = LightFieldCamera.from_dict(cb.CAMERA)
     white_scene = load_scene(embedded_scenes()["white"]).with_overrides(
         camera=camera, render=RenderSettings(spp=16, seed=3)
     )
     estimated = calibrate_mla(render_raw(mi, white_scene, progress=False)).calibrated_camera(camera)
     assert estimated != camera  # estimated, not copied: it differs in the last digits
-    port = cb.empty_scene(TILT).port
-    truth_map = build_warp_map(camera, port)
-    estimated_map = build_warp_map(estimated, port, output=truth_map.output)
+    port = cb.port_from_renders(TILT)  # shared with test_port_calibration_render
+    assert port.calibration.port != port.truth
+    truth_map = build_warp_map(camera, port.truth)
+    estimated_map = build_warp_map(estimated, port.calibration.port, output=truth_map.output)
     for depth_m in (0.15, 0.6):
         config = cb.board_scene(TILT, cb.slanted_board(depth_m, DIRECTION, truth_map.output.focal_px))
         raw = render_raw(mi, config, progress=False)

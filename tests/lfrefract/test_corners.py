@@ -1,0 +1,98 @@
+"""Chessboard corners located in the 4D light field (lfrefract.calibration.corners), on raw images
+computed from the captured-ray model: every pixel's chief ray refracted by the port onto a board
+with a smooth chessboard texture, so the exact corner tracks are known."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lfrefract import FlatPort, ParameterError, Pose, camera_preset, virtual_camera_for
+from lfrefract.calibration.corners import light_field_corners
+from lfrefract.calibration.port import project_through_port
+from tests.tolerances import LF_CORNER_ANALYTIC_PX
+
+CAMERA = camera_preset("tiny")
+VIEW = virtual_camera_for(CAMERA)  # 92 x 69 px, f = 120 px
+PATTERN = (6, 4)
+PORT = FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004, tilt_x_deg=20.0, tilt_y_deg=-10.0)
+
+
+def _board(port: FlatPort, depth_m: float, rotation_deg, px_per_square: float) -> tuple[Pose, float]:
+    """A board centred on the optical axis's refracted line at ``depth_m``, about ``px_per_square``."""
+    trace = port.trace_from_air(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
+    start, direction = trace.exit_points_cam[0], trace.directions_cam[0]
+    centre = start + direction * (depth_m - start[2]) / direction[2]
+    return Pose.from_euler_xyz_deg(rotation_deg, centre), px_per_square * depth_m / (1.333 * VIEW.focal_px)
+
+
+def _corners_world(pose: Pose, square_m: float) -> np.ndarray:
+    jj, ii = np.mgrid[0 : PATTERN[1], 0 : PATTERN[0]]
+    local = np.stack([ii.ravel() - (PATTERN[0] - 1) / 2, jj.ravel() - (PATTERN[1] - 1) / 2], axis=1) * square_m
+    return pose.to_world(np.c_[local, np.zeros(len(local))])
+
+
+def _raw(port: FlatPort, pose: Pose, square_m: float) -> np.ndarray:
+    """Each pixel's chief ray through ``port`` onto the board plane, where the texture
+    ``0.5 + 0.4 tanh(3 cos(pi x / s)) tanh(3 cos(pi y / s))`` has its X-junctions at the inner corners
+    (point-symmetric about each, like a blurred chessboard)."""
+    rays = CAMERA.captured_rays()
+    trace = port.trace_from_air(rays.origins_cam, rays.directions_cam)
+    rotation, centre = np.asarray(pose.rotation), np.asarray(pose.position_m)
+    normal = rotation[:, 2]
+    along = ((centre - trace.exit_points_cam) @ normal) / (trace.directions_cam @ normal)
+    local = (trace.exit_points_cam + along[:, None] * trace.directions_cam - centre) @ rotation
+    x, y = local[:, 0] / square_m, local[:, 1] / square_m
+    value = 0.5 + 0.4 * np.tanh(3.0 * np.cos(math.pi * x)) * np.tanh(3.0 * np.cos(math.pi * y))
+    return np.where(rays.in_aperture, value, 0.0).reshape(CAMERA.sensor.height_px, CAMERA.sensor.width_px)
+
+
+@pytest.mark.parametrize(
+    ("port", "depth_m", "rotation_deg"),
+    [
+        (PORT, 0.2, (20.0, -15.0, 5.0)),
+        (PORT, 0.5, (-10.0, 25.0, -5.0)),
+        (FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004), 0.3, (0.0, 0.0, 10.0)),
+    ],
+)
+def test_corner_tracks_follow_the_exact_refracted_projection(port, depth_m, rotation_deg):
+    pose, square = _board(port, depth_m, rotation_deg, px_per_square=12.0)
+    world = _corners_world(pose, square)
+    expected = project_through_port(VIEW, port, world)
+    start = expected + np.random.default_rng(0).normal(scale=0.3, size=expected.shape)
+    tracks = light_field_corners(
+        CAMERA, _raw(port, pose, square), start, pattern=PATTERN, square_size_m=square, view=VIEW
+    )
+    assert tracks.ok.all()
+    assert np.sqrt(np.mean(np.sum((tracks.centre_px - expected) ** 2, axis=1))) < LF_CORNER_ANALYTIC_PX
+    # Seen from near the rim of the usable aperture, where the parallax is largest (0.2-0.6 px here).
+    reach = 0.9 * CAMERA.usable_aperture_radius_m(0.71)
+    for a in ((reach, 0.0), (0.0, -reach), (-0.7 * reach, 0.7 * reach)):
+        seen = project_through_port(VIEW, port, world, centre_m=(*a, 0.0))
+        assert np.min(np.linalg.norm(seen - expected, axis=1)) > 5 * LF_CORNER_ANALYTIC_PX
+        error = np.sqrt(np.mean(np.sum((tracks.at(a) - seen) ** 2, axis=1)))
+        assert error < 2 * LF_CORNER_ANALYTIC_PX, (a, error)
+    assert np.all(tracks.centre_std_px < LF_CORNER_ANALYTIC_PX)
+
+
+def test_corners_without_contrast_are_flagged():
+    pose, square = _board(PORT, 0.3, (0.0, 0.0, 0.0), px_per_square=12.0)
+    start = project_through_port(VIEW, PORT, _corners_world(pose, square))
+    flat = np.full((CAMERA.sensor.height_px, CAMERA.sensor.width_px), 0.5)
+    tracks = light_field_corners(CAMERA, flat, start, pattern=PATTERN, square_size_m=square, view=VIEW)
+    assert not tracks.ok.any()
+
+
+def test_bad_input_is_rejected_with_the_parameter_named():
+    raw = np.zeros((CAMERA.sensor.height_px, CAMERA.sensor.width_px))
+    corners = np.zeros((24, 2))
+    with pytest.raises(ParameterError, match="corners_px"):
+        light_field_corners(CAMERA, raw, corners[:20], pattern=PATTERN, square_size_m=0.01, view=VIEW)
+    with pytest.raises(ParameterError, match="window_squares"):
+        light_field_corners(CAMERA, raw, corners, pattern=PATTERN, square_size_m=0.01, view=VIEW, window_squares=1.0)
+    with pytest.raises(ParameterError, match="square_size_m"):
+        light_field_corners(CAMERA, raw, corners, pattern=PATTERN, square_size_m=-1.0, view=VIEW)
+    with pytest.raises(ParameterError, match="raw"):
+        light_field_corners(CAMERA, raw[:10], corners, pattern=PATTERN, square_size_m=0.01, view=VIEW)
