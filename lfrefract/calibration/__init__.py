@@ -1,11 +1,13 @@
 """Calibration: what the pipeline estimates instead of knowing (port, MLA, the approximation baseline)."""
 
 from lfrefract.calibration.approx import ApproxCalibration, calibrate_approx, detect_chessboard
+from lfrefract.calibration.corners import CornerTracks, light_field_corners
 from lfrefract.calibration.mla import LATTICE_MODELS, LENS_STATUS, MlaCalibration, calibrate_mla
 from lfrefract.calibration.port import (
     BoardView,
     CalibrationError,
     PortCalibration,
+    board_view_from_light_field,
     calibrate_port,
     project_through_port,
 )
@@ -16,11 +18,14 @@ __all__ = [
     "ApproxCalibration",
     "BoardView",
     "CalibrationError",
+    "CornerTracks",
     "MlaCalibration",
     "PortCalibration",
+    "board_view_from_light_field",
     "calibrate_approx",
     "calibrate_mla",
     "calibrate_port",
     "detect_chessboard",
+    "light_field_corners",
     "project_through_port",
 ]

@@ -199,12 +199,17 @@ def find_corners(image: np.ndarray) -> np.ndarray | None:
     return detect_chessboard(image, PATTERN)
 
 
-def corner_rms_px(found: np.ndarray, expected: np.ndarray) -> float:
-    """RMS distance (px) of found corners from expected ones, in the better of the two orders.
+def aligned_errors_px(found: np.ndarray, expected: np.ndarray) -> np.ndarray:
+    """Found minus expected corners (N, 2), pixels, in the better of the two orders.
 
     The detector may report the grid from either end (7 x 5 squares look the same after a half turn).
     """
-    return min(float(np.sqrt(np.mean(np.sum((found - e) ** 2, axis=1)))) for e in (expected, expected[::-1]))
+    return min((found - e for e in (expected, expected[::-1])), key=lambda d: float(np.sum(d**2)))
+
+
+def corner_rms_px(found: np.ndarray, expected: np.ndarray) -> float:
+    """RMS distance (px) of found corners from expected ones, in the better of the two orders."""
+    return float(np.sqrt(np.mean(np.sum(aligned_errors_px(found, expected) ** 2, axis=1))))
 
 
 # Port calibration from renders (tests/simulator/test_port_calibration_render.py and the pipeline
@@ -216,16 +221,24 @@ PORT_SPP = 32
 class PortFromRenders:
     """A port calibrated from the :func:`port_boards` renders behind the port of one tilt.
 
-    ``light_field_rms_px`` and ``central_rms_px``: the light-field corners (main-lens centre) and
-    OpenCV's corners in the central view, against the exact refracted projection of the boards'
-    corners (pixels RMS over all boards).
+    ``light_field_errors_px`` and ``central_errors_px`` (N, 2): the light-field corners (seen from
+    the main-lens centre) and OpenCV's corners in the central view, minus the exact refracted
+    projection of the boards' corners, all boards.
     """
 
     calibration: PortCalibration
     truth: FlatPort
     view: PinholeCamera
-    light_field_rms_px: float
-    central_rms_px: float
+    light_field_errors_px: np.ndarray
+    central_errors_px: np.ndarray
+
+    @property
+    def light_field_rms_px(self) -> float:
+        return float(np.sqrt(np.mean(np.sum(self.light_field_errors_px**2, axis=1))))
+
+    @property
+    def central_rms_px(self) -> float:
+        return float(np.sqrt(np.mean(np.sum(self.central_errors_px**2, axis=1))))
 
     @property
     def normal_error_deg(self) -> float:
@@ -257,8 +270,8 @@ def port_from_renders(tilt: tuple[float, float]) -> PortFromRenders:
         views.append(found)
         expected = project_through_port(view, truth, chessboard_corners_world(config.objects[0]))
         central_view = find_corners(subaperture_view(camera, raw, (0.0, 0.0), output=view))
-        light_field.append(corner_rms_px(found.corners_px[found.central], expected) ** 2)
-        central.append(corner_rms_px(central_view, expected) ** 2)
+        light_field.append(aligned_errors_px(found.corners_px[found.central], expected))
+        central.append(aligned_errors_px(central_view, expected))
     calibration = calibrate_port(
         view, views, thickness_m=truth.thickness_m, n_air=truth.n_air, n_glass=truth.n_glass, n_water=truth.n_water
     )
@@ -266,6 +279,6 @@ def port_from_renders(tilt: tuple[float, float]) -> PortFromRenders:
         calibration=calibration,
         truth=truth,
         view=view,
-        light_field_rms_px=math.sqrt(np.mean(light_field)),
-        central_rms_px=math.sqrt(np.mean(central)),
+        light_field_errors_px=np.concatenate(light_field),
+        central_errors_px=np.concatenate(central),
     )
