@@ -2,13 +2,26 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import cv2
 import numpy as np
 from scipy import ndimage
 
-from lfrefract._validate import ParameterError, positive_float
+from lfrefract._validate import ParameterError, as_points, positive_float, positive_int
 
-__all__ = ["psnr", "shift_px", "ssim"]
+__all__ = [
+    "DepthErrors",
+    "DisparityErrors",
+    "PlaneFit",
+    "depth_errors",
+    "disparity_errors",
+    "fit_plane_ransac",
+    "psnr",
+    "shift_px",
+    "ssim",
+]
 
 
 def _prepare(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,3 +110,276 @@ def shift_px(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | Non
         3,
     )
     return float(warp[0, 2]), float(warp[1, 2])
+
+
+# =============================================================================== stereo
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PlaneFit:
+    """A plane ``{X : normal . X = offset_m}`` fitted to a point cloud, with its inliers.
+
+    Parameters
+    ----------
+    normal : ndarray, shape (3,)
+        Unit normal, in the points' frame, oriented so that ``offset_m >= 0`` (pointing away from
+        the frame's origin; for a plane through the origin, with ``normal[2] >= 0``).
+    offset_m : float
+        Signed distance of the plane from the origin along ``normal``, metres.
+    inliers : ndarray of bool, shape (N,)
+        Points within the threshold of the final plane.
+    rmse_m : float
+        RMS point-to-plane distance of the inliers, metres.
+    """
+
+    normal: np.ndarray
+    offset_m: float
+    inliers: np.ndarray
+    rmse_m: float
+
+    def distances_m(self, points_m: np.ndarray) -> np.ndarray:
+        """Signed distances (N,) of points (N, 3) from the plane, metres (positive along ``normal``)."""
+        return as_points("points_m", points_m, 3) @ self.normal - self.offset_m
+
+
+def _oriented_plane(normal: np.ndarray, offset: float) -> tuple[np.ndarray, float]:
+    if offset < 0.0 or (offset == 0.0 and normal[2] < 0.0):
+        return -normal, -offset
+    return normal, offset
+
+
+def _least_squares_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Total least-squares plane (orthogonal distances): normal = smallest principal axis."""
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    normal = vt[-1] / np.linalg.norm(vt[-1])
+    return _oriented_plane(normal, float(normal @ centre))
+
+
+def fit_plane_ransac(points_m: np.ndarray, *, threshold_m: float, iterations: int = 1000, seed: int = 0) -> PlaneFit:
+    """Fit a plane to a point cloud with outliers (RANSAC, then least squares on the inliers).
+
+    The paper's evaluation (section 5.1): a plane fitted to the reconstructed board after outlier
+    removal, its residual the quality measure. ``iterations`` random triples of points propose
+    planes; the one with the most points within ``threshold_m`` wins. The plane is then refitted
+    by total least squares to its inliers and the inliers recomputed, until they no longer change
+    (at most 10 times).
+
+    Parameters
+    ----------
+    points_m : ndarray, shape (N, 3)
+        Finite points, metres (any frame; the plane is returned in it). N >= 3.
+    threshold_m : float
+        Largest point-to-plane distance of an inlier, metres, > 0.
+    iterations : int
+        Number of random triples tried, > 0.
+    seed : int
+        Seed of the random generator (the result is deterministic for a given seed).
+
+    Returns
+    -------
+    PlaneFit
+
+    Raises
+    ------
+    ParameterError
+        Too few or non-finite points, bad options, or every sampled triple was degenerate (collinear).
+    """
+    pts = as_points("points_m", points_m, 3)
+    if len(pts) < 3:
+        raise ParameterError(f"points_m must hold at least 3 points, got {len(pts)}")
+    threshold = positive_float("threshold_m", threshold_m)
+    n_iter = positive_int("iterations", iterations)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ParameterError(f"seed must be an integer, got {seed!r}")
+    rng = np.random.default_rng(int(seed))
+    # Three distinct indices per trial: draw the first, then offsets that cannot collide.
+    n = len(pts)
+    first = rng.integers(0, n, n_iter)
+    second = (first + rng.integers(1, n, n_iter)) % n
+    third = rng.integers(0, n - 2, n_iter)
+    third += third >= np.minimum(first, second)
+    third += third >= np.maximum(first, second)
+    normals = np.cross(pts[second] - pts[first], pts[third] - pts[first])
+    norms = np.linalg.norm(normals, axis=1)
+    scale = np.max(np.ptp(pts, axis=0)) ** 2
+    usable = norms > 1e-12 * max(scale, np.finfo(float).tiny)
+    if not usable.any():
+        raise ParameterError("points_m are collinear or coincident: no sampled triple spans a plane")
+    normals = normals[usable] / norms[usable, None]
+    offsets = np.einsum("ij,ij->i", normals, pts[first[usable]])
+    best_count, best = -1, 0
+    chunk = max(1, 4_000_000 // n)
+    for start in range(0, len(normals), chunk):
+        dist = np.abs(pts @ normals[start : start + chunk].T - offsets[start : start + chunk])
+        counts = np.count_nonzero(dist <= threshold, axis=0)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best_count, best = int(counts[k]), start + k
+    inliers = np.abs(pts @ normals[best] - offsets[best]) <= threshold
+    normal, offset = _oriented_plane(normals[best], float(offsets[best]))
+    for _ in range(10):
+        if np.count_nonzero(inliers) < 3:
+            break
+        normal, offset = _least_squares_plane(pts[inliers])
+        updated = np.abs(pts @ normal - offset) <= threshold
+        if np.array_equal(updated, inliers):
+            break
+        inliers = updated
+    residual = pts[inliers] @ normal - offset
+    rmse = float(np.sqrt(np.mean(residual**2))) if residual.size else float("nan")
+    inliers.setflags(write=False)
+    normal.setflags(write=False)
+    return PlaneFit(normal=normal, offset_m=float(offset), inliers=inliers, rmse_m=rmse)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DepthErrors:
+    """Depth map errors against ground truth.
+
+    Parameters
+    ----------
+    mean_abs_m, rms_m, bias_m : float
+        Mean absolute, RMS and mean signed (estimate - truth) error over the pixels with both a
+        truth and an estimate, metres; NaN if there is no such pixel.
+    completeness : float
+        Fraction of the truth-valid pixels that have an estimate.
+    count : int
+        Number of pixels with both a truth and an estimate.
+    """
+
+    mean_abs_m: float
+    rms_m: float
+    bias_m: float
+    completeness: float
+    count: int
+
+
+def _truth_mask(name: str, estimate: Any, truth: Any, valid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    est = np.asarray(estimate, dtype=np.float64)
+    ref = np.asarray(truth, dtype=np.float64)
+    if est.shape != ref.shape or est.ndim != 2:
+        raise ParameterError(
+            f"{name} and its truth must be (H, W) arrays of the same shape, got {est.shape} and {ref.shape}"
+        )
+    mask = np.isfinite(ref)
+    if valid is not None:
+        v = np.asarray(valid)
+        if v.dtype != bool or v.shape != ref.shape:
+            raise ParameterError(f"valid must be a boolean array of shape {ref.shape}, got {v.dtype} {v.shape}")
+        mask &= v
+    if not mask.any():
+        raise ParameterError("no pixel has a finite truth (inside valid): nothing to compare")
+    if np.any(np.isinf(est)):
+        raise ParameterError(f"{name} holds infinite values; mark missing estimates with NaN")
+    return est, ref, mask
+
+
+def depth_errors(depth_m: np.ndarray, truth_depth_m: np.ndarray, *, valid: np.ndarray | None = None) -> DepthErrors:
+    """Compare a depth map with the ground truth depth.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+        Estimated depth, metres; NaN where there is no estimate.
+    truth_depth_m : ndarray, shape (H, W)
+        True depth in the same frame, metres; non-finite (NaN, or +inf for "no surface") where
+        there is no truth.
+    valid : ndarray of bool, shape (H, W), optional
+        Further restricts the compared pixels (e.g. a coverage mask or a region of interest).
+
+    Returns
+    -------
+    DepthErrors
+    """
+    est, ref, mask = _truth_mask("depth_m", depth_m, truth_depth_m, valid)
+    have = mask & np.isfinite(est)
+    err = est[have] - ref[have]
+    count = int(err.size)
+    nan = float("nan")
+    return DepthErrors(
+        mean_abs_m=float(np.mean(np.abs(err))) if count else nan,
+        rms_m=float(np.sqrt(np.mean(err**2))) if count else nan,
+        bias_m=float(np.mean(err)) if count else nan,
+        completeness=count / int(np.count_nonzero(mask)),
+        count=count,
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DisparityErrors:
+    """Disparity map errors against ground truth, Middlebury style.
+
+    Parameters
+    ----------
+    thresholds_px : tuple of float
+        The error thresholds, pixels.
+    bad_fractions : tuple of float
+        For each threshold, the fraction of truth-valid pixels whose estimate is missing or off by
+        more than the threshold.
+    mean_abs_px, rms_px : float
+        Mean absolute and RMS error over the pixels with both a truth and an estimate, pixels; NaN
+        if there is none.
+    completeness : float
+        Fraction of the truth-valid pixels that have an estimate.
+    count : int
+        Number of pixels with both a truth and an estimate.
+    """
+
+    thresholds_px: tuple[float, ...]
+    bad_fractions: tuple[float, ...]
+    mean_abs_px: float
+    rms_px: float
+    completeness: float
+    count: int
+
+    def bad(self, threshold_px: float) -> float:
+        """The bad-pixel fraction for one of :attr:`thresholds_px`."""
+        if threshold_px not in self.thresholds_px:
+            raise ParameterError(f"threshold_px must be one of {list(self.thresholds_px)}, got {threshold_px!r}")
+        return self.bad_fractions[self.thresholds_px.index(threshold_px)]
+
+
+def disparity_errors(
+    disparity_px: np.ndarray,
+    truth_px: np.ndarray,
+    *,
+    thresholds_px: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0),
+    valid: np.ndarray | None = None,
+) -> DisparityErrors:
+    """Compare a disparity map with the ground truth disparity (Middlebury bad-pixel rates).
+
+    Parameters
+    ----------
+    disparity_px : ndarray, shape (H, W)
+        Estimated disparity, pixels; NaN where there is no estimate (counted as bad).
+    truth_px : ndarray, shape (H, W)
+        True disparity, pixels; non-finite where there is no truth (not counted).
+    thresholds_px : tuple of float
+        Error thresholds, pixels, each > 0: a pixel is bad when ``|error| > threshold``.
+    valid : ndarray of bool, shape (H, W), optional
+        Further restricts the compared pixels.
+
+    Returns
+    -------
+    DisparityErrors
+    """
+    try:
+        thresholds = tuple(positive_float(f"thresholds_px[{i}]", t) for i, t in enumerate(thresholds_px))
+    except TypeError:
+        raise ParameterError(f"thresholds_px must be a sequence of positive numbers, got {thresholds_px!r}") from None
+    if not thresholds:
+        raise ParameterError("thresholds_px must not be empty")
+    est, ref, mask = _truth_mask("disparity_px", disparity_px, truth_px, valid)
+    total = int(np.count_nonzero(mask))
+    have = mask & np.isfinite(est)
+    err = np.abs(est[have] - ref[have])
+    count = int(err.size)
+    bad = tuple((total - int(np.count_nonzero(err <= t))) / total for t in thresholds)
+    nan = float("nan")
+    return DisparityErrors(
+        thresholds_px=thresholds,
+        bad_fractions=bad,
+        mean_abs_px=float(np.mean(err)) if count else nan,
+        rms_px=float(np.sqrt(np.mean(err**2))) if count else nan,
+        completeness=count / total,
+        count=count,
+    )

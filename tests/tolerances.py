@@ -378,3 +378,83 @@ LF_CORNER_RENDER_GAIN = 5.0
 PORT_RENDER_NORMAL_DEG = 0.2
 PORT_RENDER_DISTANCE_M = 0.75e-3
 PORT_RENDER_UNTILTED_DISTANCE_M = 2.5e-3
+
+# ----------------------------------------------------------------------------- stereo
+# lfrefract.stereo and the stereo metrics (tests/lfrefract/test_stereo.py, test_stereo_metrics.py).
+# Synthetic data: a rig of two pinholes (320 x 240 px, f = 400 / 420 px, 0.12 m baseline, the
+# right camera turned by 0.02 / -0.06 / 0.015 rad), smooth random textures (Gaussian-filtered
+# uniform noise, sigma 2 px in the images), rectified pairs built from a known disparity field.
+
+# Radians and metres; calibrate_stereo from noiseless corners of six views of a 9 x 6 board at
+# 0.6-0.9 m: OpenCV takes the corners as float32 (0.5 ulp = 1.5e-5 px at 300 px), which limits the
+# fit to 3.0e-8 rad and 2.4e-8 m measured over five board sets; the issue asked for ~1e-6.
+STEREO_CALIB_ROTATION_RAD = 1e-6
+STEREO_CALIB_TRANSLATION_M = 1e-6
+
+# Pixels; the RMS reprojection error of that fit is the float32 rounding of the corners:
+# 4.8e-6 to 5.5e-6 px measured. A left focal length 1 % off leaves 0.027 px (the board poses absorb
+# most of it).
+STEREO_CALIB_RMS_PX = 5e-5
+
+# Pixels; the rectification maps (float32, values up to 320 px: ulp 3e-5 px) sampled bilinearly
+# between pixel centres, against the exact rectifying homography: 6.1e-5 px measured (and
+# 1.5e-5 px for the left map at pixel centres). Rows of corresponding points agree to 1.6e-13 px
+# (FLOAT64_PIXEL_PX).
+RECTIFY_MAP_PX = 5e-4
+
+# Pixels RMS; ZNCC (9 px window, parabola refinement) on the slanted-plane pair
+# d = 20 + 0.03 x + 0.02 y px: 0.067-0.072 px measured over six textures (0.070-0.074 px on the
+# rectified rendered pair of the end-to-end test). The three-point parabola's own error
+# dominates: even an exact integer shift gives 0.066 px, because the windowed ZNCC curve is not
+# symmetric about its minimum. Integer disparities would give 0.29 px.
+ZNCC_SLANTED_RMS_PX = 0.1
+
+# Pixels; the largest single ZNCC error on that pair: 0.31-0.43 px measured (six textures).
+ZNCC_MAX_ERROR_PX = 0.5
+
+# Fraction of the matchable pixels (left window and the right windows of the neighbouring
+# candidates inside the images) with a ZNCC estimate: 0.995 measured.
+ZNCC_COMPLETENESS_MIN = 0.98
+
+# Pixels RMS; the same pair without sub-pixel refinement must be at least this far off
+# (0.291 px measured, 1/sqrt(12) = 0.289 for uniform rounding), or the refinement did nothing.
+ZNCC_INTEGER_RMS_MIN_PX = 0.2
+
+# Fractions of the 12 px band occluded in the right view (background at 12 px beside a
+# foreground strip at 24 px): invalidated with the left-right check 0.80-0.91 measured over four
+# texture pairs, without it 0.09-0.19 (only windows that lack a clear minimum drop out).
+ZNCC_OCCLUDED_INVALID_MIN = 0.7
+ZNCC_NO_CHECK_OCCLUDED_MAX = 0.4
+
+# Pixels RMS and fraction; OpenCV SGBM (5 px blocks, 8-bit input) on the slanted pair: 0.13-0.19 px
+# RMS with a few gross errors (up to 14 px), completeness 0.942 measured over six textures. Its
+# integer matching cost and 1/16 px output are coarser than the ZNCC path.
+SGBM_SLANTED_RMS_PX = 0.3
+SGBM_COMPLETENESS_MIN = 0.9
+
+# Fraction; left pixels whose true match lies in a NaN hole of the right image that SGBM leaves
+# without estimate: 0.985-1.0 measured (ZNCC: all of them). The rest found a wrong partner just
+# beside the hole that SGBM's left-right check let through.
+SGBM_NAN_MATCH_INVALID_MIN = 0.95
+
+# Degrees, metres, relative; end to end: both pinholes render a textured plane 0.9 m away tilted
+# about 17 deg (point-sampled, 1 mm texels blurred 4 texels), the pair is rectified, matched by
+# ZNCC, triangulated and the plane fitted by RANSAC. Measured over six textures: normal within
+# 0.0005-0.0061 deg, offset within 0.023 mm; plane RMSE 1.02-1.07 mm, 0.97 times the depth noise
+# predicted from the disparity RMS (Z^2 / (f B) * rms). A baseline 1 % off moves the offset by
+# 9 mm; points left in the rectified frame (no R1.T) tilt the plane by 5.1 deg.
+STEREO_PLANE_NORMAL_DEG = 0.05
+STEREO_PLANE_OFFSET_M = 0.1e-3
+STEREO_PLANE_RMSE_RELATIVE = 0.2
+
+# Degrees, metres, relative, fractions; fit_plane_ransac on 1400 points of a 0.5 m square plane
+# with 1 mm Gaussian noise along the normal plus 600 (30 %) uniform outliers in a 0.5 m cube,
+# threshold 4 mm. Measured over eight seeds: normal within 0.027 deg (expected scatter
+# sigma / (sqrt(N) * 0.14 m) = 0.011 deg), offset within 0.061 mm, inlier RMSE 0.995-1.023 times
+# the noise (a 4-sigma band truncates by 0.1 %; the 4-9 outliers inside the band add up to 2 %),
+# every true inlier kept, 0.7-1.5 % of the outliers kept (those in the band: 1.6 % expected).
+RANSAC_NORMAL_DEG = 0.1
+RANSAC_OFFSET_M = 0.2e-3
+RANSAC_RMSE_RELATIVE = 0.05
+RANSAC_INLIER_RECALL_MIN = 0.999
+RANSAC_OUTLIERS_KEPT_MAX = 0.04
