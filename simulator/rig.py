@@ -4,7 +4,8 @@ A rig file (TOML, ``scenes/rigs/``) holds a ``[wall]``, two or more ``[[camera]]
 usual ``[render]``, ``[[light]]`` and ``[[object]]`` tables of a scene. Everything is in one world
 frame (metres, OpenCV axes). The wall is a glass slab: its air-side face is the plane
 ``normal . X = distance_m`` (``normal`` a unit vector pointing into the water) and its water-side
-face lies ``thickness_m`` further along the normal. Each camera has a preset and a pose
+face lies ``thickness_m`` further along the normal. Each camera has a ``preset`` (or ``optics``, a
+camera table as :meth:`lfrefract.LightFieldCamera.from_dict` reads it) and a pose
 (``position_m``, ``rotation_xyz_deg``: camera to world); its port is the wall seen from that camera
 (:meth:`Wall.port_for`), so the cameras may be slanted against the wall and each sees its own
 tilted port, from the one wall.
@@ -149,8 +150,10 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
     cameras, names = [], set()
     for i, table in enumerate(tables):
         table = dict(table)
-        reject_unknown_keys(f"camera[{i}]", table, {"name", "preset", "position_m", "rotation_xyz_deg"})
-        require_keys(f"camera[{i}]", table, {"name", "preset"})
+        reject_unknown_keys(f"camera[{i}]", table, {"name", "preset", "optics", "position_m", "rotation_xyz_deg"})
+        require_keys(f"camera[{i}]", table, {"name"})
+        if ("preset" in table) == ("optics" in table):
+            raise ParameterError(f"camera[{i}] needs either preset or optics (a camera table), not both or neither")
         name = str(table["name"])
         if not name or not name.replace("-", "").replace("_", "").isalnum() or name in names:
             raise ParameterError(f"camera[{i}].name must be a unique plain name (letters, digits, - _), got {name!r}")
@@ -164,7 +167,10 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
             raise ParameterError(f"camera[{i}] ({name!r}): {exc}") from None
         scene_data = {
             "name": f"{data.get('name', Path(source).stem)}-{name}",
-            "camera": {"preset": table["preset"], "pose": pose.to_dict()},
+            "camera": {
+                **({"preset": table["preset"]} if "preset" in table else table["optics"]),
+                "pose": pose.to_dict(),
+            },
             "port": port.to_dict(),
             **{key: data[key] for key in ("render", "light", "object") if key in data},
         }

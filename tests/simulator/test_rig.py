@@ -68,10 +68,24 @@ def test_a_camera_in_the_water_is_refused():
 def test_bad_rigs_are_rejected_before_rendering(changes, message):
     with pytest.raises(ParameterError, match=message):
         parse_rig(_rig_data(**changes))
+    both = _rig_data()
+    both["camera"][0]["optics"] = {}
+    with pytest.raises(ParameterError, match="either preset or optics"):
+        parse_rig(both)
     twins = _rig_data()
     twins["camera"][1]["name"] = "left"
     with pytest.raises(ParameterError, match="unique"):
         parse_rig(twins)
+
+
+def test_a_camera_may_be_given_by_its_optics():
+    optics = load_rig("default").cameras[0].scene.camera.to_dict()
+    optics["focal_length_m"] = optics["lens_to_mla_m"] = 0.012
+    data = _rig_data()
+    data["camera"][1] = {k: v for k, v in data["camera"][1].items() if k != "preset"} | {"optics": optics}
+    rig = parse_rig(data)
+    assert rig.cameras[1].scene.camera.focal_length_m == 0.012
+    assert rig.cameras[0].scene.camera.focal_length_m == 0.006
 
 
 def test_relative_pose_maps_the_first_camera_frame_to_each_camera():
