@@ -1,4 +1,5 @@
-"""Underwater chessboard scenes for the corner tests (synthesis geometry, approximation baseline).
+"""Underwater chessboard scenes for the corner tests (synthesis geometry, approximation baseline,
+port calibration from renders).
 
 The tiny preset's refraction-free image (92 x 69 px) is too small for a board the detector finds
 reliably, so these tests use :data:`CAMERA`, the tiny preset with twice its focal length and
