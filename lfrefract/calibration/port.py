@@ -217,6 +217,8 @@ def board_view_from_light_field(
     offsets = [tuple(finite_vector("offsets_px[i]", o, 2)) for o in offsets_px]
     if not offsets or offsets[0] != (0.0, 0.0):
         raise ParameterError(f"offsets_px must start with (0, 0), the central view; got {offsets_px!r}")
+    if method == "light-field" and len(offsets) > 1:
+        raise ParameterError(f"offsets_px={offsets_px!r} is for method='views'; the light field uses every view")
     fraction = positive_float("aperture_fraction", aperture_fraction)
     if fraction > 1.0:
         raise ParameterError(f"aperture_fraction must be in (0, 1], got {aperture_fraction!r}")

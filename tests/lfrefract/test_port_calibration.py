@@ -168,6 +168,12 @@ def test_light_field_board_views_start_from_the_central_view():
     raw = np.zeros((tiny.sensor.height_px, tiny.sensor.width_px), dtype=np.float32)
     kwargs = {"pattern": (6, 4), "square_size_m": 0.01, "view": virtual_camera_for(tiny)}
     with pytest.raises(ParameterError, match="must start with"):
-        board_view_from_light_field(tiny, raw, offsets_px=((2.0, 0.0), (0.0, 0.0)), **kwargs)
+        board_view_from_light_field(tiny, raw, method="views", offsets_px=((2.0, 0.0), (0.0, 0.0)), **kwargs)
+    with pytest.raises(ParameterError, match="is for method='views'"):
+        board_view_from_light_field(tiny, raw, offsets_px=((0.0, 0.0), (2.0, 0.0)), **kwargs)
+    with pytest.raises(ParameterError, match="method"):
+        board_view_from_light_field(tiny, raw, method="best", **kwargs)
+    with pytest.raises(ParameterError, match="aperture_fraction"):
+        board_view_from_light_field(tiny, raw, aperture_fraction=1.5, **kwargs)
     with pytest.raises(ParameterError, match="blank"):  # a black capture is refused by the detector
         board_view_from_light_field(tiny, raw, **kwargs)
