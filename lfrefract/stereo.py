@@ -163,7 +163,7 @@ class StereoCalibration:
 def calibrate_stereo(
     corners_left: Sequence[np.ndarray],
     corners_right: Sequence[np.ndarray],
-    board_points_m: np.ndarray,
+    board_points_m: np.ndarray | Sequence[np.ndarray],
     *,
     left: PinholeCamera,
     right: PinholeCamera,
@@ -179,8 +179,9 @@ def calibrate_stereo(
     corners_left, corners_right : sequence of ndarray, each shape (N, 2)
         Detected corners of the same views, pixels, in the order of ``board_points_m``. At least 3
         views; both sequences equally long.
-    board_points_m : ndarray, shape (N, 2)
-        Board corner positions in the board plane (z = 0), metres. N >= 4.
+    board_points_m : ndarray, shape (N, 2), or sequence of them
+        Board corner positions in the board plane (z = 0), metres, N >= 4: one board for every
+        view, or one array per view (boards of different sizes).
     left, right : PinholeCamera
         Intrinsics of the two images, held fixed.
 
@@ -196,9 +197,17 @@ def calibrate_stereo(
     """
     _pinhole("left", left)
     _pinhole("right", right)
-    board = as_points("board_points_m", board_points_m, 2)
-    if len(board) < 4:
-        raise ParameterError(f"board_points_m must hold at least 4 points, got {len(board)}")
+    try:
+        per_view = np.asarray(board_points_m, dtype=np.float64).ndim != 2
+    except (TypeError, ValueError):  # ragged: boards of different sizes
+        per_view = True
+    if per_view:
+        boards = [as_points(f"board_points_m[{i}]", b, 2) for i, b in enumerate(board_points_m)]
+    else:
+        boards = [as_points("board_points_m", board_points_m, 2)]
+    for i, b in enumerate(boards):
+        if len(b) < 4:
+            raise ParameterError(f"board_points_m[{i}] must hold at least 4 points, got {len(b)}")
     views = []
     for name, corners in (("corners_left", corners_left), ("corners_right", corners_right)):
         if isinstance(corners, np.ndarray) and corners.ndim != 3:
@@ -208,8 +217,13 @@ def calibrate_stereo(
         except TypeError:
             raise ParameterError(f"{name} must be a sequence of (N, 2) arrays, got {corners!r}") from None
         checked = []
+        if per_view and len(items) != len(boards):
+            raise ParameterError(
+                f"{name} must hold one view per board_points_m entry ({len(boards)}), got {len(items)}"
+            )
         for i, c in enumerate(items):
             pts = as_points(f"{name}[{i}]", c, 2)
+            board = boards[i if per_view else 0]
             if len(pts) != len(board):
                 raise ParameterError(
                     f"{name}[{i}] must have one row per board point ({len(board)}), got shape {pts.shape}"
@@ -222,10 +236,12 @@ def calibrate_stereo(
         )
     if len(views[0]) < 3:
         raise ParameterError(f"corners_left must hold at least 3 views, got {len(views[0])}")
-    object_points = np.concatenate([board, np.zeros((len(board), 1))], axis=1).reshape(-1, 1, 3).astype(np.float32)
+    object_points = [
+        np.concatenate([b, np.zeros((len(b), 1))], axis=1).reshape(-1, 1, 3).astype(np.float32) for b in boards
+    ]
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
     rms, _, _, _, _, rotation, translation, _, _ = cv2.stereoCalibrate(
-        [object_points] * len(views[0]),
+        object_points if per_view else object_points * len(views[0]),
         views[0],
         views[1],
         left.K,

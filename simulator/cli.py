@@ -2,6 +2,7 @@
 
     lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--seed S] [--overwrite]
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
+    lfsim experiment NAME --out DIR [--scale tiny|illum] [--overwrite]
     lfsim scenes
 
 SCENE is a TOML file or the name of an embedded scene (``default``, ``white``); without it the
@@ -58,8 +59,24 @@ def _parser() -> argparse.ArgumentParser:
     rig.add_argument("--overwrite", action="store_true", help="replace an earlier rig output")
     rig.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     rig.add_argument("--quiet", action="store_true", help="no progress bars")
+    exp = sub.add_parser("experiment", help="run one of the paper's experiments (table, figures)")
+    exp.add_argument("name", help="experiment name (see docs/experiments.md)")
+    exp.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
+    exp.add_argument("--scale", choices=["tiny", "illum"], default="tiny", help="problem size (default: tiny)")
+    exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
+    exp.add_argument("--quiet", action="store_true", help="no progress bars")
     sub.add_parser("scenes", help="list the embedded scenes and rigs")
     return parser
+
+
+def _experiment(args: argparse.Namespace) -> int:
+    from simulator.experiments import run_experiment
+
+    result = run_experiment(args.name, args.out, scale=args.scale, progress=not args.quiet, overwrite=args.overwrite)
+    if result.summary:
+        print(result.summary)
+    print(f"wrote {args.out}/: table.csv table.md meta.json {' '.join(p.name for p in result.figures)}")
+    return 0
 
 
 def _rig(args: argparse.Namespace) -> int:
@@ -95,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "rig":
             return _rig(args)
+        if args.command == "experiment":
+            return _experiment(args)
         config = load_scene(_scene_path(args.scene))
         changes = {}
         if args.camera:

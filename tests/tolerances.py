@@ -466,3 +466,100 @@ RANSAC_OUTLIERS_KEPT_MAX = 0.04
 # measured (the rounding to the nearest pixel). Swapped poses give 0.076, the left pose for both
 # cameras 0.037.
 RIG_DEPTH_AGREEMENT_RELATIVE = 0.01
+
+# ----------------------------------------------------------------------------- averaging experiment
+# simulator/experiments/averaging.py at scale tiny (default scene, tiny camera, 16 spp at seeds 0
+# and 1, ideal image 2 x 1024 spp), measured inside the exact coverage (434 px). "Seed pairs": the
+# same measures over raw seeds (0, 1), (2, 3), (4, 5) against ideal seeds 100 and 101.
+
+# dB; PSNR at k = 8 above k = 1 and above k = 64 (paper Fig. 9: 1 is noisy, 64 blurred): 1.65 and
+# 1.83 dB measured (seed pairs 1.64-1.88 and 1.69-1.82).
+AVERAGING_PSNR_GAIN_K8_DB = 1.0
+
+# SSIM at k = 8 above k = 1 and above k = 64: 0.039 and 0.038 measured (seed pairs 0.037-0.050 and
+# 0.033-0.037).
+AVERAGING_SSIM_GAIN_K8 = 0.02
+
+# Sharpness ratio (cross-seed gradient amplitude over the ideal image's); every k below this: 0.80 at
+# most measured (k = 2; seed pairs up to 0.83): the light field samples once per microlens (about two
+# output pixels), so even k = 1 is softer than the ideal image.
+AVERAGING_SHARPNESS_MAX = 0.9
+
+# Sharpness ratio drop from k = 8 to k = 64: 0.17 measured (0.78 -> 0.61; seed pairs 0.17-0.18).
+AVERAGING_SHARPNESS_DROP_K64 = 0.1
+
+# Sharpness ratio drop per doubling of k from k = 8 on: 0.032, 0.062, 0.076 measured (k = 1 to 8 is
+# flat within 0.03, not asserted).
+AVERAGING_SHARPNESS_STEP_MIN = 0.01
+
+# dB; PSNR of the seed-independent error at k = 8 against k = 1 (averaging 8 nearby rays costs no
+# structure): 0.06 dB apart measured (seed pairs 0.06-0.15).
+AVERAGING_NOISE_FREE_PSNR_K8_VS_K1_DB = 0.5
+
+# dB; PSNR of the seed-independent error lost from k = 8 to k = 64 (blur): 2.09 dB measured (seed
+# pairs 2.05-2.11).
+AVERAGING_NOISE_FREE_PSNR_LOSS_K64_DB = 1.0
+
+# Relative; render noise at k over k = 1 against sqrt(raw pixels averaged at k = 1 / at k)
+# (independent raw pixels; the 1/D weights are unequal, which would make the noise fall more slowly):
+# within 3.6 % for every k measured (0.158 against 0.156 at k = 64).
+AVERAGING_NOISE_SQRT_LAW_RELATIVE = 0.15
+
+# Sharpness ratio, absolute; the cross-seed measure on a synthetic 128 x 128 texture (Gaussian noise
+# blurred 1.5 px) with noise of half its std: 1.0 expected, 0.978 measured (0.98-1.02 over five
+# seeds; the single-seed ratio reads 1.83); blurred by 1 px, 0.726 against the noise-free 0.706
+# (within 0.034 over five seeds). Sampling error of 16 k pixel pairs.
+AVERAGING_MEASURE_SHARPNESS = 0.05
+
+# Relative; noise_rel of that texture, true 0.5: 0.503 measured (within 1 % over five seeds).
+AVERAGING_MEASURE_NOISE_RELATIVE = 0.02
+
+# dB; noise_free_psnr of the blurred noisy texture against the noise-free error's PSNR: 12.67 against
+# 12.64 dB measured (within 0.41 dB over five seeds; with the noise it would read about 5.2 dB).
+AVERAGING_MEASURE_PSNR_DB = 0.5
+
+# ----------------------------------------------------------------------------- fov experiment
+# simulator/experiments/fov.py at scale tiny (tiny camera, port 12 mm away, 4 mm glass, tilts 0-40 deg
+# about x in 2.5 deg steps, f/2.2, 2.8, 4, 5.6).
+
+# Pixels; exact_mask against build_warp_map(...).exact on the tiny camera (0, 15, 30 deg; 15 deg at
+# f/4; 10 / -20 deg at f/2.8): 0 measured. Both evaluate the same floating-point expressions on the
+# same sub-pixel rays, so any difference is a wrong mask, not round-off.
+FOV_MASK_MISMATCH_MAX_PX = 0
+
+# Fraction of the image; how much the exact share may rise from one tilt to a larger one: the exact
+# cone keeps its angular size while tilt moves it off axis, where a pinhole image spends more pixels
+# per steradian (1 / cos^3: +4.7 % at 10 deg). 0.0022 measured (f/5.6, 0.0536 at 5 deg to 0.0558 at
+# 10 deg; f/4 0.0013; f/2.2 and f/2.8 never rise); falls to 0 by 40 deg at every f-number.
+FOV_SHARE_RISE_MAX = 0.005
+
+# Pixel angles (degrees of one pixel at the principal point); perfect_fov_h/v_deg of a pixel mask of a
+# known cone (half angles 5-12 deg, on and 8 deg off axis) against its apex angle: the end pixels'
+# centres lie up to one pixel inside the cone and their outer edges half a pixel beyond, so the
+# bound is 1 px; up to 0.99 px measured.
+FOV_RUN_PX = 1.0 + 1e-6
+
+# Pixel angles; perfect_fov_equiv_deg (solid angle of the mask as a cone) of those masks: pixels cut
+# by the cone's edge count whole or not at all, which averages out: up to 0.07 px measured.
+FOV_EQUIV_CONE_PX = 0.5
+
+# Pixel angles, below the apex angle only; perfect_cone_centred_deg of the centred masks: the nearest
+# excluded pixel centre can lie one pixel beyond the cone along an axis and its square reaches half a
+# pixel back, 1.5 px on each side: bound 3 px, 1.26-1.31 px measured.
+FOV_CENTRED_CONE_PX = 3.0
+
+# ----------------------------------------------------------------------------- planes experiment
+# simulator/experiments/planes.py at the tiny scale (tests/simulator/test_experiment_planes.py).
+# Ratio; the proposed method's plane-fit RMSE over the ideal images' at each depth: issue 5's bound.
+# Measured 0.93 / 0.90 / 0.90 at 0.3 / 0.45 / 0.6 m (the synthesis averages k = 32 rays, so its
+# images are a little smoother for the matcher than the 16 spp ideal renders).
+PLANES_PROPOSED_OVER_IDEAL_RMSE = 1.3
+
+# Relative to the depth; the proposed method's mean distance of the inlier points to the true
+# plane: 1.9 / 2.4 / 2.7 mm measured (0.64 / 0.53 / 0.45 %); the ideal images give 0.9 / 1.2 /
+# 1.8 mm, the rest is the rig calibration (12 boards, 0.12 px RMS) and the matcher.
+PLANES_PROPOSED_TRUTH_ERROR_RELATIVE = 0.01
+
+# Ratio; the approximation calibrated at 0.3 m: its error at 0.6 m over its error at 0.3 m (7.1
+# measured: 8.2 against 1.15 mm), and over the proposed method's at 0.6 m (3.0). Issue 5's bound.
+PLANES_APPROX_GROWTH_MIN = 2.0

@@ -470,7 +470,7 @@ def test_presets_focus_at_infinity_and_do_not_overlap(name):
 
 def test_unknown_preset():
     with pytest.raises(
-        ParameterError, match=re.escape("camera preset must be one of ['illum', 'f01', 'tiny'], got 'x3'")
+        ParameterError, match=re.escape("camera preset must be one of ['illum', 'f01', 'tiny', 'tiny-2x'], got 'x3'")
     ):
         camera_preset("x3")
 

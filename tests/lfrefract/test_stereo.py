@@ -479,3 +479,28 @@ def test_bad_input_names_the_parameter():
     for call, message in cases:
         with pytest.raises(ParameterError, match=message):
             call()
+
+
+def test_calibrate_stereo_takes_one_board_per_view():
+    """Boards of two sizes: each view with its own board points gives the exact rig; the wrong size
+    for half of them does not."""
+    left, right, board = board_views(3)
+    # Three more views, of a board with half-size squares at about half the distance.
+    gx, gy = np.meshgrid(np.arange(9), np.arange(6))
+    half = np.stack([gx.ravel(), gy.ravel()], axis=1) * 0.0125
+    rng = np.random.default_rng(5)
+    views_l, views_r = list(left), list(right)
+    for _ in range(3):
+        rot = rotation_from_euler_xyz(tuple(rng.uniform(-0.4, 0.4, 3)))
+        centre = np.array([0.06 + rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02), rng.uniform(0.3, 0.45)])
+        points = np.concatenate([half - half.mean(axis=0), np.zeros((len(half), 1))], axis=1) @ rot.T + centre
+        views_l.append(LEFT.project(points))
+        views_r.append(RIGHT.project(points @ RIG_ROTATION.T + RIG_TRANSLATION_M))
+    boards = [board] * 3 + [half] * 3
+    cal = calibrate_stereo(views_l, views_r, boards, left=LEFT, right=RIGHT)
+    assert rotation_angle_rad(cal.rotation, RIG_ROTATION) <= STEREO_CALIB_ROTATION_RAD
+    assert np.max(np.abs(cal.translation_m - RIG_TRANSLATION_M)) <= STEREO_CALIB_TRANSLATION_M
+    wrong = calibrate_stereo(views_l, views_r, [board] * 6, left=LEFT, right=RIGHT)
+    assert wrong.rms_px > 100 * STEREO_CALIB_RMS_PX
+    with pytest.raises(ParameterError, match="one view per board_points_m"):
+        calibrate_stereo(views_l, views_r, boards[:5], left=LEFT, right=RIGHT)

@@ -2,9 +2,8 @@
 port calibration from renders).
 
 The tiny preset's refraction-free image (92 x 69 px) is too small for a board the detector finds
-reliably, so these tests use :data:`CAMERA`, the tiny preset with twice its focal length and
-sensor: the same 44 deg field, MLA and f-numbers, four times the microlenses (7655). Its
-refraction-free image (2 px per lens) is 188 x 141 px with f = 240 px.
+reliably, so these tests use :data:`CAMERA`, the ``tiny-2x`` preset: the tiny camera with twice its
+focal length and sensor. Its refraction-free image (2 px per lens) is 188 x 141 px with f = 240 px.
 """
 
 from __future__ import annotations
@@ -32,14 +31,8 @@ from simulator.job import render_raw
 from simulator.scene import check_geometry
 from tests.simulator.scenes import chessboard_corners_world, scene
 
-CAMERA = {
-    "name": "tiny-2x",
-    "focal_length_m": 0.012,
-    "lens_to_mla_m": 0.012,
-    "f_number": 2.2,
-    "mla": {"grid": "hex", "pitch_m": 100e-6, "focal_length_m": 200e-6, "rotation_rad": 0.0, "offset_m": [0.0, 0.0]},
-    "sensor": {"width_px": 960, "height_px": 720, "pixel_pitch_m": 10e-6},
-}
+#: The tiny preset at twice its size (the "tiny-2x" preset), as a scene's camera.
+CAMERA = "tiny-2x"
 
 #: Squares (columns, rows) of the test board; its detector pattern is one less each way.
 SQUARES = (7, 5)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfrefract import LightFieldCamera
+from lfrefract import camera_preset
 from lfrefract.calibration import calibrate_mla
 from lfrefract.synthesis import build_warp_map
 from simulator.config import RenderSettings, embedded_scenes, load_scene
@@ -26,7 +26,7 @@ DIRECTION = (0.16, -0.125)  # inside the exact coverage behind this port (test_s
 
 
 def test_synthesis_with_the_calibrated_mla_and_port_matches_ground_truth_parameters(mi):
-    camera = LightFieldCamera.from_dict(cb.CAMERA)
+    camera = camera_preset(cb.CAMERA)
     white_scene = load_scene(embedded_scenes()["white"]).with_overrides(
         camera=camera, render=RenderSettings(spp=16, seed=3)
     )

@@ -1,0 +1,157 @@
+"""Experiment ``fov`` (paper section 6): exact share and perfect field of view, tiny scale."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import itertools
+import json
+import math
+
+import numpy as np
+import pytest
+
+from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
+from lfrefract.synthesis import build_warp_map
+from simulator.experiments import run_experiment
+from simulator.experiments.fov import exact_mask, fov_measures, original_fov
+from tests.tolerances import (
+    FLOAT64_ANGLE_DEG,
+    FOV_CENTRED_CONE_PX,
+    FOV_EQUIV_CONE_PX,
+    FOV_MASK_MISMATCH_MAX_PX,
+    FOV_RUN_PX,
+    FOV_SHARE_RISE_MAX,
+)
+
+FIGURES = ("fov_exact_share.png", "fov_perfect_fov.png", "fov_masks.png")
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("experiment") / "fov"
+    result = run_experiment("fov", out, scale="tiny", progress=False)
+    with open(out / "table.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return out, result, rows
+
+
+def _series(rows, series):
+    return [r for r in rows if r["series"] == series]
+
+
+def test_files_and_table(tiny_run):
+    out, result, rows = tiny_run
+    assert sorted(p.name for p in out.iterdir()) == sorted(["meta.json", "table.csv", "table.md", *FIGURES])
+    assert [p.name for p in result.figures] == list(FIGURES)
+    for name in FIGURES:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["kind"] == "lfsim.experiment"
+    assert (meta["experiment"], meta["scale"]) == ("fov", "tiny")
+    assert meta["parameters"]["camera"]["name"] == "tiny"
+    assert len(rows) == len(result.rows)
+    tilts = {float(r["tilt_deg"]) for r in _series(rows, "tilt")}
+    f_numbers = {float(r["f_number"]) for r in _series(rows, "tilt")}
+    assert min(tilts) == 0.0
+    assert max(tilts) >= 30.0
+    assert min(f_numbers) == camera_preset("tiny").f_number
+    assert len(f_numbers) >= 3
+    assert len(_series(rows, "tilt")) == len(tilts) * len(f_numbers)
+    assert "exact" in result.summary
+
+
+def test_exact_share_against_tilt(tiny_run):
+    """The exact region is the cone of lines of sight about the port normal: tilt moves it out of the
+    image. Its pixel share may rise a little while it is still inside (a cone off axis covers more
+    pixels of a pinhole image), never by more than FOV_SHARE_RISE_MAX, and at the preset f-number,
+    whose region fills the image's water field, it falls at every step until it is gone."""
+    _, _, rows = tiny_run
+    tilt_rows = _series(rows, "tilt")
+    for n in sorted({float(r["f_number"]) for r in tilt_rows}):
+        share = [float(r["exact_share"]) for r in tilt_rows if float(r["f_number"]) == n]
+        for i in range(len(share) - 1):
+            assert max(share[i + 1 :]) <= share[i] + FOV_SHARE_RISE_MAX
+        assert share[0] > 0.0
+        assert share[-1] == 0.0  # 40 deg: the cone has left the image
+    preset = [float(r["exact_share"]) for r in tilt_rows if float(r["f_number"]) == camera_preset("tiny").f_number]
+    positive = [s for s in preset if s > 0]
+    assert all(b < a for a, b in itertools.pairwise(positive))
+    assert len(positive) >= 10
+
+
+def test_exact_share_against_f_number(tiny_run):
+    """A larger f-number is a smaller usable aperture: the pixels exact at it are a subset of those
+    exact at a smaller one (same necessary rays, smaller disc), so share and perfect FOV never grow."""
+    _, _, rows = tiny_run
+    tilt_rows = _series(rows, "tilt")
+    for tilt in sorted({float(r["tilt_deg"]) for r in tilt_rows}):
+        sel = sorted((r for r in tilt_rows if float(r["tilt_deg"]) == tilt), key=lambda r: float(r["f_number"]))
+        for key in ("exact_share", "perfect_fov_h_deg", "perfect_fov_v_deg", "perfect_fov_equiv_deg"):
+            values = [float(r[key]) for r in sel]
+            assert all(b <= a for a, b in itertools.pairwise(values)), (tilt, key, values)
+        radii = [float(r["usable_aperture_radius_mm"]) for r in sel]
+        assert all(b < a for a, b in itertools.pairwise(radii))
+    untilted = sorted((r for r in tilt_rows if float(r["tilt_deg"]) == 0.0), key=lambda r: float(r["f_number"]))
+    untilted = [float(r["exact_share"]) for r in untilted]
+    assert all(b < a for a, b in itertools.pairwise(untilted))
+
+
+@pytest.mark.parametrize(
+    ("tilt_x_deg", "tilt_y_deg", "f_number"),
+    [(0.0, 0.0, None), (15.0, 0.0, None), (30.0, 0.0, None), (15.0, 0.0, 4.0), (10.0, -20.0, 2.8)],
+)
+def test_mask_agrees_with_warp_map(tilt_x_deg, tilt_y_deg, f_number):
+    camera = camera_preset("tiny")
+    if f_number is not None:
+        camera = dataclasses.replace(camera, f_number=f_number)
+    port = FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004, tilt_x_deg=tilt_x_deg, tilt_y_deg=tilt_y_deg)
+    expected = build_warp_map(camera, port).exact
+    mask = exact_mask(camera, port)
+    assert mask.shape == expected.shape
+    assert 0 < expected.sum() < expected.size  # a boundary to agree on
+    assert np.count_nonzero(mask != expected) <= FOV_MASK_MISMATCH_MAX_PX
+
+
+def test_measures_of_a_known_cone():
+    """Masks of the pixels whose line of sight lies within a cone of known apex angle."""
+    output = virtual_camera_for(camera_preset("tiny"))
+    px_deg = math.degrees(1.0 / output.focal_px)  # one pixel at the principal point
+    vv, uu = np.mgrid[0 : output.height_px, 0 : output.width_px]
+    rays = np.stack(
+        [(uu - output.cx_px) / output.focal_px, (vv - output.cy_px) / output.focal_px, np.ones(uu.shape)], -1
+    )
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    for half_deg, off_axis_deg in [(5.0, 0.0), (8.0, 0.0), (12.0, 0.0), (6.0, 8.0)]:
+        axis = np.array([math.tan(math.radians(off_axis_deg)), 0.0, 1.0])
+        mask = np.degrees(np.arccos(np.clip(rays @ (axis / np.linalg.norm(axis)), -1, 1))) <= half_deg
+        m = fov_measures(mask, output)
+        full = 2 * half_deg
+        assert m["perfect_fov_h_deg"] == pytest.approx(full, abs=FOV_RUN_PX * px_deg)
+        assert m["perfect_fov_v_deg"] == pytest.approx(full, abs=FOV_RUN_PX * px_deg)
+        assert m["perfect_fov_equiv_deg"] == pytest.approx(full, abs=FOV_EQUIV_CONE_PX * px_deg)
+        if off_axis_deg == 0.0:
+            assert full - FOV_CENTRED_CONE_PX * px_deg <= m["perfect_cone_centred_deg"] <= full
+        else:
+            assert m["perfect_cone_centred_deg"] == 0.0  # the principal point is outside the cone
+    assert fov_measures(np.zeros(mask.shape, bool), output)["perfect_fov_h_deg"] == 0.0
+
+
+def test_original_fov():
+    """In air the image's edges; in the water, through an untilted port, Snell's law (parallel faces:
+    the glass does not change the final angle)."""
+    output = virtual_camera_for(camera_preset("tiny"))
+    fov = original_fov(output, FlatPort.from_degrees(distance_m=0.01, thickness_m=0.003, n_water=1.333))
+    half_h = math.atan(output.width_px / 2 / output.focal_px)
+    half_v = math.atan(output.height_px / 2 / output.focal_px)
+    assert fov["original_fov_h_deg"] == pytest.approx(2 * math.degrees(half_h), abs=FLOAT64_ANGLE_DEG)
+    assert fov["original_fov_v_deg"] == pytest.approx(2 * math.degrees(half_v), abs=FLOAT64_ANGLE_DEG)
+    for key, half in (("original_fov_water_h_deg", half_h), ("original_fov_water_v_deg", half_v)):
+        assert fov[key] == pytest.approx(2 * math.degrees(math.asin(math.sin(half) / 1.333)), abs=FLOAT64_ANGLE_DEG)
+    assert fov["original_fov_equiv_deg"] < fov["original_fov_h_deg"]
+
+
+def test_unknown_scale(tmp_path):
+    with pytest.raises(ParameterError, match="scale"):
+        run_experiment("fov", tmp_path / "fov", scale="huge", progress=False)
+    assert not (tmp_path / "fov").exists()
