@@ -13,6 +13,6 @@ def test_ci_runs_the_readme_test_command():
     assert ci_lines[0] in (ROOT / "README.md").read_text()
 
 
-def test_readme_main_job_command_renders_the_default_scene():
+def test_readme_main_job_command_runs_the_demo():
     readme = (ROOT / "README.md").read_text()
-    assert "pip install -q -e '.[sim]' && .venv/bin/lfsim render --out out/default" in readme
+    assert "python3 -m venv .venv && .venv/bin/pip install -q -e '.[sim]' && .venv/bin/lfsim demo\n" in readme

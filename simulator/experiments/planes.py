@@ -25,22 +25,25 @@ and triangulated into the left camera's frame. Measured per method and depth:
 from __future__ import annotations
 
 import math
+import re
 import tempfile
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from lfrefract import Pose, virtual_camera_for
 from lfrefract.calibration.approx import detect_chessboard
-from lfrefract.io import read_exr, read_json, write_json
+from lfrefract.io import read_exr, read_json, write_json, write_ply
 from lfrefract.methods import CalibrationViews, build_projector
 from lfrefract.metrics import fit_plane_ransac
-from lfrefract.stereo import calibrate_stereo, disparity_to_points, rectify, zncc_disparity
+from lfrefract.stereo import calibrate_stereo, disparity_to_depth, disparity_to_points, rectify, zncc_disparity
 from lfrefract.synthesis import build_warp_map
 from simulator.assets import chessboard_inner_corners
 from simulator.experiments import ExperimentResult, check_scale, register
-from simulator.rig import RigConfig, parse_rig, render_rig
+from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
 
 __all__ = ["METHOD_NAMES", "PlanesSetup", "run_planes", "setup_for"]
 
@@ -54,28 +57,20 @@ class PlanesSetup:
 
     Attributes
     ----------
-    optics : dict or str
-        Camera table (or preset name) of both cameras.
-    baseline_m, toe_in_deg : float
-        Distance between the cameras and how far each is turned inwards.
-    wall_tilt_deg, wall_distance_m, wall_thickness_m : float
-        The wall: normal turned up by the tilt, its air-side face this far from the rig centre.
+    rig : str
+        The embedded rig (``scenes/rigs/``) whose wall and cameras are used; its objects, lights and
+        render settings are replaced by the experiment's.
     plane_depths_m : (float, float, float)
         Near, medium and far plane (world z of its centre).
     calibration_depths_m : (float, float)
-        Near and far chessboard depths (approximation baseline; the far set also calibrates the rig).
+        Near and far chessboard depths (the approximation baseline's two calibrations).
     px_per_square : float
         Chessboard squares in the views at their depth, pixels (about).
     spp : int
         Samples per pixel.
     """
 
-    optics: dict | str
-    baseline_m: float
-    toe_in_deg: float
-    wall_tilt_deg: float
-    wall_distance_m: float
-    wall_thickness_m: float
+    rig: str
     plane_depths_m: tuple[float, float, float]
     calibration_depths_m: tuple[float, float]
     px_per_square: float
@@ -83,32 +78,13 @@ class PlanesSetup:
 
 
 def setup_for(scale: str) -> PlanesSetup:
-    """The setup of ``scale`` (``tiny``: the tiny camera at twice its size; ``illum``: the Illum)."""
-    check_scale(scale)
-    if scale == "tiny":
+    """The setup of ``scale``: ``tiny``, the default rig (two tiny-2x cameras); ``illum``, the Illum rig."""
+    if check_scale(scale) == "tiny":
         return PlanesSetup(
-            optics="tiny-2x",
-            baseline_m=0.06,
-            toe_in_deg=3.0,
-            wall_tilt_deg=20.0,
-            wall_distance_m=0.015,
-            wall_thickness_m=0.004,
-            plane_depths_m=(0.3, 0.45, 0.6),
-            calibration_depths_m=(0.3, 0.6),
-            px_per_square=10.0,
-            spp=16,
+            rig="default", plane_depths_m=(0.3, 0.45, 0.6), calibration_depths_m=(0.3, 0.6), px_per_square=10.0, spp=16
         )
     return PlanesSetup(
-        optics="illum",
-        baseline_m=0.08,
-        toe_in_deg=3.0,
-        wall_tilt_deg=20.0,
-        wall_distance_m=0.06,
-        wall_thickness_m=0.005,
-        plane_depths_m=(0.4, 0.7, 1.0),
-        calibration_depths_m=(0.4, 1.0),
-        px_per_square=30.0,
-        spp=8,
+        rig="illum", plane_depths_m=(0.4, 0.7, 1.0), calibration_depths_m=(0.4, 1.0), px_per_square=30.0, spp=8
     )
 
 
@@ -124,24 +100,10 @@ _LIGHTS = [
 
 
 def _rig_data(setup: PlanesSetup, objects: list[dict]) -> dict:
-    tilt = math.radians(setup.wall_tilt_deg)
-    half = setup.baseline_m / 2
-    optics = {"preset": setup.optics} if isinstance(setup.optics, str) else {"optics": setup.optics}
-    return {
-        "name": "planes",
-        "wall": {
-            "normal": [0.0, -math.sin(tilt), math.cos(tilt)],
-            "distance_m": setup.wall_distance_m,
-            "thickness_m": setup.wall_thickness_m,
-        },
-        "camera": [
-            {"name": "left", **optics, "position_m": [-half, 0.0, 0.0], "rotation_xyz_deg": [0, setup.toe_in_deg, 0]},
-            {"name": "right", **optics, "position_m": [half, 0.0, 0.0], "rotation_xyz_deg": [0, -setup.toe_in_deg, 0]},
-        ],
-        "render": {"spp": setup.spp, "seed": 0},
-        "light": _LIGHTS,
-        "object": objects,
-    }
+    """The rig file's wall and cameras with the experiment's lights, render settings and ``objects``."""
+    data = tomllib.loads(embedded_rigs()[setup.rig].read_text())
+    data.update(name=f"planes-{setup.rig}", render={"spp": setup.spp, "seed": 0}, light=_LIGHTS, object=objects)
+    return data
 
 
 def _aim(rig: RigConfig, depth_m: float) -> np.ndarray:
@@ -234,12 +196,18 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 
 def run_planes(
-    out_dir: Path, *, scale: str = "tiny", progress: bool = True, renders_dir: Path | None = None
+    out_dir: Path,
+    *,
+    scale: str = "tiny",
+    progress: bool = True,
+    renders_dir: Path | None = None,
+    write_clouds: bool = False,
 ) -> ExperimentResult:
     """Run the experiment (see the module docstring); figures go to ``out_dir``.
 
     ``renders_dir``: keep the rig renders there and reuse those that match on a later run
-    (default: a temporary directory, deleted).
+    (default: a temporary directory, deleted). ``write_clouds``: also write each method's point
+    cloud of the medium plane, ``cloud_<method>.ply`` (left camera frame, metres, coloured).
     """
     setup = setup_for(scale)
     base = parse_rig(_rig_data(setup, []))
@@ -248,15 +216,17 @@ def run_planes(
     near, far = setup.calibration_depths_m
     with tempfile.TemporaryDirectory(prefix="lfsim-planes-") as tmp:
         work = Path(tmp) if renders_dir is None else Path(renders_dir)
+        jobs = [(f"board-{d}-{i}", d, [b]) for d in (near, far) for i, b in enumerate(_boards(base, setup, d))]
+        jobs += [(f"plane-{d}", d, [_plane(base, d, 7)]) for d in setup.plane_depths_m]
+        captures = {
+            name: _capture(setup, objects, work / name)
+            for name, _, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
+        }
         boards = {
-            depth: [
-                _capture(setup, [b], work / f"board-{depth}-{i}") for i, b in enumerate(_boards(base, setup, depth))
-            ]
-            for depth in (near, far)
+            d: [captures[name] for name, depth, _ in jobs if depth == d and name.startswith("board")]
+            for d in (near, far)
         }
-        planes = {
-            depth: _capture(setup, [_plane(base, depth, 7)], work / f"plane-{depth}") for depth in setup.plane_depths_m
-        }
+        planes = {d: captures[f"plane-{d}"] for d in setup.plane_depths_m}
     squares = {depth: _square_size_m(base, setup, depth) for depth in (near, far)}
     truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in setup.plane_depths_m}
 
@@ -278,7 +248,7 @@ def run_planes(
         )
 
     rows, disparities = [], {}
-    for method in METHOD_NAMES:
+    for method in tqdm(METHOD_NAMES, desc="methods (synthesis, stereo)", disable=not progress):
         if method == "ideal":
             outputs = {n: warps[n].output for n in names}
 
@@ -330,6 +300,11 @@ def run_planes(
             )
             disparities[(method, depth)] = disparity
             points = disparity_to_points(disparity, rect)
+            if write_clouds and depth == setup.plane_depths_m[1]:
+                finite = np.isfinite(disparity_to_depth(disparity, rect))
+                colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
+                cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply"
+                write_ply(cloud, points, (colours * 255).astype(np.uint8))
             normal, offset = truth[depth]
             rmse = truth_error = outliers = math.nan  # no match at all is a result too, not a crash
             if len(points) >= 3:
@@ -356,7 +331,7 @@ def run_planes(
         rows=tuple(rows),
         figures=figures,
         summary=_summary(rows, setup),
-        parameters={k: v for k, v in setup.__dict__.items() if k != "optics"} | {"optics": str(setup.optics)},
+        parameters=dict(setup.__dict__),
     )
 
 
