@@ -454,13 +454,25 @@ def load_scene(path: str | Path | None = None) -> SceneConfig:
         If the file is not valid TOML or describes an invalid scene.
     """
     p = default_scene_path() if path is None else Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"scene file {str(p)!r} does not exist")
+    return parse_scene(read_toml(p, "scene"), base_dir=p.parent, source=str(p))
+
+
+def read_toml(path: Path, what: str) -> dict:
+    """The TOML document at ``path`` as a dict; ``what`` names it in errors ("scene", "rig").
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    ParameterError
+        If it is not valid TOML.
+    """
+    if not path.is_file():
+        raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
     try:
-        data = tomllib.loads(p.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"scene file {str(p)!r} is not valid TOML: {exc}") from None
-    return parse_scene(data, base_dir=p.parent, source=str(p))
+        raise ParameterError(f"{what} file {str(path)!r} is not valid TOML: {exc}") from None
 
 
 def scenes_dir() -> Path:

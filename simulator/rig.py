@@ -19,7 +19,6 @@ stereo ground truth: the pose of every camera relative to the first
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +27,7 @@ import numpy as np
 from lfrefract import FlatPort, ParameterError, Pose
 from lfrefract._validate import finite_vector, positive_float, reject_unknown_keys, require_keys
 from lfrefract.io import staged_directory, write_json
-from simulator.config import SceneConfig, parse_scene, scenes_dir
+from simulator.config import SceneConfig, parse_scene, read_toml, scenes_dir
 
 __all__ = ["RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
 
@@ -202,12 +201,8 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
         path = embedded_rigs()["default" if path is None else str(path)]
     p = Path(path)
     if not p.is_file():
-        raise FileNotFoundError(f"rig file {str(p)!r} does not exist (embedded: {sorted(embedded_rigs())})")
-    try:
-        data = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"rig file {str(p)!r} is not valid TOML: {exc}") from None
-    return parse_rig(data, base_dir=p.parent, source=str(p))
+        raise FileNotFoundError(f"rig file {str(p)!r} does not exist (embedded rigs: {sorted(embedded_rigs())})")
+    return parse_rig(read_toml(p, "rig"), base_dir=p.parent, source=str(p))
 
 
 def render_rig(

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import re
 import tempfile
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,6 +41,7 @@ from lfrefract.metrics import fit_plane_ransac
 from lfrefract.stereo import calibrate_stereo, disparity_to_depth, disparity_to_points, rectify, zncc_disparity
 from lfrefract.synthesis import build_warp_map
 from simulator.assets import chessboard_inner_corners
+from simulator.config import read_toml
 from simulator.experiments import ExperimentResult, check_scale, register
 from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
 
@@ -101,7 +101,7 @@ _LIGHTS = [
 
 def _rig_data(setup: PlanesSetup, objects: list[dict]) -> dict:
     """The rig file's wall and cameras with the experiment's lights, render settings and ``objects``."""
-    data = tomllib.loads(embedded_rigs()[setup.rig].read_text())
+    data = read_toml(embedded_rigs()[setup.rig], "rig")
     data.update(name=f"planes-{setup.rig}", render={"spp": setup.spp, "seed": 0}, light=_LIGHTS, object=objects)
     return data
 
@@ -151,22 +151,29 @@ def _plane(rig: RigConfig, depth_m: float, seed: int) -> dict:
     }
 
 
-def _capture(setup: PlanesSetup, objects: list[dict], folder: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Render the rig with ``objects`` into ``folder`` (kept if it already holds this very rig);
-    ``{camera: (raw, ideal)}``."""
+@dataclass(frozen=True)
+class _Capture:
+    """One rendered rig capture on disk; images are read when asked for (an Illum raw image is
+    0.5 GB, and the experiment has thirty)."""
+
+    folder: Path
+
+    def raw(self, camera: str) -> np.ndarray:
+        return read_exr(self.folder / camera / "raw.exr", role="raw")
+
+    def ideal(self, camera: str) -> np.ndarray:
+        return read_exr(self.folder / camera / "ideal.exr", role="ideal")
+
+
+def _capture(setup: PlanesSetup, objects: list[dict], folder: Path) -> _Capture:
+    """Render the rig with ``objects`` into ``folder`` (kept if it already holds this very rig)."""
     rig = parse_rig(_rig_data(setup, objects))
     meta = folder / "meta.json"
     if not (meta.is_file() and read_json(meta).get("objects") == objects):
         render_rig(rig, folder, progress=False, write_previews=False, overwrite=True)
         kept = {k: v for k, v in read_json(meta).items() if k != "schema_version"}
         write_json(meta, {**kept, "objects": objects})
-    return {
-        c.name: (
-            read_exr(folder / c.name / "raw.exr", role="raw"),
-            read_exr(folder / c.name / "ideal.exr", role="ideal"),
-        )
-        for c in rig.cameras
-    }
+    return _Capture(folder)
 
 
 def _inner_corners_world(table: dict) -> np.ndarray:
@@ -211,22 +218,26 @@ def run_planes(
     """
     setup = setup_for(scale)
     base = parse_rig(_rig_data(setup, []))
+    with tempfile.TemporaryDirectory(prefix="lfsim-planes-") as tmp:
+        work = Path(tmp) if renders_dir is None else Path(renders_dir)
+        return _run(out_dir, setup, scale, base, work, progress=progress, write_clouds=write_clouds)
+
+
+def _run(
+    out_dir: Path, setup: PlanesSetup, scale: str, base: RigConfig, work: Path, *, progress: bool, write_clouds: bool
+) -> ExperimentResult:
+    """Render (into ``work``) and measure; see :func:`run_planes`."""
     names = [c.name for c in base.cameras]
     pattern = (SQUARES[0] - 1, SQUARES[1] - 1)
     near, far = setup.calibration_depths_m
-    with tempfile.TemporaryDirectory(prefix="lfsim-planes-") as tmp:
-        work = Path(tmp) if renders_dir is None else Path(renders_dir)
-        jobs = [(f"board-{d}-{i}", d, [b]) for d in (near, far) for i, b in enumerate(_boards(base, setup, d))]
-        jobs += [(f"plane-{d}", d, [_plane(base, d, 7)]) for d in setup.plane_depths_m]
-        captures = {
-            name: _capture(setup, objects, work / name)
-            for name, _, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
-        }
-        boards = {
-            d: [captures[name] for name, depth, _ in jobs if depth == d and name.startswith("board")]
-            for d in (near, far)
-        }
-        planes = {d: captures[f"plane-{d}"] for d in setup.plane_depths_m}
+    jobs = [(f"board-{d}-{i}", [b]) for d in (near, far) for i, b in enumerate(_boards(base, setup, d))]
+    jobs += [(f"plane-{d}", [_plane(base, d, 7)]) for d in setup.plane_depths_m]
+    captures = {
+        name: _capture(setup, objects, work / name)
+        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
+    }
+    boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(_BOARD_OFFSETS))] for d in (near, far)}
+    planes = {d: captures[f"plane-{d}"] for d in setup.plane_depths_m}
     squares = {depth: _square_size_m(base, setup, depth) for depth in (near, far)}
     truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in setup.plane_depths_m}
 
@@ -241,7 +252,7 @@ def run_planes(
         pose = cameras[name].pose
         corners = [pose.to_camera(_inner_corners_world(table)) for table in _boards(base, setup, depth)]
         return CalibrationViews(
-            raws=[b[name][0] for b in boards[depth]],
+            raws=[b.raw(name) for b in boards[depth]],
             pattern=pattern,
             square_size_m=squares[depth],
             corners_cam=corners,
@@ -253,7 +264,7 @@ def run_planes(
             outputs = {n: warps[n].output for n in names}
 
             def project(name, capture):
-                return capture[name][1]
+                return capture.ideal(name)
         else:
             projectors = {}
             for n in names:
@@ -270,7 +281,7 @@ def run_planes(
             outputs = {n: projectors[n].output for n in names}
 
             def project(name, capture, projectors=projectors):
-                return projectors[name].apply(capture[name][0])
+                return projectors[name].apply(capture.raw(name))
 
         # The rig is calibrated on the method's own images of all chessboards, near and far: the
         # approximation's camera model belongs to one depth, the rig's pose to none (boards at one
