@@ -181,36 +181,54 @@ class Disc:
         object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
 
 
+def _mesh_texture(obj) -> None:
+    """Check a procedural mesh's optional texture: ``texture_seed`` (None: plain ``reflectance``)
+    and ``texture_px``. With a seed the surface carries the seeded multi-scale colour texture of
+    ``textured_plane`` (for stereo), wrapped around the mesh's axis."""
+    if obj.texture_seed is not None:
+        _seed("texture_seed", obj.texture_seed)
+    if positive_int("texture_px", obj.texture_px) > MAX_TEXTURE_PX:
+        raise ParameterError(f"texture_px must be at most {MAX_TEXTURE_PX}, got {obj.texture_px!r}")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Bowl:
-    """A thin-walled bowl opening towards -z (towards a camera with identity pose)."""
+    """A thin-walled bowl opening towards -z (towards a camera with identity pose); plain
+    ``reflectance``, or with ``texture_seed`` a random colour texture."""
 
     placement: Placement
     radius_m: float
     depth_m: float
     thickness_m: float = 0.004
     reflectance: tuple[float, float, float] = (0.7, 0.45, 0.3)
+    texture_seed: int | None = None
+    texture_px: int = 512
 
     def __post_init__(self) -> None:
         positive_float("radius_m", self.radius_m)
         positive_float("depth_m", self.depth_m)
         positive_float("thickness_m", self.thickness_m)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+        _mesh_texture(self)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Figurine:
-    """An organic, figurine-like closed shape standing along -y (up), ``height_m`` tall."""
+    """An organic, figurine-like closed shape standing along -y (up), ``height_m`` tall; plain
+    ``reflectance``, or with ``texture_seed`` a random colour texture."""
 
     placement: Placement
     height_m: float
     seed: int = 0
     reflectance: tuple[float, float, float] = (0.35, 0.6, 0.4)
+    texture_seed: int | None = None
+    texture_px: int = 512
 
     def __post_init__(self) -> None:
         positive_float("height_m", self.height_m)
         _seed("seed", self.seed)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
+        _mesh_texture(self)
 
 
 @dataclass(frozen=True, kw_only=True)

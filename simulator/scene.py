@@ -107,29 +107,55 @@ def _diffuse(reflectance) -> dict:
     return {"type": "twosided", "material": {"type": "diffuse", "reflectance": value}}
 
 
-def _mesh(mi: ModuleType, name: str, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, bsdf: dict):
+def _mesh(
+    mi: ModuleType,
+    name: str,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    normals: np.ndarray,
+    bsdf: dict,
+    texcoords: np.ndarray | None = None,
+):
     import drjit as dr
 
     props = mi.Properties()
     props["bsdf"] = mi.load_dict(bsdf)
-    mesh = mi.Mesh(name, len(vertices), len(faces), props, has_vertex_normals=True)
+    mesh = mi.Mesh(
+        name, len(vertices), len(faces), props, has_vertex_normals=True, has_vertex_texcoords=texcoords is not None
+    )
     params = mi.traverse(mesh)
     params["vertex_positions"] = dr.ravel(mi.Point3f(np.asarray(vertices, dtype=np.float32).T))
     params["vertex_normals"] = dr.ravel(mi.Normal3f(np.asarray(normals, dtype=np.float32).T))
     params["faces"] = dr.ravel(mi.Vector3u(np.asarray(faces, dtype=np.uint32).T))
+    if texcoords is not None:
+        params["vertex_texcoords"] = dr.ravel(mi.Point2f(np.asarray(texcoords, dtype=np.float32).T))
     params.update()
     return mesh
+
+
+def _wrapped_texcoords(local: np.ndarray, axis: int, extent_m: float) -> np.ndarray:
+    """Texture coordinates (N, 2) of mesh vertices (N, 3) in the object's local frame: the angle
+    about local ``axis`` (u, one turn) and the position along it over ``extent_m`` (v). The
+    texture tiles, so u wraps without a seam in the image; the triangles that straddle the
+    wrap get a narrow stripe of compressed texture."""
+    a, b = [i for i in range(3) if i != axis]
+    u = np.arctan2(local[:, a], local[:, b]) / (2.0 * np.pi) + 0.5
+    v = (local[:, axis] - local[:, axis].min()) / extent_m
+    return np.stack([u, v], axis=1)
 
 
 def _plane_matrix(placement_matrix: np.ndarray, width: float, height: float) -> np.ndarray:
     return placement_matrix @ np.diag([width / 2.0, height / 2.0, 1.0, 1.0])
 
 
-def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _local_mesh(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if isinstance(obj, Bowl):
-        v, f, n = assets.bowl_mesh(radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
-    else:
-        v, f, n = assets.figurine_mesh(height_m=obj.height_m, seed=obj.seed)
+        return assets.bowl_mesh(radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
+    return assets.figurine_mesh(height_m=obj.height_m, seed=obj.seed)
+
+
+def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    v, f, n = _local_mesh(obj)
     rot = obj.placement.matrix[:3, :3]
     return obj.placement.to_world(v), f, n @ rot.T
 
@@ -162,7 +188,14 @@ def _object_dict(mi: ModuleType, config: SceneConfig, index: int):
         return out
     if isinstance(obj, (Bowl, Figurine)):
         v, f, n = _mesh_in_world(obj)
-        return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance))
+        if obj.texture_seed is None:
+            return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance))
+        # Bowl: around its axis (z), across its depth; figurine: around its height (y).
+        local = _local_mesh(obj)[0]
+        axis, extent = (2, 2.0 * obj.radius_m) if isinstance(obj, Bowl) else (1, obj.height_m)
+        texcoords = _wrapped_texcoords(local, axis, extent)
+        bsdf = _diffuse(_texture(mi, _random_texture(obj.texture_px, obj.texture_seed), nearest=False))
+        return _mesh(mi, f"object_{index}", v, f, n, bsdf, texcoords)
     if isinstance(obj, MeshFile):
         return _load_mesh_file(mi, config, index)
     raise TypeError(f"unknown scene object {obj!r}")
