@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import re
 import tempfile
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +39,15 @@ from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.io import read_exr, read_json, write_json, write_ply
 from lfrefract.methods import CalibrationViews, build_projector
 from lfrefract.metrics import fit_plane_ransac
-from lfrefract.stereo import calibrate_stereo, disparity_to_depth, disparity_to_points, rectify, zncc_disparity
+from lfrefract.stereo import (
+    Rectification,
+    StereoCalibration,
+    calibrate_stereo,
+    disparity_to_depth,
+    disparity_to_points,
+    rectify,
+    zncc_disparity,
+)
 from lfrefract.synthesis import build_warp_map
 from simulator.assets import chessboard_inner_corners
 from simulator.config import read_toml
@@ -223,32 +232,32 @@ def run_planes(
         return _run(out_dir, setup, scale, base, work, progress=progress, write_clouds=write_clouds)
 
 
-def _run(
-    out_dir: Path, setup: PlanesSetup, scale: str, base: RigConfig, work: Path, *, progress: bool, write_clouds: bool
-) -> ExperimentResult:
-    """Render (into ``work``) and measure; see :func:`run_planes`."""
+def calibrated_methods(
+    base: RigConfig, setup: PlanesSetup, boards: dict[float, list[_Capture]], *, progress: bool
+) -> Iterator[tuple[str, Callable, Rectification, StereoCalibration, int]]:
+    """For each method of :data:`METHOD_NAMES`: its projection ``project(camera, capture)`` of a
+    capture into a central image, and the rig calibrated and rectified on its own images of the
+    chessboard captures ``boards`` (depth -> six captures of :func:`_boards`), with the number of
+    board views found in both images.
+
+    The approximation's camera model is calibrated per camera on the boards at one depth
+    (``approx far`` / ``approx near``), with the boards' true corners fixing the model's frame (as
+    tests/simulator/test_approx_baseline.py does: a free OpenCV fit of boards at one depth trades
+    the focal length against the board distances and the principal point against the port's
+    deflection, and its undistorted images leave the frame); ``proposed+distortion`` fits its
+    residual distortion on the farthest boards. The rig is calibrated on every board given: the
+    approximation's camera model belongs to one depth, the rig's pose to none (boards at one depth
+    left the baseline a few per cent off on the small rig's 188 px images).
+    """
     names = [c.name for c in base.cameras]
     pattern = (SQUARES[0] - 1, SQUARES[1] - 1)
-    near, far = setup.calibration_depths_m
-    jobs = [(f"board-{d}-{i}", [b]) for d in (near, far) for i, b in enumerate(_boards(base, setup, d))]
-    jobs += [(f"plane-{d}", [_plane(base, d, 7)]) for d in setup.plane_depths_m]
-    captures = {
-        name: _capture(setup, objects, work / name)
-        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
-    }
-    boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(_BOARD_OFFSETS))] for d in (near, far)}
-    planes = {d: captures[f"plane-{d}"] for d in setup.plane_depths_m}
-    squares = {depth: _square_size_m(base, setup, depth) for depth in (near, far)}
-    truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in setup.plane_depths_m}
-
+    depths = sorted(boards)
+    near, far = depths[0], depths[-1]
+    squares = {d: _square_size_m(base, setup, d) for d in depths}
     cameras = {c.name: c.scene for c in base.cameras}
     warps = {n: build_warp_map(cameras[n].camera, cameras[n].port) for n in names}
 
     def calibration(name: str, depth: float) -> CalibrationViews:
-        # The boards' corners in this camera's frame (ground truth) fix the model's frame, as
-        # tests/simulator/test_approx_baseline.py does: a free OpenCV fit of boards at one depth
-        # trades the focal length against the board distances and the principal point against
-        # the port's deflection, and its undistorted images leave the frame.
         pose = cameras[name].pose
         corners = [pose.to_camera(_inner_corners_world(table)) for table in _boards(base, setup, depth)]
         return CalibrationViews(
@@ -258,7 +267,6 @@ def _run(
             corners_cam=corners,
         )
 
-    rows, disparities = [], {}
     for method in tqdm(METHOD_NAMES, desc="methods (synthesis, stereo)", disable=not progress):
         if method == "ideal":
             outputs = {n: warps[n].output for n in names}
@@ -283,12 +291,9 @@ def _run(
             def project(name, capture, projectors=projectors):
                 return projectors[name].apply(capture.raw(name))
 
-        # The rig is calibrated on the method's own images of all chessboards, near and far: the
-        # approximation's camera model belongs to one depth, the rig's pose to none (boards at one
-        # depth leave the baseline a few per cent off on these small images).
         found = [
             (_corners(project("left", b), pattern), _corners(project("right", b), pattern), squares[depth])
-            for depth in (near, far)
+            for depth in depths
             for b in boards[depth]
         ]
         pairs = [(lft, rgt, square) for lft, rgt, square in found if lft is not None and rgt is not None]
@@ -299,7 +304,26 @@ def _run(
             left=outputs["left"],
             right=outputs["right"],
         )
-        rect = rectify(stereo)
+        yield method, project, rectify(stereo), stereo, len(pairs)
+
+
+def _run(
+    out_dir: Path, setup: PlanesSetup, scale: str, base: RigConfig, work: Path, *, progress: bool, write_clouds: bool
+) -> ExperimentResult:
+    """Render (into ``work``) and measure; see :func:`run_planes`."""
+    near, far = setup.calibration_depths_m
+    jobs = [(f"board-{d}-{i}", [b]) for d in (near, far) for i, b in enumerate(_boards(base, setup, d))]
+    jobs += [(f"plane-{d}", [_plane(base, d, 7)]) for d in setup.plane_depths_m]
+    captures = {
+        name: _capture(setup, objects, work / name)
+        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
+    }
+    boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(_BOARD_OFFSETS))] for d in (near, far)}
+    planes = {d: captures[f"plane-{d}"] for d in setup.plane_depths_m}
+    truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in setup.plane_depths_m}
+
+    rows, disparities = [], {}
+    for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress):
         for depth in setup.plane_depths_m:
             left, right = rect.apply(project("left", planes[depth]), project("right", planes[depth]))
             expected = rect.focal_px * rect.baseline_m / depth
@@ -332,7 +356,7 @@ def _run(
                     "outlier_share": outliers,
                     "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(_grey(left)).sum(), 1)),
                     "stereo_rms_px": stereo.rms_px,
-                    "boards": len(pairs),
+                    "boards": pairs,
                 }
             )
     figures = _figures(out_dir, rows, disparities, setup)

@@ -1,0 +1,27 @@
+"""``lfsim experiment objects`` at the tiny scale: a textured bowl and figurine, every method."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from lfrefract.io import read_ply
+from simulator.experiments import run_experiment
+from tests.tolerances import OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN, OBJECTS_COMPLETENESS_MIN
+
+pytestmark = pytest.mark.render
+
+
+def test_objects_by_method(tmp_path):
+    out = tmp_path / "objects"
+    result = run_experiment("objects", out, scale="tiny", progress=False)
+    rows = {row["method"]: row for row in result.rows}
+    assert (out / "objects_depth_error.png").is_file()
+    for method, row in rows.items():
+        assert row["completeness"] > OBJECTS_COMPLETENESS_MIN, method
+        points, _ = read_ply(out / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply")
+        assert len(points) > 1000, method
+    # The approximation calibrated at 0.6 m, twice as far as the objects, misses them most.
+    far, proposed = rows["approx far"]["median_abs_mm"], rows["proposed"]["median_abs_mm"]
+    assert far > OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN * proposed
