@@ -16,7 +16,8 @@ from pathlib import Path
 
 from lfrefract.io import _write_text_atomically, staged_directory, write_json
 from simulator.experiments import write_table
-from simulator.experiments.planes import METHOD_NAMES, run_planes, setup_for
+from simulator.experiments.planes import PLANE_DEPTHS_M, run_planes
+from simulator.experiments.rigstereo import METHOD_NAMES
 
 __all__ = ["run_demo"]
 
@@ -48,7 +49,7 @@ def run_demo(out_dir: str | Path = "demo", *, progress: bool = True, overwrite: 
 def _checks(rows: list[dict]) -> list[str]:
     """The regression claims of issue 5, evaluated on this run."""
     by = {(r["method"], r["depth_m"]): r for r in rows}
-    depths = setup_for("tiny").plane_depths_m
+    depths = PLANE_DEPTHS_M["tiny"]
     ratios = [by[("proposed", d)]["plane_rmse_mm"] / by[("ideal", d)]["plane_rmse_mm"] for d in depths]
     near, far = by[("approx near", depths[0])], by[("approx near", depths[-1])]
     growth = far["truth_error_mm"] / near["truth_error_mm"]
@@ -62,7 +63,7 @@ def _checks(rows: list[dict]) -> list[str]:
 
 
 def _report(rows: list[dict], seconds: float, clouds: list[str]) -> str:
-    depths = setup_for("tiny").plane_depths_m
+    depths = PLANE_DEPTHS_M["tiny"]
     header = "| method | " + " | ".join(f"{d:g} m" for d in depths) + " |"
     lines = [header, "|---|" + "---|" * len(depths)]
     for method in METHOD_NAMES:

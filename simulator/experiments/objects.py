@@ -1,7 +1,7 @@
 """The ``objects`` experiment (paper Fig. 7): a bowl and a figurine, reconstructed by every method.
 
-The default rig (:mod:`simulator.experiments.planes` explains the rig, the methods and how each
-method's rig is calibrated) sees a textured bowl and a textured figurine about 0.3 m away in front
+The default rig (:mod:`simulator.experiments.planes` and :mod:`simulator.experiments.rigstereo`
+explain the rig, the methods and how each method's rig is calibrated) sees a textured bowl and a textured figurine about 0.3 m away in front
 of a textured backdrop at 0.7 m. The chessboards that calibrate the approximation and the rig are
 farther than both objects, at 0.45 and 0.6 m (``approx near`` / ``approx far``), as in the paper.
 
@@ -25,23 +25,22 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from lfrefract import ParameterError, virtual_camera_for
 from lfrefract.io import read_exr, write_ply
 from lfrefract.metrics import depth_errors
 from lfrefract.stereo import disparity_to_points, zncc_disparity
 from simulator.experiments import ExperimentResult, check_scale, register
-from simulator.experiments.planes import (
-    _BOARD_OFFSETS,
+from simulator.experiments.rigstereo import (
+    BOARD_OFFSETS,
     METHOD_NAMES,
-    PlanesSetup,
-    _aim,
-    _boards,
-    _capture,
-    _grey,
-    _rig_data,
+    RigSetup,
+    aim,
     calibrated_methods,
+    chessboards,
+    grey,
+    render_captures,
+    rig_data,
 )
 from simulator.rig import parse_rig
 
@@ -51,17 +50,15 @@ __all__ = ["OBJECT_MASK_DEPTH_M", "run_objects"]
 OBJECT_MASK_DEPTH_M = 0.5
 
 
-def _setup(scale: str) -> PlanesSetup:
+def _setup(scale: str) -> RigSetup:
     if check_scale(scale) != "tiny":
         raise ParameterError(f"scale={scale!r}: the objects experiment runs at the tiny scale only so far")
-    return PlanesSetup(
-        rig="default", plane_depths_m=(0.3, 0.45, 0.6), calibration_depths_m=(0.45, 0.6), px_per_square=10.0, spp=16
-    )
+    return RigSetup(rig="default", calibration_depths_m=(0.45, 0.6), px_per_square=10.0, spp=16)
 
 
 def _scene_objects(base) -> list[dict]:
-    bowl_at = _aim(base, 0.31) + np.array([-0.05, 0.01, 0.0])
-    figurine_at = _aim(base, 0.34) + np.array([0.05, 0.0, 0.0])
+    bowl_at = aim(base, 0.31) + np.array([-0.05, 0.01, 0.0])
+    figurine_at = aim(base, 0.34) + np.array([0.05, 0.0, 0.0])
     return [
         {
             "type": "bowl",
@@ -74,7 +71,7 @@ def _scene_objects(base) -> list[dict]:
         {"type": "figurine", "position_m": figurine_at.tolist(), "height_m": 0.1, "seed": 3, "texture_seed": 12},
         {
             "type": "textured_plane",
-            "position_m": _aim(base, 0.7).tolist(),
+            "position_m": aim(base, 0.7).tolist(),
             "size_m": [1.0, 0.8],
             "texture_px": 1024,
             "texture_seed": 13,
@@ -85,17 +82,14 @@ def _scene_objects(base) -> list[dict]:
 def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) -> ExperimentResult:
     """Run the experiment (see the module docstring); figures and clouds go to ``out_dir``."""
     setup = _setup(scale)
-    base = parse_rig(_rig_data(setup, []))
+    base = parse_rig(rig_data(setup, []))
     depths = setup.calibration_depths_m
     with tempfile.TemporaryDirectory(prefix="lfsim-objects-") as tmp:
         work = Path(tmp)
-        jobs = [(f"board-{d}-{i}", [b]) for d in depths for i, b in enumerate(_boards(base, setup, d))]
+        jobs = [(f"board-{d}-{i}", [b]) for d in depths for i, b in enumerate(chessboards(base, setup, d))]
         jobs.append(("objects", _scene_objects(base)))
-        captures = {
-            name: _capture(setup, objects, work / name)
-            for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
-        }
-        boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(_BOARD_OFFSETS))] for d in depths}
+        captures = render_captures(setup, jobs, work, progress=progress)
+        boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(BOARD_OFFSETS))] for d in depths}
         scene = captures["objects"]
         truth = read_exr(scene.folder / "left" / "depth.exr", role="depth")
         mask = np.isfinite(truth) & (truth < OBJECT_MASK_DEPTH_M)
@@ -105,7 +99,7 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
             left, right = rect.apply(project("left", scene), project("right", scene))
             low, high = rect.focal_px * rect.baseline_m / 0.8, rect.focal_px * rect.baseline_m / 0.25
             disparity = zncc_disparity(
-                _grey(left), _grey(right), min_disparity_px=int(low), num_disparities=int(high - low) + 3
+                grey(left), grey(right), min_disparity_px=int(low), num_disparities=int(high - low) + 3
             )
             points = disparity_to_points(disparity, rect)
             write_ply(Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply", points)
