@@ -1,9 +1,10 @@
 """The ``objects`` experiment (paper Fig. 7): a bowl and a figurine, reconstructed by every method.
 
 The default rig (:mod:`simulator.experiments.planes` and :mod:`simulator.experiments.rigstereo`
-explain the rig, the methods and how each method's rig is calibrated) sees a textured bowl and a textured figurine about 0.3 m away in front
-of a textured backdrop at 0.7 m. The chessboards that calibrate the approximation and the rig are
-farther than both objects, at 0.45 and 0.6 m (``approx near`` / ``approx far``), as in the paper.
+explain the rig, the methods and how each method's rig is calibrated) sees a textured bowl and a
+textured figurine about 0.3 m away in front of a textured backdrop at 0.7 m. The chessboards that
+calibrate the approximation and the rig are farther than both objects, at 0.45 and 0.6 m
+(``approx near`` / ``approx far``), as in the paper.
 
 Per method, the ZNCC disparity is triangulated into the left camera's frame, written as a point
 cloud (``cloud_<method>.ply``) and splatted into a depth map of the left ideal image's geometry
