@@ -49,7 +49,15 @@ from lfrefract.io import FileFormatError
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort
 
-__all__ = ["SynthesisOptions", "WarpMap", "build_warp_map", "necessary_air_rays", "warp_map_key"]
+__all__ = [
+    "SynthesisOptions",
+    "WarpMap",
+    "build_warp_map",
+    "lens_plane_hits",
+    "mla_points_img",
+    "necessary_air_rays",
+    "warp_map_key",
+]
 
 #: Version of the warp-map algorithm and file layout; part of every map's key.
 WARP_MAP_VERSION = 3
@@ -320,9 +328,18 @@ class WarpMap:
         )
 
 
-def _mla_points_img(hit: np.ndarray, dirs: np.ndarray, f: float, f_prime: float) -> np.ndarray:
-    """Image-plane MLA points (N, 2) of air rays leaving the main lens at ``hit`` along ``dirs``
-    (thin lens backwards: slope behind the lens = slope in front + hit / f)."""
+def lens_plane_hits(points_cam: np.ndarray, directions_cam: np.ndarray) -> np.ndarray:
+    """Where air rays through ``points_cam`` (N, 3) along ``directions_cam`` (N, 3) cross the
+    main-lens plane z = 0: (N, 2), camera frame, metres (NaN for rays parallel to it)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = -points_cam[:, 2] / directions_cam[:, 2]
+        return points_cam[:, :2] + tau[:, None] * directions_cam[:, :2]
+
+
+def mla_points_img(hit: np.ndarray, dirs: np.ndarray, f: float, f_prime: float) -> np.ndarray:
+    """Image-plane MLA points (N, 2) of air rays leaving the main lens at ``hit`` (N, 2) along
+    ``dirs`` (N, 3) (thin lens backwards: slope behind the lens = slope in front + hit / f; the MLA
+    is ``f_prime`` behind the lens)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         return -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime)
 
@@ -385,9 +402,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
 
     # Follow the necessary air ray back through the thin main lens to the MLA.
     f, f_prime = camera.focal_length_m, camera.lens_to_mla_m
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tau = -points[:, 2] / dirs[:, 2]
-        hit = points[:, :2] + tau[:, None] * dirs[:, :2]
+    hit = lens_plane_hits(points, dirs)
     radius = np.hypot(hit[:, 0], hit[:, 1])
     # The camera records the necessary ray only inside the usable aperture: rays through its rim
     # (rim_margin_px) are vignetted, so their pixels are never used.
@@ -399,7 +414,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     with np.errstate(invalid="ignore", divide="ignore"):
         shrink = np.where(radius > r_ok, r_ok / radius, 1.0)
     aim_hit = hit * shrink[:, None]
-    mla_point_img = _mla_points_img(aim_hit, dirs, f, f_prime)
+    mla_point_img = mla_points_img(aim_hit, dirs, f, f_prime)
     aim_points = np.concatenate([aim_hit + dirs[:, :2] / dirs[:, 2:3] * points[:, 2:3], points[:, 2:3]], axis=1)
     usable = valid & np.all(np.isfinite(mla_point_img), axis=1)
     lens0 = np.zeros((len(uv), 2), dtype=np.int64)
@@ -408,7 +423,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     # image through the main-lens centre, i.e. its micro-image position, is on the pixel grid).
     with np.errstate(invalid="ignore"):
         sensor_px = camera.sensor.image_plane_to_pixels(
-            _mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale
+            mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale
         )
     covered &= (
         (sensor_px[:, 0] >= -0.5)

@@ -52,7 +52,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
-from lfrefract.synthesis import SynthesisOptions, necessary_air_rays
+from lfrefract.synthesis import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
 from simulator.experiments import ExperimentResult, check_scale, register
 
 __all__ = ["FovSetup", "exact_mask", "fov_measures", "original_fov", "required_aperture_radius", "run", "setup_for"]
@@ -152,13 +152,11 @@ def required_aperture_radius(
         points, dirs, _, valid = necessary_air_rays(
             port, output.pixel_directions(np.stack([uu.ravel(), vv.ravel()], 1))
         )
-        with np.errstate(invalid="ignore", divide="ignore"):
-            tau = -points[:, 2] / dirs[:, 2]  # to the lens plane z = 0 (as build_warp_map, to the bit)
-            hit = points[:, :2] + tau[:, None] * dirs[:, :2]
-            # Thin lens backwards to the MLA (slope behind = slope in front + hit / f), then the
-            # micro-image position through the main-lens centre, in sensor pixels.
-            mla = -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime)
-            px = camera.sensor.image_plane_to_pixels(mla * camera.micro_image_scale)
+        # The lens-plane crossing and the MLA point exactly as build_warp_map computes them, then
+        # the micro-image position through the main-lens centre, in sensor pixels.
+        hit = lens_plane_hits(points, dirs)
+        px = camera.sensor.image_plane_to_pixels(mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale)
+        with np.errstate(invalid="ignore"):
             on_sensor = (px[:, 0] >= -0.5) & (px[:, 0] <= width - 0.5) & (px[:, 1] >= -0.5) & (px[:, 1] <= height - 0.5)
         radius = np.hypot(hit[:, 0], hit[:, 1])
         radius = np.where(valid & on_sensor & np.isfinite(radius), radius, np.inf)
