@@ -1,79 +1,119 @@
 """The ``objects`` experiment (paper Fig. 7): a bowl and a figurine, reconstructed by every method.
 
-The default rig (:mod:`simulator.experiments.planes` and :mod:`simulator.experiments.rigstereo`
-explain the rig, the methods and how each method's rig is calibrated) sees a textured bowl and a
-textured figurine about 0.3 m away in front of a textured backdrop at 0.7 m. The chessboards that
-calibrate the approximation and the rig are farther than both objects, at 0.45 and 0.6 m
-(``approx near`` / ``approx far``), as in the paper.
+A rig (:mod:`simulator.experiments.planes` and :mod:`simulator.experiments.rigstereo` explain the
+rig, the methods and how each method's rig is calibrated) sees a textured bowl and a textured
+figurine in front of a textured backdrop. The chessboards that calibrate the approximation and the
+rig are farther than both objects (``approx near`` / ``approx far``), as in the paper. ``tiny``:
+the default rig, objects at 0.31 and 0.34 m, backdrop at 0.7 m, boards at 0.45 and 0.6 m.
+``illum``: the Illum rig, the same scene 1.5 times larger and farther.
 
-Per method, the ZNCC disparity is triangulated into the left camera's frame, written as a point
-cloud (``cloud_<method>.ply``) and splatted into a depth map of the left ideal image's geometry
-(nearest pixel, nearest point). Against the ground-truth depth on the objects' pixels
-(:func:`lfrefract.metrics.depth_errors`):
+Per matcher (:data:`~simulator.experiments.rigstereo.MATCHERS`) and method, the disparity is
+triangulated into the left camera's frame, written as a point cloud (``cloud_<method>.ply`` for
+ZNCC, ``cloud_<method>_sgbm.ply`` for SGBM) and splatted into a depth map of the left ideal
+image's geometry (nearest pixel, nearest point). Against the ground truth on the objects' pixels:
 
 - ``median_abs_mm``, ``mean_abs_mm``, ``rms_mm``, ``bias_mm``: errors of the estimated depth
-  (camera z); the mean and RMS include the mismatches at the objects' outlines (backdrop points
-  0.4 m behind), the median does not;
+  (camera z, :func:`lfrefract.metrics.depth_errors`); the mean and RMS include the mismatches at
+  the objects' outlines (backdrop points far behind), the median does not;
+- ``bad_0.5px``, ``bad_1px``, ``bad_2px``: Middlebury-style bad-pixel rates
+  (:func:`lfrefract.metrics.disparity_errors`) of the disparity ``f B / z`` that each depth
+  implies on the method's rectified rig (pixels without an estimate count as bad);
 - ``completeness``: the share of the objects' pixels with an estimate.
 
-Figures: the depth error maps by method (``objects_depth_error.png``).
+Figures: the depth error maps by matcher and method (``objects_depth_error.png``).
 """
 
 from __future__ import annotations
 
 import re
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lfrefract import ParameterError, virtual_camera_for
+from lfrefract import virtual_camera_for
 from lfrefract.io import read_exr, write_ply
-from lfrefract.metrics import depth_errors
-from lfrefract.stereo import disparity_to_points, zncc_disparity
+from lfrefract.metrics import depth_errors, disparity_errors
+from lfrefract.stereo import disparity_to_points
 from simulator.experiments import ExperimentResult, check_scale, register
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
+    MATCHERS,
     METHOD_NAMES,
     RigSetup,
     aim,
     calibrated_methods,
     chessboards,
-    grey,
+    match,
     render_captures,
     rig_data,
 )
 from simulator.rig import parse_rig
 
-__all__ = ["OBJECT_MASK_DEPTH_M", "run_objects"]
+__all__ = ["BAD_PIXEL_THRESHOLDS_PX", "ObjectsSetup", "run_objects", "setup_for"]
 
-#: Pixels of the left ideal image nearer than this are the objects' (the backdrop is at 0.7 m).
-OBJECT_MASK_DEPTH_M = 0.5
-
-
-def _setup(scale: str) -> RigSetup:
-    if check_scale(scale) != "tiny":
-        raise ParameterError(f"scale={scale!r}: the objects experiment runs at the tiny scale only so far")
-    return RigSetup(rig="default", calibration_depths_m=(0.45, 0.6), px_per_square=10.0, spp=16)
+#: Disparity error thresholds of the bad-pixel rates, pixels (Middlebury's usual ones).
+BAD_PIXEL_THRESHOLDS_PX = (0.5, 1.0, 2.0)
 
 
-def _scene_objects(base) -> list[dict]:
-    bowl_at = aim(base, 0.31) + np.array([-0.05, 0.01, 0.0])
-    figurine_at = aim(base, 0.34) + np.array([0.05, 0.0, 0.0])
+@dataclass(frozen=True)
+class ObjectsSetup:
+    """What one scale of the experiment renders.
+
+    Attributes
+    ----------
+    rig : RigSetup
+        The rig, the chessboards' depths (near, far) and the render settings.
+    size : float
+        Scale of the scene: object sizes, depths and offsets are the tiny scene's times ``size``.
+    mask_depth_m : float
+        Pixels of the left ideal image nearer than this are the objects' (the backdrop is farther).
+    """
+
+    rig: RigSetup
+    size: float
+    mask_depth_m: float
+
+
+def setup_for(scale: str) -> ObjectsSetup:
+    """The set-up of ``scale``: ``tiny`` (default rig) or ``illum`` (Illum rig, 1.5 x the scene)."""
+    if check_scale(scale) == "tiny":
+        return ObjectsSetup(
+            rig=RigSetup(rig="default", calibration_depths_m=(0.45, 0.6), px_per_square=10.0, spp=16),
+            size=1.0,
+            mask_depth_m=0.5,
+        )
+    return ObjectsSetup(
+        rig=RigSetup(rig="illum", calibration_depths_m=(0.675, 0.9), px_per_square=30.0, spp=8),
+        size=1.5,
+        mask_depth_m=0.75,
+    )
+
+
+def _scene_objects(base, size: float) -> list[dict]:
+    bowl_at = aim(base, 0.31 * size) + np.array([-0.05, 0.01, 0.0]) * size
+    figurine_at = aim(base, 0.34 * size) + np.array([0.05, 0.0, 0.0]) * size
     return [
         {
             "type": "bowl",
             "position_m": bowl_at.tolist(),
             "rotation_xyz_deg": [-30.0, 0.0, 0.0],
-            "radius_m": 0.045,
-            "depth_m": 0.03,
+            "radius_m": 0.045 * size,
+            "depth_m": 0.03 * size,
             "texture_seed": 11,
         },
-        {"type": "figurine", "position_m": figurine_at.tolist(), "height_m": 0.1, "seed": 3, "texture_seed": 12},
+        {
+            "type": "figurine",
+            "position_m": figurine_at.tolist(),
+            "height_m": 0.1 * size,
+            "seed": 3,
+            "texture_seed": 12,
+        },
         {
             "type": "textured_plane",
-            "position_m": aim(base, 0.7).tolist(),
-            "size_m": [1.0, 0.8],
+            "position_m": aim(base, 0.7 * size).tolist(),
+            "size_m": [1.0 * size, 0.8 * size],
             "texture_px": 1024,
             "texture_seed": 13,
         },
@@ -82,47 +122,58 @@ def _scene_objects(base) -> list[dict]:
 
 def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) -> ExperimentResult:
     """Run the experiment (see the module docstring); figures and clouds go to ``out_dir``."""
-    setup = _setup(scale)
+    objects_setup = setup_for(scale)
+    setup = objects_setup.rig
     base = parse_rig(rig_data(setup, []))
     depths = setup.calibration_depths_m
+    nearest, farthest = 0.25 * objects_setup.size, 0.8 * objects_setup.size  # disparity search range
     with tempfile.TemporaryDirectory(prefix="lfsim-objects-") as tmp:
         work = Path(tmp)
         jobs = [(f"board-{d}-{i}", [b]) for d in depths for i, b in enumerate(chessboards(base, setup, d))]
-        jobs.append(("objects", _scene_objects(base)))
+        jobs.append(("objects", _scene_objects(base, objects_setup.size)))
         captures = render_captures(setup, jobs, work, progress=progress)
         boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(BOARD_OFFSETS))] for d in depths}
         scene = captures["objects"]
         truth = read_exr(scene.folder / "left" / "depth.exr", role="depth")
-        mask = np.isfinite(truth) & (truth < OBJECT_MASK_DEPTH_M)
+        mask = np.isfinite(truth) & (truth < objects_setup.mask_depth_m)
         view = virtual_camera_for(base.cameras[0].scene.camera)
         rows, errors = [], {}
         for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress):
             left, right = rect.apply(project("left", scene), project("right", scene))
-            low, high = rect.focal_px * rect.baseline_m / 0.8, rect.focal_px * rect.baseline_m / 0.25
-            disparity = zncc_disparity(
-                grey(left), grey(right), min_disparity_px=int(low), num_disparities=int(high - low) + 3
-            )
-            points = disparity_to_points(disparity, rect)
-            write_ply(Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply", points)
-            estimate = _splat(points, view)
-            result = depth_errors(estimate, truth, valid=mask)
-            errors[method] = np.where(mask, np.abs(estimate - truth), np.nan)
-            rows.append(
-                {
-                    "method": method,
-                    "median_abs_mm": float(np.nanmedian(errors[method][mask])) * 1e3,
-                    "mean_abs_mm": result.mean_abs_m * 1e3,
-                    "rms_mm": result.rms_m * 1e3,
-                    "bias_mm": result.bias_m * 1e3,
-                    "completeness": result.completeness,
-                    "stereo_rms_px": stereo.rms_px,
-                    "boards": pairs,
-                }
-            )
+            focal_baseline = rect.focal_px * rect.baseline_m  # disparity (px) times depth (m)
+            low, high = focal_baseline / farthest, focal_baseline / nearest
+            for matcher in MATCHERS:
+                disparity = match(matcher, left, right, min_disparity_px=int(low), num_disparities=int(high - low) + 3)
+                points = disparity_to_points(disparity, rect)
+                suffix = "" if matcher == MATCHERS[0] else f"_{matcher}"
+                write_ply(Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}{suffix}.ply", points)
+                estimate = _splat(points, view)
+                result = depth_errors(estimate, truth, valid=mask)
+                bad = disparity_errors(
+                    focal_baseline / estimate,
+                    focal_baseline / truth,
+                    thresholds_px=BAD_PIXEL_THRESHOLDS_PX,
+                    valid=mask,
+                )
+                errors[(matcher, method)] = np.where(mask, np.abs(estimate - truth), np.nan)
+                rows.append(
+                    {
+                        "matcher": matcher,
+                        "method": method,
+                        "median_abs_mm": float(np.nanmedian(errors[(matcher, method)][mask])) * 1e3,
+                        "mean_abs_mm": result.mean_abs_m * 1e3,
+                        "rms_mm": result.rms_m * 1e3,
+                        "bias_mm": result.bias_m * 1e3,
+                        **{f"bad_{t:g}px": f for t, f in zip(BAD_PIXEL_THRESHOLDS_PX, bad.bad_fractions, strict=True)},
+                        "completeness": result.completeness,
+                        "stereo_rms_px": stereo.rms_px,
+                        "boards": pairs,
+                    }
+                )
     figure = _figure(Path(out_dir), errors)
     summary = "\n".join(
-        f"- {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
-        f"{r['rms_mm']:.2f} mm RMS, completeness {r['completeness']:.2f}"
+        f"- {r['matcher']}, {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
+        f"{r['rms_mm']:.2f} mm RMS, bad 1 px {r['bad_1px']:.2f}, completeness {r['completeness']:.2f}"
         for r in rows
     )
     return ExperimentResult(
@@ -131,7 +182,8 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
         rows=tuple(rows),
         figures=(figure,),
         summary="depth error on the bowl and the figurine:\n" + summary,
-        parameters=dict(setup.__dict__) | {"object_mask_depth_m": OBJECT_MASK_DEPTH_M},
+        parameters=dict(setup.__dict__)
+        | {"size": objects_setup.size, "object_mask_depth_m": objects_setup.mask_depth_m},
     )
 
 
@@ -146,19 +198,24 @@ def _splat(points_cam: np.ndarray, view) -> np.ndarray:
     return depth
 
 
-def _figure(out_dir: Path, errors: dict[str, np.ndarray]) -> Path:
+def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray]) -> Path:
     import matplotlib as mpl
 
     mpl.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(METHOD_NAMES), figsize=(2.8 * len(METHOD_NAMES), 2.6))
+    fig, axes = plt.subplots(
+        len(MATCHERS), len(METHOD_NAMES), figsize=(2.8 * len(METHOD_NAMES), 2.4 * len(MATCHERS)), squeeze=False
+    )
     top = max((float(np.nanpercentile(e, 95)) for e in errors.values() if np.isfinite(e).any()), default=1.0)
-    for ax, method in zip(axes, METHOD_NAMES, strict=True):
-        image = ax.imshow(errors[method] * 1e3, cmap="magma", vmin=0, vmax=top * 1e3)
-        ax.set_title(method, fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
+    for i, matcher in enumerate(MATCHERS):
+        for ax, method in zip(axes[i], METHOD_NAMES, strict=True):
+            image = ax.imshow(errors[(matcher, method)] * 1e3, cmap="magma", vmin=0, vmax=top * 1e3)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(method, fontsize=9)
+        axes[i, 0].set_ylabel(matcher, fontsize=9)
     fig.colorbar(image, ax=axes, shrink=0.8, label="|depth error| [mm]")
     fig.suptitle("depth error on the objects (left ideal view; no estimate: white)", fontsize=9)
     path = out_dir / "objects_depth_error.png"

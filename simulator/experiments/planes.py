@@ -11,15 +11,21 @@ central projections (:mod:`lfrefract.methods`):
 - ``ideal``: the simulator's ground-truth refraction-free pinhole images, the floor.
 
 For every method the rig is stereo-calibrated from its own images of all the chessboards (OpenCV,
-intrinsics fixed to the method's ``K``), rectified, matched by ZNCC (:func:`lfrefract.stereo.zncc_disparity`)
-and triangulated into the left camera's frame. Measured per method and depth:
+intrinsics fixed to the method's ``K``), rectified, matched by each of
+:data:`~simulator.experiments.rigstereo.MATCHERS` (ZNCC, the paper's cost, and OpenCV's SGBM) and
+triangulated into the left camera's frame. Measured per matcher, method and depth:
 
 - ``plane_rmse_mm``: the paper's figure, the RMS distance of the points to a plane fitted after
   outlier removal (RANSAC, threshold 1 % of the depth);
 - ``truth_error_mm``: the mean absolute distance of those inlier points to the true plane (left
   camera frame; the experiment's ground truth, which the paper did not have), and
   ``outlier_share``, the share of points RANSAC left out;
-- ``completeness``: the share of the rectified left image's pixels with a disparity.
+- ``completeness``: the share of the rectified left image's pixels with a disparity;
+- ``exact_share`` and ``exact_plane_rmse_mm``, ``exact_truth_error_mm``, ``exact_outlier_share``:
+  the share of the points inside both cameras' exact coverage
+  (:func:`~simulator.experiments.rigstereo.exact_coverage`, where the synthesis's every necessary
+  ray is recorded) and the same measures on those points alone. Outside it the synthesis
+  approximates; on the ``illum`` rig the coverage is a fraction of the image.
 """
 
 from __future__ import annotations
@@ -34,22 +40,22 @@ import numpy as np
 from lfrefract import Pose
 from lfrefract.io import write_ply
 from lfrefract.metrics import fit_plane_ransac
-from lfrefract.stereo import (
-    disparity_to_depth,
-    disparity_to_points,
-    zncc_disparity,
-)
+from lfrefract.stereo import disparity_to_depth, disparity_to_points
 from simulator.experiments import ExperimentResult, check_scale, register
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
+    MATCHERS,
     METHOD_NAMES,
     RigSetup,
     aim,
     calibrated_methods,
     chessboards,
+    exact_coverage,
     grey,
+    match,
     render_captures,
     rig_data,
+    warp_maps,
 )
 from simulator.rig import RigConfig, parse_rig
 
@@ -111,43 +117,43 @@ def _run(
     planes = {d: captures[f"plane-{d}"] for d in plane_depths}
     truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in plane_depths}
 
+    warps = warp_maps(base)
     rows, disparities = [], {}
-    for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress):
+    for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress, warps=warps):
         for depth in plane_depths:
             left, right = rect.apply(project("left", planes[depth]), project("right", planes[depth]))
             expected = rect.focal_px * rect.baseline_m / depth
-            disparity = zncc_disparity(
-                grey(left),
-                grey(right),
-                min_disparity_px=max(int(expected * 0.5), 0),
-                num_disparities=int(expected) + 8,
-            )
-            disparities[(method, depth)] = disparity
-            points = disparity_to_points(disparity, rect)
-            if write_clouds and depth == plane_depths[1]:
-                finite = np.isfinite(disparity_to_depth(disparity, rect))
-                colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
-                cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply"
-                write_ply(cloud, points, (colours * 255).astype(np.uint8))
-            normal, offset = truth[depth]
-            rmse = truth_error = outliers = math.nan  # no match at all is a result too, not a crash
-            if len(points) >= 3:
-                fit = fit_plane_ransac(points, threshold_m=0.01 * depth, seed=0)
-                rmse = fit.rmse_m
-                truth_error = float(np.mean(np.abs(points[fit.inliers] @ normal - offset)))
-                outliers = 1.0 - float(np.mean(fit.inliers))
-            rows.append(
-                {
-                    "method": method,
-                    "depth_m": depth,
-                    "plane_rmse_mm": rmse * 1e3,
-                    "truth_error_mm": truth_error * 1e3,
-                    "outlier_share": outliers,
-                    "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(grey(left)).sum(), 1)),
-                    "stereo_rms_px": stereo.rms_px,
-                    "boards": pairs,
-                }
-            )
+            for matcher in MATCHERS:
+                disparity = match(
+                    matcher,
+                    left,
+                    right,
+                    min_disparity_px=max(int(expected * 0.5), 0),
+                    num_disparities=int(expected) + 8,
+                )
+                disparities[(matcher, method, depth)] = disparity
+                points = disparity_to_points(disparity, rect)
+                if write_clouds and matcher == MATCHERS[0] and depth == plane_depths[1]:
+                    finite = np.isfinite(disparity_to_depth(disparity, rect))
+                    colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
+                    cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply"
+                    write_ply(cloud, points, (colours * 255).astype(np.uint8))
+                exact = exact_coverage(points, base, warps)
+                everywhere = _plane_measures(points, truth[depth], depth)
+                inside = _plane_measures(points[exact], truth[depth], depth)
+                rows.append(
+                    {
+                        "matcher": matcher,
+                        "method": method,
+                        "depth_m": depth,
+                        **everywhere,
+                        "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(grey(left)).sum(), 1)),
+                        "exact_share": float(exact.mean()) if len(exact) else math.nan,
+                        **{f"exact_{k}": v for k, v in inside.items()},
+                        "stereo_rms_px": stereo.rms_px,
+                        "boards": pairs,
+                    }
+                )
     figures = _figures(out_dir, rows, disparities, plane_depths)
     return ExperimentResult(
         name="planes",
@@ -157,6 +163,19 @@ def _run(
         summary=_summary(rows, plane_depths),
         parameters=dict(setup.__dict__) | {"plane_depths_m": plane_depths},
     )
+
+
+def _plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m: float) -> dict[str, float]:
+    """Plane-fit RMSE, mean error against the true plane (mm) and outlier share of ``points`` (N, 3)."""
+    normal, offset = truth
+    if len(points) < 3:  # no match at all is a result too, not a crash
+        return {"plane_rmse_mm": math.nan, "truth_error_mm": math.nan, "outlier_share": math.nan}
+    fit = fit_plane_ransac(points, threshold_m=0.01 * depth_m, seed=0)
+    return {
+        "plane_rmse_mm": fit.rmse_m * 1e3,
+        "truth_error_mm": float(np.mean(np.abs(points[fit.inliers] @ normal - offset))) * 1e3,
+        "outlier_share": 1.0 - float(np.mean(fit.inliers)),
+    }
 
 
 def _plane_in_left(rig: RigConfig, table: dict) -> tuple[np.ndarray, float]:
@@ -170,12 +189,21 @@ def _plane_in_left(rig: RigConfig, table: dict) -> tuple[np.ndarray, float]:
 
 
 def _summary(rows: list[dict], plane_depths: tuple[float, ...]) -> str:
-    lines = ["| method | " + " | ".join(f"{d:g} m" for d in plane_depths) + " |"]
-    lines.append("|---|" + "---|" * len(plane_depths))
-    for method in METHOD_NAMES:
-        cells = [f"{r['plane_rmse_mm']:.2f} / {r['truth_error_mm']:.2f}" for r in rows if r["method"] == method]
-        lines.append(f"| {method} | " + " | ".join(cells) + " |")
-    return "plane RMSE / error against the true plane, mm:\n" + "\n".join(lines)
+    parts = []
+    for matcher in MATCHERS:
+        for prefix, what in (("", "all points"), ("exact_", "points in the exact coverage")):
+            lines = ["| method | " + " | ".join(f"{d:g} m" for d in plane_depths) + " |"]
+            lines.append("|---|" + "---|" * len(plane_depths))
+            for method in METHOD_NAMES:
+                ours = [r for r in rows if r["method"] == method and r["matcher"] == matcher]
+                cells = [f"{r[prefix + 'plane_rmse_mm']:.2f} / {r[prefix + 'truth_error_mm']:.2f}" for r in ours]
+                lines.append(f"| {method} | " + " | ".join(cells) + " |")
+            title = f"{matcher}, {what}: plane RMSE / error against the true plane, mm"
+            if prefix:
+                shares = [r["exact_share"] for r in rows if r["matcher"] == matcher and r["method"] == "ideal"]
+                title += " (share of the ideal images' points: " + ", ".join(f"{x:.2f}" for x in shares) + ")"
+            parts.append(title + ":\n" + "\n".join(lines))
+    return "\n\n".join(parts)
 
 
 def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...]) -> tuple[Path, ...]:
@@ -184,41 +212,48 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...]) 
     mpl.use("Agg")
     import matplotlib.pyplot as plt
 
-    depths = plane_depths
-    fig, axes = plt.subplots(len(depths), len(METHOD_NAMES), figsize=(2.6 * len(METHOD_NAMES), 2.2 * len(depths)))
-    for i, depth in enumerate(depths):
-        values = [disparities[(m, depth)] for m in METHOD_NAMES]
-        finite = np.concatenate([v[np.isfinite(v)] for v in values])
-        lo, hi = np.percentile(finite, [2, 98]) if len(finite) else (0.0, 1.0)
-        for j, method in enumerate(METHOD_NAMES):
-            ax = axes[i, j]
-            ax.imshow(values[j], cmap="viridis", vmin=lo, vmax=hi)
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title(method, fontsize=9)
-            if j == 0:
-                ax.set_ylabel(f"{depth:g} m", fontsize=9)
-    fig.suptitle("disparity maps (rectified left view; NaN white)", fontsize=9)
-    montage = Path(out_dir) / "planes_disparity.png"
-    fig.savefig(montage, dpi=90, bbox_inches="tight")
-    plt.close(fig)
+    depths, paths = plane_depths, []
+    for matcher in MATCHERS:
+        fig, axes = plt.subplots(len(depths), len(METHOD_NAMES), figsize=(2.6 * len(METHOD_NAMES), 2.2 * len(depths)))
+        for i, depth in enumerate(depths):
+            values = [disparities[(matcher, m, depth)] for m in METHOD_NAMES]
+            finite = np.concatenate([v[np.isfinite(v)] for v in values])
+            lo, hi = np.percentile(finite, [2, 98]) if len(finite) else (0.0, 1.0)
+            for j, method in enumerate(METHOD_NAMES):
+                ax = axes[i, j]
+                ax.imshow(values[j], cmap="viridis", vmin=lo, vmax=hi)
+                ax.set_xticks([])
+                ax.set_yticks([])
+                if i == 0:
+                    ax.set_title(method, fontsize=9)
+                if j == 0:
+                    ax.set_ylabel(f"{depth:g} m", fontsize=9)
+        fig.suptitle(f"{matcher} disparity maps (rectified left view; NaN white)", fontsize=9)
+        paths.append(Path(out_dir) / f"planes_disparity_{matcher}.png")
+        fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
+        plt.close(fig)
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    keys = (
+        ("plane_rmse_mm", "plane fit RMSE (paper's metric)"),
+        ("truth_error_mm", "error against the true plane"),
+        ("exact_truth_error_mm", "same, exact coverage only"),
+    )
+    fig, axes = plt.subplots(len(MATCHERS), len(keys), figsize=(15, 3.4 * len(MATCHERS)), squeeze=False)
     width = 0.8 / len(METHOD_NAMES)
     x = np.arange(len(depths))
-    for j, method in enumerate(METHOD_NAMES):
-        ours = [r for r in rows if r["method"] == method]
-        for ax, key in zip(axes, ("plane_rmse_mm", "truth_error_mm"), strict=True):
-            ax.bar(x + (j - len(METHOD_NAMES) / 2 + 0.5) * width, [r[key] for r in ours], width, label=method)
-    for ax, title in zip(axes, ("plane fit RMSE (paper's metric)", "mean error against the true plane"), strict=True):
-        ax.set(xticks=x, xticklabels=[f"{d:g} m" for d in depths], ylabel="mm", title=title)
-        ax.grid(alpha=0.3, axis="y")
-    axes[0].legend(fontsize=8)
-    bars = Path(out_dir) / "planes_errors.png"
-    fig.savefig(bars, dpi=90, bbox_inches="tight")
+    for i, matcher in enumerate(MATCHERS):
+        for j, method in enumerate(METHOD_NAMES):
+            ours = [r for r in rows if r["method"] == method and r["matcher"] == matcher]
+            for ax, (key, _) in zip(axes[i], keys, strict=True):
+                ax.bar(x + (j - len(METHOD_NAMES) / 2 + 0.5) * width, [r[key] for r in ours], width, label=method)
+        for ax, (_, title) in zip(axes[i], keys, strict=True):
+            ax.set(xticks=x, xticklabels=[f"{d:g} m" for d in depths], ylabel="mm", title=f"{matcher}: {title}")
+            ax.grid(alpha=0.3, axis="y")
+    axes[0, 0].legend(fontsize=8)
+    paths.append(Path(out_dir) / "planes_errors.png")
+    fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
     plt.close(fig)
-    return montage, bars
+    return tuple(paths)
 
 
 @register("planes")

@@ -14,18 +14,26 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lfrefract import Pose, virtual_camera_for
+from lfrefract import ParameterError, Pose, virtual_camera_for
 from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.io import read_exr, read_json, write_json
 from lfrefract.methods import CalibrationViews, build_projector
-from lfrefract.stereo import Rectification, StereoCalibration, calibrate_stereo, rectify
-from lfrefract.synthesis import build_warp_map
+from lfrefract.stereo import (
+    Rectification,
+    StereoCalibration,
+    calibrate_stereo,
+    rectify,
+    sgbm_disparity,
+    zncc_disparity,
+)
+from lfrefract.synthesis import WarpMap, build_warp_map
 from simulator.assets import chessboard_inner_corners
 from simulator.config import read_toml
 from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
 
 __all__ = [
     "BOARD_OFFSETS",
+    "MATCHERS",
     "METHOD_NAMES",
     "SQUARES",
     "Capture",
@@ -33,14 +41,22 @@ __all__ = [
     "aim",
     "calibrated_methods",
     "chessboards",
+    "exact_coverage",
     "grey",
+    "match",
     "render_capture",
     "render_captures",
     "rig_data",
+    "warp_maps",
 ]
 
 #: Methods compared, in table order.
 METHOD_NAMES = ("approx far", "approx near", "proposed", "proposed+distortion", "ideal")
+
+#: Stereo matchers run on every method's rectified pair: the paper's NCC cost
+#: (:func:`lfrefract.stereo.zncc_disparity`) and OpenCV's semi-global matcher
+#: (:func:`lfrefract.stereo.sgbm_disparity`), whose smoothness terms hold up better at depth edges.
+MATCHERS = ("zncc", "sgbm")
 
 
 @dataclass(frozen=True)
@@ -169,8 +185,54 @@ def grey(image: np.ndarray) -> np.ndarray:
     return image.mean(axis=2) if image.ndim == 3 else image
 
 
+def match(matcher: str, left: np.ndarray, right: np.ndarray, *, min_disparity_px: int, num_disparities: int):
+    """Disparity (H, W) of a rectified pair (grey or RGB, NaN where missing) by one of :data:`MATCHERS`."""
+    if matcher == "zncc":
+        return zncc_disparity(
+            grey(left), grey(right), min_disparity_px=min_disparity_px, num_disparities=num_disparities
+        )
+    if matcher == "sgbm":
+        return sgbm_disparity(
+            grey(left), grey(right), min_disparity_px=min_disparity_px, num_disparities=num_disparities
+        )
+    raise ParameterError(f"matcher must be one of {MATCHERS}, got {matcher!r}")
+
+
+def warp_maps(rig: RigConfig) -> dict[str, WarpMap]:
+    """Each camera's warp map (:func:`lfrefract.synthesis.build_warp_map`) with the default options."""
+    return {c.name: build_warp_map(c.scene.camera, c.scene.port) for c in rig.cameras}
+
+
+def exact_coverage(points_left: np.ndarray, rig: RigConfig, warps: dict[str, WarpMap]) -> np.ndarray:
+    """Whether each point (N, 3; the first camera's frame, metres) is seen by exact pixels of every camera.
+
+    A point is inside when it projects, in every camera's refraction-free view (true pose,
+    ``warps[name].output``), onto a pixel whose necessary rays that camera records
+    (:attr:`WarpMap.exact`): there the synthesis is exact, elsewhere it approximates. The region
+    belongs to the set-up, not to a method, so every method is measured on the same points.
+    """
+    points_left = np.asarray(points_left, dtype=np.float64).reshape(-1, 3)
+    world = rig.cameras[0].scene.pose.to_world(points_left)
+    inside = np.ones(len(points_left), dtype=bool)
+    for camera in rig.cameras:
+        warp = warps[camera.name]
+        points = camera.scene.pose.to_camera(world)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = np.rint(warp.output.project(points))
+        ok = (points[:, 2] > 0) & np.isfinite(uv).all(axis=1)
+        ok &= (uv[:, 0] >= 0) & (uv[:, 0] < warp.output.width_px) & (uv[:, 1] >= 0) & (uv[:, 1] < warp.output.height_px)
+        col, row = np.where(ok, uv[:, 0], 0).astype(np.int64), np.where(ok, uv[:, 1], 0).astype(np.int64)
+        inside &= ok & warp.exact[row, col]
+    return inside
+
+
 def calibrated_methods(
-    base: RigConfig, setup: RigSetup, boards: dict[float, list[Capture]], *, progress: bool
+    base: RigConfig,
+    setup: RigSetup,
+    boards: dict[float, list[Capture]],
+    *,
+    progress: bool,
+    warps: dict[str, WarpMap] | None = None,
 ) -> Iterator[tuple[str, Callable, Rectification, StereoCalibration, int]]:
     """For each method of :data:`METHOD_NAMES`: its projection ``project(camera, capture)`` of a
     capture into a central image, and the rig calibrated and rectified on its own images of the
@@ -184,7 +246,8 @@ def calibrated_methods(
     deflection, and its undistorted images leave the frame); ``proposed+distortion`` fits its
     residual distortion on the farthest boards. The rig is calibrated on every board given: the
     approximation's camera model belongs to one depth, the rig's pose to none (boards at one depth
-    left the baseline a few per cent off on the small rig's 188 px images).
+    left the baseline a few per cent off on the small rig's 188 px images). ``warps``: the cameras'
+    warp maps if already built (:func:`warp_maps`).
     """
     names = [c.name for c in base.cameras]
     pattern = (SQUARES[0] - 1, SQUARES[1] - 1)
@@ -192,7 +255,7 @@ def calibrated_methods(
     near, far = depths[0], depths[-1]
     squares = {d: square_size_m(base, setup, d) for d in depths}
     cameras = {c.name: c.scene for c in base.cameras}
-    warps = {n: build_warp_map(cameras[n].camera, cameras[n].port) for n in names}
+    warps = warp_maps(base) if warps is None else warps
 
     def calibration(name: str, depth: float) -> CalibrationViews:
         pose = cameras[name].pose

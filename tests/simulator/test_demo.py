@@ -19,7 +19,7 @@ def test_demo_writes_a_report_with_every_method(tmp_path, capsys):
     report = (out / "report.md").read_text()
     for name in ("approx far", "approx near", "proposed", "proposed+distortion", "ideal"):
         assert f"| {name} |" in report
-    for figure in ("planes_disparity.png", "planes_errors.png"):
+    for figure in ("planes_disparity_zncc.png", "planes_disparity_sgbm.png", "planes_errors.png"):
         assert f"]({figure})" in report
         assert (out / figure).is_file()
     points, colours = read_ply(out / "cloud_proposed.ply")
