@@ -3,6 +3,7 @@
     lfrefract describe (PRESET | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full]
+    lfrefract views RAW.exr --out DIR [--grid 9] [--spacing-px S] [--format png|exr] [--overwrite]
     lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square]
     lfrefract calibrate port BOARD.exr... --squares C R --square-size-m S --out PORT.json
     lfrefract calibrate approx BOARD.exr... --squares C R --square-size-m S --out APPROX.json
@@ -11,7 +12,9 @@
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
 refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (K, size, pose, options, coverage
 statistics), the coverage map ``OUT.coverage.exr`` and a figure ``OUT.png``. ``naive`` writes the
-conventional view with no refraction handling, for comparison.
+conventional view with no refraction handling, for comparison. ``views`` writes a regular grid of
+sub-aperture views (no refraction handling either) in the HCI 4D light field benchmark layout that
+light-field depth-estimation methods read (``lfrefract.io.write_view_stack``).
 
 ``calibrate`` estimates what the pipeline would otherwise be told: ``mla`` the microlens lattice
 and every micro-image centre from a white image; ``port`` the port's normal and distance from
@@ -44,10 +47,19 @@ from lfrefract import (
 )
 from lfrefract.calibration import MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
-from lfrefract.io import FileFormatError, read_exr, read_json, write_exr, write_flat_port, write_json
+from lfrefract.io import (
+    VIEW_STACK_FORMATS,
+    FileFormatError,
+    read_exr,
+    read_json,
+    write_exr,
+    write_flat_port,
+    write_json,
+    write_view_stack,
+)
 from lfrefract.methods import ConventionalView
 from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
-from lfrefract.views import naive_view
+from lfrefract.views import naive_view, subaperture_stack
 
 __all__ = [
     "calibrate_approx_command",
@@ -57,6 +69,7 @@ __all__ = [
     "main",
     "naive",
     "synth",
+    "views",
 ]
 
 
@@ -178,6 +191,27 @@ def naive(args: argparse.Namespace) -> int:
     image = naive_view(camera, raw, output=output, kind=args.kind)
     write_exr(Path(args.out), image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}")
+    return 0
+
+
+def views(args: argparse.Namespace) -> int:
+    """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
+    raw, meta = _capture(Path(args.raw))
+    camera = LightFieldCamera.from_dict(meta["camera"])
+    output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
+    stack = subaperture_stack(camera, raw, grid=args.grid, spacing_px=args.spacing_px, output=output)
+    out = write_view_stack(
+        Path(args.out),
+        stack,
+        overwrite=args.overwrite,
+        image_format=args.format,
+        metadata={"source": str(args.raw), "pose": meta.get("pose")},
+    )
+    print(
+        f"{stack.grid} x {stack.grid} views of {output.width_px} x {output.height_px} px, spacing "
+        f"{stack.spacing_px:.4g} px, baseline {stack.baseline_m * 1e3:.4g} mm, disparity "
+        f"{output.focal_px * stack.baseline_m:.4g} px m / depth; wrote {out}"
+    )
     return 0
 
 
@@ -325,12 +359,23 @@ def main(argv: list[str] | None = None) -> int:
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")
     nv.add_argument("--kind", choices=["central", "full"], default="central")
+    vw = sub.add_parser("views", help="grid of sub-aperture views in the HCI 4D light field benchmark layout")
+    vw.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
+    vw.add_argument("--out", required=True, help="output directory")
+    vw.add_argument("--grid", type=int, default=9, help="views per row and column, odd >= 3 (default: 9)")
+    vw.add_argument(
+        "--spacing-px", type=float, help="sensor offset between neighbouring views (default: the largest that fits)"
+    )
+    vw.add_argument("--format", choices=VIEW_STACK_FORMATS, default="png", help="view images (default: png)")
+    vw.add_argument("--overwrite", action="store_true", help="replace an earlier view stack in --out")
     args = parser.parse_args(argv)
     try:
         if args.command == "synth":
             return synth(args)
         if args.command == "naive":
             return naive(args)
+        if args.command == "views":
+            return views(args)
         if args.command == "calibrate":
             return {"mla": calibrate_mla_command, "port": calibrate_port_command, "approx": calibrate_approx_command}[
                 args.target
@@ -341,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
             meta = read_json(Path(args.source))
             port = FlatPort.from_dict(meta["port"]) if meta.get("port") else None
             info = describe(LightFieldCamera.from_dict(meta["camera"]), port)
-    except (ParameterError, FileFormatError, KeyError) as exc:
+    except (ParameterError, FileFormatError, FileExistsError, KeyError) as exc:
         print(f"lfrefract: error: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -13,26 +13,39 @@ Sub-aperture views (:func:`subaperture_view`) sample every micro-image at the sa
 at ``h`` with the central view's orientation; with the MLA off the focal plane (``f' != f``) its
 rays are also tilted by ``delta * pixel_pitch / f_mla * (1 - f' / f)``, a shift of the principal
 point.
+
+A view stack (:func:`subaperture_stack`) is a regular ``grid x grid`` set of sub-aperture views,
+offsets ``((column - h) s, (row - h) s)`` with ``h = (grid - 1) / 2``: its centres of projection
+form a regular grid on the main-lens plane, ``baseline = s * pixel_pitch * f' / f_mla`` apart, and
+every view has the same K and orientation, so it is the input that light-field depth-estimation
+methods expect (``lfrefract.io.write_view_stack`` writes it in the HCI benchmark layout).
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import ndimage, sparse
 from scipy.spatial import Delaunay
 
-from lfrefract._validate import ParameterError, finite_vector, one_of
+from lfrefract._validate import ParameterError, finite_vector, one_of, positive_float
 from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 
 __all__ = [
     "VIEW_KINDS",
+    "ViewStack",
     "apply_resampling",
     "micro_image_samples",
     "naive_view",
     "raw_channels",
     "resampling_matrix",
     "subaperture_centre_m",
+    "subaperture_limit_px",
+    "subaperture_stack",
     "subaperture_view",
 ]
 
@@ -251,7 +264,7 @@ def subaperture_view(
         NaN outside the lenses' hull.
     """
     du, dv = finite_vector("offset_px", offset_px, 2)
-    limit = camera.micro_image_radius_px - 1.0
+    limit = subaperture_limit_px(camera)
     if np.hypot(du, dv) > limit:
         raise ParameterError(
             f"offset_px={offset_px!r} reaches the micro-image rim (at most {limit:.3g} px from its centre)"
@@ -259,6 +272,298 @@ def subaperture_view(
     image = raw_channels(camera, raw)
     idx = camera.lens_indices_on_sensor()
     values = micro_image_samples(camera, image, idx, (du, dv))
+    return _resample(camera, idx, values, output, _slope_shift(camera, du, dv), grey=np.ndim(raw) == 2)
+
+
+def subaperture_limit_px(camera: LightFieldCamera) -> float:
+    """How far from its micro-image centre a sub-aperture view may sample, pixels.
+
+    The micro-image radius less one pixel: a bilinear sample there reads pixels that are all
+    inside the micro-image, so none is vignetted (the main-lens radius
+    :meth:`LightFieldCamera.usable_aperture_radius_m` ``(1.0)``, seen from the sensor).
+    """
+    return camera.micro_image_radius_px - 1.0
+
+
+def _slope_shift(camera: LightFieldCamera, du: float, dv: float) -> tuple[float, float]:
+    """Principal-point shift (slope units) of the sub-aperture view at ``(du, dv)``: zero when
+    ``f' = f``, else ``delta * pixel_pitch / f_mla * (1 - f' / f)`` (see the module docstring)."""
     spread = 1.0 - camera.lens_to_mla_m / camera.focal_length_m
     tilt = camera.sensor.pixel_pitch_m / camera.mla.focal_length_m * spread
-    return _resample(camera, idx, values, output, (du * tilt, dv * tilt), grey=np.ndim(raw) == 2)
+    return (du * tilt, dv * tilt)
+
+
+def _grid_size(name: str, value: Any) -> int:
+    """``value`` as an int, or raise unless it is an odd integer >= 3 (a central view exists)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(f"{name} must be an odd integer >= 3, got {value!r}")
+    if value < 3 or value % 2 != 1:
+        raise ParameterError(f"{name} must be an odd integer >= 3 (a central view with neighbours), got {value!r}")
+    return int(value)
+
+
+def _regular_grid(name: str, value: Any, grid: int, dims: int) -> np.ndarray:
+    """``value`` (grid, grid, dims) as read-only float64, or raise unless entry ``[r, c]`` is
+    ``((c - h) s, (r - h) s, 0...)`` with a step ``s > 0`` (to 1e-9 of ``s``)."""
+    arr = np.array(value, dtype=np.float64, copy=True)
+    if arr.shape != (grid, grid, dims) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be a finite array of shape {(grid, grid, dims)}, got shape {arr.shape}")
+    step = float(arr[0, 1, 0] - arr[0, 0, 0])
+    k = np.arange(grid, dtype=np.float64) - (grid - 1) / 2.0
+    expected = np.zeros_like(arr)
+    expected[..., 0] = k[None, :] * step
+    expected[..., 1] = k[:, None] * step
+    error = np.max(np.abs(arr - expected), axis=2)
+    if not step > 0.0 or np.max(error) > 1e-9 * step:
+        r, c = np.unravel_index(np.argmax(error), error.shape)
+        raise ParameterError(
+            f"{name} must be a regular grid about 0 with a positive step s, [r, c] = ((c - h) s, (r - h) s"
+            f"{', 0' if dims == 3 else ''}); got s = {step!r} and {name}[{r}, {c}] = {arr[r, c].tolist()}"
+        )
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ViewStack:
+    """A regular grid of sub-aperture views of one raw lenslet image (:func:`subaperture_stack`).
+
+    Indexing is ``[row v, column u]``: row 0 is the top row of centres (camera-frame -y, up),
+    column 0 the leftmost (-x); the central view is ``[h, h]``, ``h = (grid - 1) / 2``. All views
+    are pinholes with the same intrinsics :attr:`output` and the camera frame's orientation; only
+    their centres of projection differ, by :attr:`baseline_m` between neighbours. A point at
+    depth ``Z`` (camera-frame z, metres) therefore moves by the disparity
+    ``d = f_px * baseline_m / Z`` pixels between neighbouring views, against the direction of the
+    step: ``views[r, c + 1]`` at ``(u - d, v)`` and ``views[r + 1, c]`` at ``(u, v - d)`` show what
+    ``views[r, c]`` shows at ``(u, v)``. ``d`` is zero at infinity and grows as the point nears.
+
+    Parameters
+    ----------
+    views : ndarray, float32, shape (grid, grid, H, W) or (grid, grid, H, W, C)
+        The views (linear radiance as in the raw image), NaN where a view has no value (outside
+        the lenses' hull). ``grid`` odd, >= 3; ``(H, W)`` the size of ``output``.
+    offsets_px : ndarray, shape (grid, grid, 2)
+        Sensor offset ``(du, dv)`` from every micro-image centre that each view samples, pixels:
+        ``((c - h) s, (r - h) s)``, ``s`` the spacing (> 0).
+    centres_m : ndarray, shape (grid, grid, 3)
+        Centre of projection of each view, camera frame, metres, on the main-lens plane
+        (:func:`subaperture_centre_m`): ``((c - h) b, (r - h) b, 0)``, ``b`` the baseline (> 0).
+    output : PinholeCamera
+        Intrinsics and size shared by every view.
+    camera : LightFieldCamera, optional
+        The camera whose raw image the views come from; when given, ``centres_m`` must be
+        :func:`subaperture_centre_m` of ``offsets_px`` and the corner views must lie within
+        :func:`subaperture_limit_px`. It gives the views' physical image distance (``f'``) for
+        exports.
+
+    Raises
+    ------
+    ParameterError
+        If a shape, type or value breaks the above (the grids must be regular to 1e-9 of a step).
+    """
+
+    views: np.ndarray
+    offsets_px: np.ndarray
+    centres_m: np.ndarray
+    output: PinholeCamera
+    camera: LightFieldCamera | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.output, PinholeCamera):
+            raise ParameterError(f"output must be a PinholeCamera, got {self.output!r}")
+        views = np.asarray(self.views)
+        if views.dtype != np.float32 or views.ndim not in (4, 5):
+            raise ParameterError(
+                f"views must be a float32 array of shape (grid, grid, H, W[, C]), got {views.dtype} {views.shape}"
+            )
+        if views.shape[0] != views.shape[1]:
+            raise ParameterError(f"views must have as many rows as columns of views, got shape {views.shape}")
+        grid = _grid_size("views.shape[0] (the grid)", views.shape[0])
+        if views.shape[2:4] != (self.output.height_px, self.output.width_px):
+            raise ParameterError(
+                f"views must be {self.output.height_px} x {self.output.width_px} px (output), got shape {views.shape}"
+            )
+        if views.ndim == 5 and views.shape[4] < 1:
+            raise ParameterError(f"views must have at least one channel, got shape {views.shape}")
+        views = views.view()
+        views.setflags(write=False)
+        offsets = _regular_grid("offsets_px", self.offsets_px, grid, 2)
+        centres = _regular_grid("centres_m", self.centres_m, grid, 3)
+        if self.camera is not None:
+            if not isinstance(self.camera, LightFieldCamera):
+                raise ParameterError(f"camera must be a LightFieldCamera or None, got {self.camera!r}")
+            corner = float(np.hypot(*offsets[0, 0]))
+            if corner > subaperture_limit_px(self.camera):
+                raise ParameterError(
+                    f"offsets_px reach {corner:.4g} px from the micro-image centres at the corners, beyond "
+                    f"camera {self.camera.name!r}'s limit of {subaperture_limit_px(self.camera):.4g} px"
+                )
+            step_m = subaperture_centre_m(self.camera, (1.0, 0.0))[0]
+            expected = np.concatenate([offsets * step_m, np.zeros((grid, grid, 1))], axis=2)
+            if not np.allclose(centres, expected, rtol=1e-9, atol=0.0):
+                raise ParameterError(
+                    f"centres_m are not subaperture_centre_m of offsets_px for camera {self.camera.name!r}: baseline "
+                    f"{centres[0, 1, 0] - centres[0, 0, 0]!r} m, expected {expected[0, 1, 0] - expected[0, 0, 0]!r} m"
+                )
+        object.__setattr__(self, "views", views)
+        object.__setattr__(self, "offsets_px", offsets)
+        object.__setattr__(self, "centres_m", centres)
+
+    @property
+    def grid(self) -> int:
+        """Views per row and per column (odd)."""
+        return int(self.views.shape[0])
+
+    @property
+    def centre_index(self) -> int:
+        """Row and column ``h = (grid - 1) / 2`` of the central view."""
+        return (self.grid - 1) // 2
+
+    @property
+    def central_view(self) -> np.ndarray:
+        """The view at offset (0, 0): centre of projection at the main-lens centre, shape (H, W[, C])."""
+        return self.views[self.centre_index, self.centre_index]
+
+    @property
+    def spacing_px(self) -> float:
+        """Sensor offset between neighbouring views' samples, pixels."""
+        return float(self.offsets_px[0, 1, 0] - self.offsets_px[0, 0, 0])
+
+    @property
+    def baseline_m(self) -> float:
+        """Distance between the centres of neighbouring views (along a row or a column), metres."""
+        return float(self.centres_m[0, 1, 0] - self.centres_m[0, 0, 0])
+
+    @property
+    def K(self) -> np.ndarray:  # noqa: N802 - the conventional name
+        """Intrinsic matrix (3, 3) of every view, OpenCV form."""
+        return self.output.K
+
+    def disparity_px(self, depth_m: float | np.ndarray) -> float | np.ndarray:
+        """Disparity between neighbouring views of points at camera-frame depth ``depth_m``, pixels.
+
+        ``f_px * baseline_m / depth_m``; ``depth_m`` > 0 (``inf`` gives 0), scalar or array.
+        """
+        z = np.asarray(depth_m, dtype=np.float64)
+        if not np.all(z > 0.0):
+            bad = z[~(z > 0.0)].ravel()[0]
+            raise ParameterError(f"depth_m must be positive (inf allowed), got {float(bad)!r}")
+        out = self.output.focal_px * self.baseline_m / z
+        return float(out) if out.ndim == 0 else out
+
+    def depth_m(self, disparity_px: float | np.ndarray) -> float | np.ndarray:
+        """Camera-frame depth of points with disparity ``disparity_px`` between neighbouring views, metres.
+
+        The inverse of :meth:`disparity_px`; ``disparity_px`` >= 0 (0 gives ``inf``), scalar or array.
+        """
+        d = np.asarray(disparity_px, dtype=np.float64)
+        if not np.all(d >= 0.0) or not np.all(np.isfinite(d)):
+            bad = d[~((d >= 0.0) & np.isfinite(d))].ravel()[0]
+            raise ParameterError(f"disparity_px must be finite and non-negative, got {float(bad)!r}")
+        with np.errstate(divide="ignore"):
+            out = self.output.focal_px * self.baseline_m / d
+        return float(out) if out.ndim == 0 else out
+
+
+def subaperture_stack(
+    camera: LightFieldCamera,
+    raw: np.ndarray,
+    *,
+    grid: int = 9,
+    spacing_px: float | None = None,
+    output: PinholeCamera | None = None,
+) -> ViewStack:
+    """A regular ``grid x grid`` set of sub-aperture views of ``raw`` (a light-field view stack).
+
+    View ``[r, c]`` is :func:`subaperture_view` at ``offset_px = ((c - h) s, (r - h) s)``,
+    ``h = (grid - 1) / 2``, ``s = spacing_px``: a pinhole at :func:`subaperture_centre_m` of that
+    offset, so the centres form a regular grid ``s * pixel_pitch * f' / f_mla`` metres apart on
+    the main-lens plane, and every view shares the intrinsics of ``output`` and the camera frame's
+    orientation (see :class:`ViewStack` for the disparity between neighbours). Each view is one
+    vectorised gather and sparse product; the interpolation matrix is built once per distinct
+    principal-point shift (once in all when ``f' = f``).
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    raw : ndarray, shape (H_raw, W_raw) or (H_raw, W_raw, C)
+        Raw lenslet image of ``camera``'s sensor size.
+    grid : int
+        Views per row and column; odd and >= 3, so that there is a central view.
+    spacing_px : float, optional
+        Offset between neighbouring views' samples in every micro-image, sensor pixels, > 0. The
+        corner views sample ``sqrt(2) h s`` from the micro-image centres, which must stay within
+        :func:`subaperture_limit_px` (no sample vignetted). Default: the largest such spacing,
+        ``subaperture_limit_px(camera) / (sqrt(2) h)``.
+    output : PinholeCamera, optional
+        Geometry of every view; default :func:`virtual_camera_for` ``(camera)``.
+
+    Returns
+    -------
+    ViewStack
+        ``views`` float32, shape (grid, grid, height, width) for a 2-D ``raw``, else
+        (grid, grid, height, width, C); NaN outside the lenses' hull.
+
+    Raises
+    ------
+    ParameterError
+        If ``grid`` is not an odd integer >= 3, ``spacing_px`` is not positive and finite or puts
+        the corner views beyond the limit, the camera's micro-images leave no room for any view
+        but the central one, or ``raw`` does not match the sensor.
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    grid = _grid_size("grid", grid)
+    if output is None:
+        output = virtual_camera_for(camera)
+    elif not isinstance(output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
+    half = (grid - 1) // 2
+    limit = subaperture_limit_px(camera)
+    if limit <= 0.0:
+        raise ParameterError(
+            f"camera {camera.name!r} has micro-images of radius {camera.micro_image_radius_px:.3g} px: "
+            "no sub-aperture view but the central one stays a pixel inside the rim"
+        )
+    largest = limit / (math.sqrt(2.0) * half)
+    while math.hypot(half * largest, half * largest) > limit:  # round-off: the corner must pass the limit
+        largest = math.nextafter(largest, 0.0)
+    if spacing_px is None:
+        spacing = largest
+    else:
+        spacing = positive_float("spacing_px", spacing_px)
+        reach = math.hypot(half * spacing, half * spacing)
+        if reach > limit:
+            raise ParameterError(
+                f"spacing_px={spacing_px!r} puts the corner views of the {grid} x {grid} grid {reach:.4g} px from "
+                f"the micro-image centres, beyond the limit of {limit:.4g} px (micro-image radius less one pixel); "
+                f"at most {largest:.4g} px for grid={grid}"
+            )
+    image = raw_channels(camera, raw)
+    grey = np.ndim(raw) == 2
+    idx = camera.lens_indices_on_sensor()
+    # micro_image_samples per view, with its invariant parts hoisted: the centres, and the channels
+    # as contiguous planes (map_coordinates copies a strided channel on every call otherwise).
+    centres_px = camera.micro_image_centres_px(idx)
+    planes = [np.ascontiguousarray(image[..., c]) for c in range(image.shape[2])]
+    steps = (np.arange(grid, dtype=np.float64) - half) * spacing
+    offsets = np.stack(np.broadcast_arrays(steps[None, :], steps[:, None]), axis=-1)  # [r, c] = (du_c, dv_r)
+    shape = (grid, grid, output.height_px, output.width_px) + (() if grey else (image.shape[2],))
+    views = np.empty(shape, dtype=np.float32)
+    centres = np.empty((grid, grid, 3))
+    matrices: dict[tuple[float, float], tuple[sparse.csr_matrix, np.ndarray]] = {}
+    for r in range(grid):
+        for c in range(grid):
+            du, dv = float(offsets[r, c, 0]), float(offsets[r, c, 1])
+            shift = _slope_shift(camera, du, dv)
+            if shift not in matrices:
+                _, matrix, inside = resampling_matrix(camera, output, slope_shift=shift, lenses=idx)
+                matrices[shift] = (matrix, inside)
+            points = centres_px + np.asarray((du, dv))
+            values = np.stack(
+                [ndimage.map_coordinates(p, [points[:, 1], points[:, 0]], order=1, mode="nearest") for p in planes],
+                axis=1,
+            )
+            views[r, c] = apply_resampling(*matrices[shift], values, output, grey=grey)
+            centres[r, c] = subaperture_centre_m(camera, (du, dv))
+    return ViewStack(views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera)

@@ -593,3 +593,44 @@ OBJECTS_COMPLETENESS_MIN = {"zncc": 0.6, "sgbm": 0.45}
 # Ratio of median depth errors, the approximation calibrated at 0.6 m over the proposed method:
 # 1.62 measured (3.31 against 2.04 mm; the ideal images give 1.41 mm).
 OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN = 1.3
+
+# ----------------------------------------------------------------------------- water
+# [water] (tests/simulator/test_water.py).
+# Absolute; Quan and Fry's (1995) index of sea water against tabulated values: Mobley (2010) after
+# Austin and Halikas (1976), 0 and 35 psu, 0-30 C, 400-700 nm (5-decimal table): 5.8e-5 at worst
+# measured, 2e-5 RMS (the equation's own fit error); Tilton and Taylor (1938), distilled water at
+# 589.3 nm to four decimals: 2.3e-5 at worst. A wrong coefficient moves some value by 5e-4 or more.
+WATER_INDEX_ABS = 1e-4
+
+# Relative; Beer-Lambert on the tiny camera: rendered radiance, absorbing water over clear, against
+# exp(-sigma_a * path) per quartile of path length and per channel (sigma_a = 2, 1, 0.5 per metre;
+# path from the depth ground truth, plus the light leg for a point light). volpath estimates the
+# transmittance by free-flight sampling (each sample passes or not), so the ratio carries binomial
+# noise: worst 1.1 % measured for the ideal image (64 spp), 0.6 % for the raw image (16 spp, sensor and
+# geometry port models). A missing medium (sensor, port face, shadow ray) is off by 20 % or more.
+WATER_BEER_LAMBERT_RELATIVE = 0.03
+
+# Relative; single-scattering veil of a lamp beside the camera in empty water (ideal image, 32 spp)
+# against numerical quadrature of the single-scattering integral: 0.3-0.5 % measured for isotropic,
+# Henyey-Greenstein g = 0.8 and RGB coefficients with g = 0.5. The noise of free-flight sampling.
+WATER_VEIL_RELATIVE = 0.03
+
+# ----------------------------------------------------------------------------- sub-aperture view stacks
+# tests/lfrefract/test_view_stack.py: stacks at the default spacing of analytic raw images (chief ray of
+# every pixel onto a fronto-parallel textured plane); each view's shift against the central view by ECC
+# (lfrefract.metrics.shift_px), least-squares slope per axis over the grid against f_px * baseline / Z.
+# Relative; that slope: tiny-2x 9 x 9 at 0.2 / 0.4 m (0.45 / 0.23 px per step) within 0.6 %, tiny with
+# f' = 1.05 f, 5 x 5 at 0.1 m (0.47 px) within 2.2 % (seeds 0-3; 92 x 69 px views are what limits ECC).
+# A baseline off by f' / f (5 %) fails it.
+VIEW_STACK_DISPARITY_RELATIVE = 0.03
+# Pixels; the largest distance of one view's measured shift from (-(c - h) d, -(r - h) d): 0.037 px
+# measured on tiny-2x, 0.096 px on tiny (0.14 px on 9 x 9 tiny stacks): piecewise-linear interpolation
+# between lens samples, one per two output pixels, pulls ECC towards the lens lattice.
+VIEW_STACK_SHIFT_RESIDUAL_PX = 0.15
+
+# ----------------------------------------------------------------------------- datasets
+# Ratio; mean raw pixel of the default scene (tiny, 2 spp) in water with absorption_per_m = 1 over
+# the same in clear water, both swept by a dataset (tests/simulator/test_dataset_run.py): 0.33
+# measured. Light travels 0.8-1.7 m through the water to the backdrop and back (e^-0.8 to e^-1.7,
+# 0.45 to 0.18); without the medium reaching the render the ratio would be 1 up to noise.
+DATASET_TURBID_OVER_CLEAR_MAX = 0.6
