@@ -9,6 +9,7 @@ from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort, PortTrace, fresnel_transmittance, refract
 from lfrefract.pose import Pose
 from lfrefract.presets import PRESETS, camera_preset
+from lfrefract.water import seawater_index
 
 __version__ = "0.1.0"
 
@@ -27,5 +28,6 @@ __all__ = [
     "camera_preset",
     "fresnel_transmittance",
     "refract",
+    "seawater_index",
     "virtual_camera_for",
 ]

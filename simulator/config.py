@@ -12,6 +12,13 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
     distance_m = 0.02                 # see lfrefract.FlatPort
     thickness_m = 0.005
     tilt_x_deg = 20.0
+    [water]                           # optional; no [water] table: clear water, the port's n_water
+    salinity_psu = 35.0               # with temperature_c (both or neither): n_water from Quan and
+    temperature_c = 20.0              #   Fry (1995), lfrefract.seawater_index; 0-35 psu, 0-30 C
+    wavelength_nm = 589.3             # optional, 400-700 nm (default 589.3)
+    absorption_per_m = [0.4, 0.07, 0.02]  # sigma_a, 1/m, one number or RGB (default 0)
+    scattering_per_m = 0.1            # sigma_s, 1/m, one number or RGB (default 0)
+    phase_g = 0.9                     # Henyey-Greenstein asymmetry in (-1, 1) (default 0)
     [render]
     spp = 16
     seed = 0
@@ -23,6 +30,12 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
 Objects are placed in the world frame by ``position_m`` and ``rotation_xyz_deg``; in their
 local frame +x is right, +y down and +z away from a camera with identity pose (OpenCV), so an
 unrotated plane faces that camera with its texture upright. Unknown keys are errors.
+
+``[water]`` (:class:`Water`) makes the water physical. Its salinity and temperature set the
+port's ``n_water`` (a ``[port]`` table that also states ``n_water`` must agree to within
+:data:`N_WATER_TOLERANCE`); its absorption and scattering coefficients fill the water with a
+homogeneous participating medium (:func:`simulator.scene.water_medium`). Without a ``[water]``
+table, or with both coefficients zero, the scene renders exactly as clear water.
 """
 
 from __future__ import annotations
@@ -36,9 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset
+from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset, seawater_index
 from lfrefract._validate import (
     ParameterError,
+    finite_float,
     finite_vector,
     non_negative_float,
     one_of,
@@ -47,8 +61,10 @@ from lfrefract._validate import (
     reject_unknown_keys,
 )
 from lfrefract.pose import rotation_from_euler_xyz
+from lfrefract.water import SODIUM_D_NM
 
 __all__ = [
+    "N_WATER_TOLERANCE",
     "OBJECT_TYPES",
     "PORT_MODELS",
     "Bowl",
@@ -62,6 +78,8 @@ __all__ = [
     "RenderSettings",
     "SceneConfig",
     "TexturedPlane",
+    "Water",
+    "apply_water_index",
     "default_scene_path",
     "embedded_scenes",
     "load_scene",
@@ -298,6 +316,170 @@ class RenderSettings:
         _seed("render.seed", self.seed)
 
 
+#: Largest difference between an ``n_water`` stated in ``[port]`` (or a rig's ``[wall]``) and the
+#: index that ``[water]`` computes before the two count as a conflict. About the equation's own
+#: error against the data it fits (up to 6e-5 against the tabulated values of Austin and Halikas),
+#: so an index that agrees to the fourth decimal passes, while one psu of salinity (1.8e-4) or two
+#: degrees of temperature (1.8e-4 at 20 C) is refused.
+N_WATER_TOLERANCE = 1e-4
+
+
+@dataclass(frozen=True, kw_only=True)
+class Water:
+    """The water the objects stand in: its refractive index and its turbidity (``[water]``).
+
+    Parameters
+    ----------
+    salinity_psu, temperature_c : float, optional
+        Practical salinity (0 to 35 psu) and temperature (0 to 30 degrees Celsius), both or
+        neither. Given, the refractive index of the water follows from them
+        (:func:`lfrefract.seawater_index`, Quan and Fry 1995) and is the port's ``n_water``.
+    wavelength_nm : float, optional
+        Wavelength in vacuum of that index, nanometres, 400 to 700; only with salinity and
+        temperature (default then 589.3, the sodium D line).
+    absorption_per_m, scattering_per_m : float or sequence of 3 floats
+        Absorption and scattering coefficients sigma_a and sigma_s of the water, per metre
+        (>= 0; one number for all three colour channels, or RGB). Default 0: clear water.
+    phase_g : float
+        Asymmetry g of the Henyey-Greenstein phase function of the scattering, in (-1, 1):
+        0 isotropic, towards 1 forward (typical of sea water: about 0.9). Default 0.
+
+    Attributes
+    ----------
+    n_water : float or None
+        The computed refractive index (relative to air), None without salinity and temperature.
+
+    Raises
+    ------
+    ParameterError
+        For one of salinity and temperature without the other, a wavelength without them, a value
+        outside the index equation's ranges, a negative or non-finite coefficient, or ``phase_g``
+        outside (-1, 1); the message names the key (``water.<key>``) and the value.
+    """
+
+    salinity_psu: float | None = None
+    temperature_c: float | None = None
+    wavelength_nm: float | None = None
+    absorption_per_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scattering_per_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    phase_g: float = 0.0
+    n_water: float | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        if (self.salinity_psu is None) != (self.temperature_c is None):
+            raise ParameterError(
+                "water.salinity_psu and water.temperature_c go together (both or neither), got "
+                f"salinity_psu={self.salinity_psu!r}, temperature_c={self.temperature_c!r}"
+            )
+        if self.salinity_psu is None:
+            if self.wavelength_nm is not None:
+                raise ParameterError(
+                    f"water.wavelength_nm={self.wavelength_nm!r} is the wavelength of the index that "
+                    "salinity_psu and temperature_c give; it needs them"
+                )
+        else:
+            wavelength = SODIUM_D_NM if self.wavelength_nm is None else self.wavelength_nm
+            try:
+                n = seawater_index(
+                    salinity_psu=self.salinity_psu, temperature_c=self.temperature_c, wavelength_nm=wavelength
+                )
+            except ParameterError as exc:
+                raise ParameterError(f"water.{exc}") from None
+            for name, value in (("salinity_psu", self.salinity_psu), ("temperature_c", self.temperature_c)):
+                object.__setattr__(self, name, float(value))
+            object.__setattr__(self, "wavelength_nm", float(wavelength))
+            object.__setattr__(self, "n_water", n)
+        object.__setattr__(self, "absorption_per_m", _rgb("water.absorption_per_m", self.absorption_per_m))
+        object.__setattr__(self, "scattering_per_m", _rgb("water.scattering_per_m", self.scattering_per_m))
+        g = finite_float("water.phase_g", self.phase_g)
+        if not -1.0 < g < 1.0:
+            raise ParameterError(f"water.phase_g must lie in (-1, 1), got {self.phase_g!r}")
+        object.__setattr__(self, "phase_g", g)
+
+    @classmethod
+    def from_dict(cls, table: Any) -> Water:
+        """Build from a ``[water]`` table; unknown keys are an error, lists become tuples."""
+        if not isinstance(table, dict):
+            raise ParameterError(f"[water] must be a table, got {table!r}")
+        keys = {f.name for f in dataclasses.fields(cls) if f.init}
+        reject_unknown_keys("water", table, keys)
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})
+
+    @property
+    def has_medium(self) -> bool:
+        """Whether the water absorbs or scatters (then it is rendered as a participating medium)."""
+        return max(self.absorption_per_m) > 0.0 or max(self.scattering_per_m) > 0.0
+
+    @property
+    def extinction_per_m(self) -> tuple[float, float, float]:
+        """Extinction coefficient sigma_t = sigma_a + sigma_s per channel, per metre."""
+        return tuple(a + s for a, s in zip(self.absorption_per_m, self.scattering_per_m, strict=True))
+
+    @property
+    def albedo(self) -> tuple[float, float, float]:
+        """Single-scattering albedo sigma_s / sigma_t per channel (0 where sigma_t is 0)."""
+        pairs = zip(self.scattering_per_m, self.extinction_per_m, strict=True)
+        return tuple(s / t if t > 0.0 else 0.0 for s, t in pairs)
+
+    def transmittance(self, path_m: Any) -> np.ndarray:
+        """Beer-Lambert transmittance ``exp(-sigma_t * path)`` per channel, shape ``(..., 3)``.
+
+        Parameters
+        ----------
+        path_m : float or array_like
+            Path lengths through the water, metres (>= 0).
+        """
+        path = np.asarray(path_m, dtype=np.float64)[..., None]
+        return np.exp(-path * np.asarray(self.extinction_per_m))
+
+    def to_dict(self) -> dict:
+        """Plain data: the table's keys with the effective wavelength, and the derived ``n_water``."""
+        return {
+            "salinity_psu": self.salinity_psu,
+            "temperature_c": self.temperature_c,
+            "wavelength_nm": self.wavelength_nm,
+            "n_water": self.n_water,
+            "n_water_source": None if self.n_water is None else "Quan and Fry (1995), Appl. Opt. 34(18), 3477",
+            "absorption_per_m": list(self.absorption_per_m),
+            "scattering_per_m": list(self.scattering_per_m),
+            "phase_g": self.phase_g,
+        }
+
+
+def apply_water_index(table: dict, water: Water | None, *, where: str) -> dict:
+    """A copy of a port-like table (``[port]``, a rig's ``[wall]``) with the water's ``n_water``.
+
+    Parameters
+    ----------
+    table : dict
+        The table; its ``n_water`` key, if any, is the index the user stated.
+    water : Water or None
+        The scene's water; without a computed index the table is returned unchanged (copied).
+    where : str
+        The table's name in errors (``"port"``, ``"wall"``).
+
+    Raises
+    ------
+    ParameterError
+        If the table states an ``n_water`` that differs from the water's computed index by more
+        than :data:`N_WATER_TOLERANCE`: neither is picked silently.
+    """
+    out = dict(table)
+    if water is None or water.n_water is None:
+        return out
+    if "n_water" in out:
+        stated = finite_float(f"{where}.n_water", out["n_water"])
+        if abs(stated - water.n_water) > N_WATER_TOLERANCE:
+            raise ParameterError(
+                f"{where}.n_water={stated!r} conflicts with the index of [water] (salinity_psu="
+                f"{water.salinity_psu!r}, temperature_c={water.temperature_c!r}, wavelength_nm="
+                f"{water.wavelength_nm!r}: n_water={water.n_water:.6f}, Quan and Fry 1995); they differ by "
+                f"{abs(stated - water.n_water):.2g} > {N_WATER_TOLERANCE:g}. Remove one of them or make them agree"
+            )
+    out["n_water"] = water.n_water
+    return out
+
+
 SceneObject = TexturedPlane | Chessboard | Disc | Bowl | Figurine | MeshFile
 Light = PointLight | ConstantLight
 
@@ -322,17 +504,35 @@ class SceneConfig:
     lights: tuple[Light, ...] = ()
     objects: tuple[SceneObject, ...] = ()
     render: RenderSettings = field(default_factory=RenderSettings)
+    water: Water | None = None
     name: str = "scene"
     source: str = "<memory>"
 
     def __post_init__(self) -> None:
-        if self.port is not None and any(isinstance(light, ConstantLight) for light in self.lights):
+        constant = any(isinstance(light, ConstantLight) for light in self.lights)
+        if self.port is not None and constant:
             raise ParameterError(
                 "a constant (environment) light cannot light a scene behind a port: the glass would "
                 "shadow it; use point lights in the water, or remove [port]"
             )
         if not self.lights:
             raise ParameterError("the scene has no [[light]]: it would render black")
+        water = self.water
+        if water is not None and not isinstance(water, Water):
+            raise ParameterError(f"water must be a Water or None, got {water!r}")
+        if water is not None and water.has_medium and constant:
+            raise ParameterError(
+                "a constant (environment) light lies at infinity, beyond an infinite expanse of turbid water "
+                f"(water.absorption_per_m={list(water.absorption_per_m)}, water.scattering_per_m="
+                f"{list(water.scattering_per_m)}): none of its light would arrive; use point lights or luminous discs"
+            )
+        n_water = None if water is None else water.n_water
+        if n_water is not None and self.port is not None and abs(self.port.n_water - n_water) > N_WATER_TOLERANCE:
+            raise ParameterError(
+                f"port.n_water={self.port.n_water!r} conflicts with the index of the water "
+                f"(n_water={n_water:.6f} from water.salinity_psu={water.salinity_psu!r}, "
+                f"water.temperature_c={water.temperature_c!r}); build the port with n_water=water.n_water"
+            )
 
     def with_overrides(self, **changes: Any) -> SceneConfig:
         """A copy with some fields replaced (validated again)."""
@@ -363,6 +563,7 @@ class SceneConfig:
             "lights": plain(self.lights),
             "objects": plain(self.objects),
             "render": plain(self.render),
+            "water": None if self.water is None else self.water.to_dict(),
         }
 
 
@@ -440,16 +641,19 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     Raises
     ------
     ParameterError
-        For unknown keys or types, missing keys, and invalid values; the message names them.
+        For unknown keys or types, missing keys, and invalid values; the message names them. With a
+        ``[water]`` index, also for a ``[port]`` ``n_water`` that disagrees with it.
     """
     base = Path(base_dir)
-    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object"})
+    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water"})
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
     camera, pose = _camera(data["camera"])
-    port = FlatPort.from_dict(data["port"]) if "port" in data else None
+    water = Water.from_dict(data["water"]) if "water" in data else None
+    port = FlatPort.from_dict(apply_water_index(data["port"], water, where="port")) if "port" in data else None
     render = _build(RenderSettings, data.get("render", {}), "render", base)
     return SceneConfig(
+        water=water,
         name=str(data.get("name", Path(source).stem)),
         source=source,
         camera=camera,

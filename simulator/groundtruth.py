@@ -1,9 +1,12 @@
 """Ground truth traced by the project, not read from Mitsuba's AOVs (which stop at the glass).
 
 * The ideal image: the same scene without the port, seen by the virtual pinhole camera
-  (centre of projection at the main-lens centre, OpenCV intrinsics K), lit identically.
+  (centre of projection at the main-lens centre, OpenCV intrinsics K), lit identically. In turbid
+  water the pinhole stands in the water: its rays are attenuated (and the view veiled) over the
+  whole distance from the main-lens centre, where the raw image's rays cross water only beyond
+  the port's water face.
 * Its depth map: camera-frame z of the first surface along each pixel-centre ray, metres,
-  +inf where the ray hits nothing.
+  +inf where the ray hits nothing. It is geometric: turbid water does not change it.
 * The microlenses: lattice indices, image-plane centres (metres) and micro-image centres
   (raw pixels) of every lens whose micro-image centre lies on the sensor.
 """
@@ -18,6 +21,7 @@ import numpy as np
 from lfrefract import LightFieldCamera, PinholeCamera, Pose
 from simulator.config import SceneConfig
 from simulator.render import IDEAL_STREAM, render_bands
+from simulator.scene import water_medium
 from simulator.sensor import pinhole_sensor_dict
 
 __all__ = ["GroundTruth", "compute", "depth_map", "lens_table"]
@@ -98,10 +102,11 @@ def compute(
     progress : bool
         Show a progress bar.
     """
+    medium = water_medium(config.water)
     ideal = render_bands(
         mi,
         scene,
-        lambda crop: pinhole_sensor_dict(mi, pinhole, config.pose, spp=spp, crop=crop),
+        lambda crop: pinhole_sensor_dict(mi, pinhole, config.pose, spp=spp, crop=crop, medium=medium),
         pinhole.width_px,
         pinhole.height_px,
         spp=spp,

@@ -15,7 +15,7 @@ from lfrefract.io import staged_directory, write_exr, write_json
 from simulator import backend, groundtruth, previews
 from simulator.config import SceneConfig
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
-from simulator.scene import build_scene, check_geometry, integrator
+from simulator.scene import build_scene, check_geometry, integrator, water_medium
 from simulator.sensor import plenoptic_sensor_dict
 
 __all__ = ["RenderResult", "render_job", "render_raw"]
@@ -50,14 +50,20 @@ def render_raw(
     """
     camera = config.camera
     if config.port is not None and config.render.port_model == "geometry":
-        scene, sensor_port = build_scene(mi, config, port_geometry=True), None
+        # The camera is in air; its rays enter the water (and its medium) at the port's water face.
+        scene, sensor_port, medium = build_scene(mi, config, port_geometry=True), None, None
     else:
         scene = glass_free_scene if glass_free_scene is not None else build_scene(mi, config, port_geometry=False)
-        sensor_port = config.port
+        sensor_port, medium = config.port, water_medium(config.water)
+
+    def sensor(crop):
+        spp = config.render.spp
+        return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port, medium=medium)
+
     return render_bands(
         mi,
         scene,
-        lambda crop: plenoptic_sensor_dict(mi, camera, config.pose, spp=config.render.spp, crop=crop, port=sensor_port),
+        sensor,
         camera.sensor.width_px,
         camera.sensor.height_px,
         spp=config.render.spp,
@@ -166,8 +172,9 @@ def render_job(
                 "stream 0 raw, 1 ideal",
                 "max_band_pixels": max_band_pixels,
                 "port_model": config.render.port_model,
-                "integrator_raw": integrator(config.port if port_geometry else None),
-                "integrator_ideal": integrator(None),
+                "integrator_raw": integrator(config.port if port_geometry else None, water=config.water),
+                "integrator_ideal": integrator(None, water=config.water),
+                "medium": water_medium(config.water),
                 "raw_seconds": raw_seconds,
                 "ideal_seconds": ideal_seconds,
                 "lfrefract": lfrefract.__version__,

@@ -10,6 +10,11 @@ camera table as :meth:`lfrefract.LightFieldCamera.from_dict` reads it) and a pos
 (:meth:`Wall.port_for`), so the cameras may be slanted against the wall and each sees its own
 tilted port, from the one wall.
 
+An optional ``[water]`` table (:class:`simulator.config.Water`) describes the one water behind the
+wall for every camera: its salinity and temperature set the wall's ``n_water`` (a ``[wall]`` that
+also states ``n_water`` must agree, as a scene's ``[port]`` must), and its turbidity fills the
+water of every camera's scene.
+
 ``lfsim rig [RIG] --out DIR`` renders every camera into ``DIR/<name>/`` (the files of
 ``lfsim render``) and writes ``DIR/meta.json`` with the wall, each camera's pose and port, and the
 stereo ground truth: the pose of every camera relative to the first
@@ -27,7 +32,7 @@ import numpy as np
 from lfrefract import FlatPort, ParameterError, Pose
 from lfrefract._validate import finite_vector, positive_float, reject_unknown_keys, require_keys
 from lfrefract.io import staged_directory, write_json
-from simulator.config import SceneConfig, parse_scene, read_toml, scenes_dir
+from simulator.config import SceneConfig, Water, apply_water_index, parse_scene, read_toml, scenes_dir
 
 __all__ = ["RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
 
@@ -111,11 +116,12 @@ class RigCamera:
 
 @dataclass(frozen=True, kw_only=True)
 class RigConfig:
-    """A stereo rig: cameras behind one wall, sharing lights, objects and render settings."""
+    """A stereo rig: cameras behind one wall, sharing lights, objects, render settings and water."""
 
     name: str
     wall: Wall
     cameras: tuple[RigCamera, ...]
+    water: Water | None = None
     source: str = "<memory>"
 
     def relative_pose(self, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -135,14 +141,16 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
     ------
     ParameterError
         For unknown or missing keys, fewer than two cameras, repeated camera names, a camera on
-        the water side of the wall, and anything :func:`simulator.config.parse_scene` rejects.
+        the water side of the wall, a ``[wall]`` ``n_water`` that disagrees with ``[water]``, and
+        anything :func:`simulator.config.parse_scene` rejects.
     """
-    reject_unknown_keys("rig", data, {"name", "wall", "camera", "render", "light", "object"})
+    reject_unknown_keys("rig", data, {"name", "wall", "camera", "render", "light", "object", "water"})
     require_keys("rig", data, {"wall", "camera"})
+    water = Water.from_dict(data["water"]) if "water" in data else None
     wall_table = dict(data["wall"])
     reject_unknown_keys("wall", wall_table, _WALL_KEYS)
     require_keys("wall", wall_table, {"normal", "distance_m", "thickness_m"})
-    wall = Wall(**wall_table)
+    wall = Wall(**apply_water_index(wall_table, water, where="wall"))
     tables = data["camera"]
     if not isinstance(tables, list) or len(tables) < 2:
         raise ParameterError(f"a rig needs at least two [[camera]] tables, got {tables!r}")
@@ -171,10 +179,11 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
                 "pose": pose.to_dict(),
             },
             "port": port.to_dict(),
-            **{key: data[key] for key in ("render", "light", "object") if key in data},
+            **{key: data[key] for key in ("render", "light", "object", "water") if key in data},
         }
         cameras.append(RigCamera(name=name, scene=parse_scene(scene_data, base_dir=base_dir, source=source)))
-    return RigConfig(name=str(data.get("name", Path(source).stem)), wall=wall, cameras=tuple(cameras), source=source)
+    name = str(data.get("name", Path(source).stem))
+    return RigConfig(name=name, wall=wall, cameras=tuple(cameras), water=water, source=source)
 
 
 def rigs_dir() -> Path:
@@ -216,9 +225,9 @@ def render_rig(
 ) -> Path:
     """Render every camera of ``rig`` with its ground truth into ``out_dir/<name>/``.
 
-    Writes ``meta.json`` (kind ``lfsim.rig``): the wall, each camera's folder, pose and port, and
-    the stereo ground truth (each camera's rotation and translation relative to the first, and
-    the baseline). The directory appears only when every camera is rendered.
+    Writes ``meta.json`` (kind ``lfsim.rig``): the wall, the water (None without ``[water]``),
+    each camera's folder, pose and port, and the stereo ground truth (each camera's rotation and
+    translation relative to the first, and the baseline). The directory appears only when every camera is rendered.
 
     Returns
     -------
@@ -248,6 +257,12 @@ def render_rig(
                     "angle_deg": math.degrees(math.acos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))),
                 },
             }
-        meta = {"kind": "lfsim.rig", "name": rig.name, "source": rig.source, "wall": rig.wall.to_dict()}
+        meta = {
+            "kind": "lfsim.rig",
+            "name": rig.name,
+            "source": rig.source,
+            "wall": rig.wall.to_dict(),
+            "water": None if rig.water is None else rig.water.to_dict(),
+        }
         write_json(stage / "meta.json", {**meta, "cameras": cameras})
     return out

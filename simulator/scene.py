@@ -10,6 +10,14 @@ Lighting is direct only: next-event estimation at the first diffuse surface (beh
 faces when they are geometry). The raw and the ideal image are therefore lit identically, and the
 port changes only the geometry of the rays and the radiometric factor of
 :class:`lfrefract.PortTrace`.
+
+Turbid water (a :class:`~simulator.config.Water` with a non-zero absorption or scattering
+coefficient) is a ``homogeneous`` medium (:func:`water_medium`) that fills the water: it is the
+medium of every camera that starts in the water (the plenoptic sensor behind a port it refracts
+itself, a camera without a port, the ideal pinhole), of the point lights, of both sides of every
+object's surface, and of the water side of the port's water face. Mitsuba's ``volpath``
+integrator then attenuates camera rays and shadow rays alike, and scatters single-bounce light
+into the view (:func:`integrator`). Clear water builds exactly the scene it always did.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from simulator.config import (
     SceneConfig,
     SceneObject,
     TexturedPlane,
+    Water,
 )
 from simulator.interface import INTERFACE
 
@@ -42,6 +51,7 @@ __all__ = [
     "integrator",
     "object_sample_points",
     "port_faces",
+    "water_medium",
 ]
 
 #: Side of the square port faces, metres: far larger than any camera footprint on the port.
@@ -69,7 +79,8 @@ def port_faces(port: FlatPort) -> list[dict]:
     -------
     list of dict
         Each with ``matrix`` (4x4, camera frame, rectangle normal = side of ``ext_ior``),
-        ``int_ior`` and ``ext_ior``.
+        ``int_ior``, ``ext_ior``, and ``water_side``: which side of the rectangle is water
+        (``"exterior"``, ``"interior"``, or None for the air/glass face of a slab).
     """
     n = port.normal
     faces = []
@@ -77,10 +88,18 @@ def port_faces(port: FlatPort) -> list[dict]:
         centre = np.array([0.0, 0.0, offset / n[2]])  # where the optical axis meets the face
         last = i == len(port.faces) - 1 and len(port.faces) > 1
         if last:  # water-side face of a slab: normal into the water, glass behind it
-            normal, ext, inner = n, n_after, n_before
+            normal, ext, inner, water = n, n_after, n_before, "exterior"
         else:  # camera-side face (or the only one): normal towards the camera
             normal, ext, inner = -n, n_before, n_after
-        faces.append({"matrix": _frame_matrix(centre, normal, PORT_FACE_SIZE_M / 2), "int_ior": inner, "ext_ior": ext})
+            water = "interior" if len(port.faces) == 1 else None  # a bare air/water interface
+        faces.append(
+            {
+                "matrix": _frame_matrix(centre, normal, PORT_FACE_SIZE_M / 2),
+                "int_ior": inner,
+                "ext_ior": ext,
+                "water_side": water,
+            }
+        )
     return faces
 
 
@@ -115,11 +134,14 @@ def _mesh(
     normals: np.ndarray,
     bsdf: dict,
     texcoords: np.ndarray | None = None,
+    media: dict | None = None,
 ):
     import drjit as dr
 
     props = mi.Properties()
     props["bsdf"] = mi.load_dict(bsdf)
+    for side, medium in (media or {}).items():
+        props[side] = medium
     mesh = mi.Mesh(
         name, len(vertices), len(faces), props, has_vertex_normals=True, has_vertex_texcoords=texcoords is not None
     )
@@ -160,7 +182,16 @@ def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return obj.placement.to_world(v), f, n @ rot.T
 
 
-def _object_dict(mi: ModuleType, config: SceneConfig, index: int):
+def _object_dict(mi: ModuleType, config: SceneConfig, index: int, media: dict):
+    """The Mitsuba shape (dict or loaded mesh) of object ``index``; ``media`` maps ``interior``
+    and ``exterior`` to the water's medium (empty in clear water)."""
+    shape = _object_shape(mi, config, index, media)
+    if isinstance(shape, dict):
+        shape.update(media)
+    return shape
+
+
+def _object_shape(mi: ModuleType, config: SceneConfig, index: int, media: dict):
     obj = config.objects[index]
     if isinstance(obj, TexturedPlane):
         tex = _random_texture(obj.texture_px, obj.texture_seed)
@@ -189,21 +220,21 @@ def _object_dict(mi: ModuleType, config: SceneConfig, index: int):
     if isinstance(obj, (Bowl, Figurine)):
         v, f, n = _mesh_in_world(obj)
         if obj.texture_seed is None:
-            return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance))
+            return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance), media=media)
         # Bowl: around its axis (z), across its depth; figurine: around its height (y).
         local = _local_mesh(obj)[0]
         axis, extent = (2, 2.0 * obj.radius_m) if isinstance(obj, Bowl) else (1, obj.height_m)
         texcoords = _wrapped_texcoords(local, axis, extent)
         bsdf = _diffuse(_texture(mi, _random_texture(obj.texture_px, obj.texture_seed), nearest=False))
-        return _mesh(mi, f"object_{index}", v, f, n, bsdf, texcoords)
+        return _mesh(mi, f"object_{index}", v, f, n, bsdf, texcoords, media=media)
     if isinstance(obj, MeshFile):
-        return _load_mesh_file(mi, config, index)
+        return _load_mesh_file(mi, config, index, media)
     raise TypeError(f"unknown scene object {obj!r}")
 
 
-def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int):
-    """Load a user OBJ/PLY mesh and check every vertex against the port (its extent is only
-    known once loaded)."""
+def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict):
+    """Load a user OBJ/PLY mesh (with ``media`` on its sides) and check every vertex against the
+    port (its extent is only known once loaded)."""
     import drjit as dr
 
     obj = config.objects[index]
@@ -213,6 +244,7 @@ def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int):
         "filename": str(obj.path),
         "to_world": mi.ScalarTransform4f(m.tolist()),
         "bsdf": _diffuse(obj.reflectance),
+        **media,
     }
     try:
         shape = mi.load_dict(spec)
@@ -223,13 +255,55 @@ def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int):
     return shape
 
 
-def integrator(port: FlatPort | None) -> dict:
+def water_medium(water: Water | None) -> dict | None:
+    """Mitsuba dict of the ``homogeneous`` medium of turbid water; None for clear water.
+
+    Extinction ``sigma_t = sigma_a + sigma_s`` and albedo ``sigma_s / sigma_t`` per channel, per
+    metre (the scene unit), with a Henyey-Greenstein phase function (``isotropic`` for g = 0).
+    Mitsuba's RGB values must lie in [0, 1], so an RGB extinction is given divided by its
+    largest channel and that channel is the medium's ``scale``.
+
+    Parameters
+    ----------
+    water : Water or None
+
+    Returns
+    -------
+    dict or None
+        None when there is no water or neither coefficient is positive: no medium at all.
+    """
+    if water is None or not water.has_medium:
+        return None
+    sigma_t, albedo = water.extinction_per_m, water.albedo
+    scale = max(sigma_t)
+    grey_t, grey_albedo = len(set(sigma_t)) == 1, len(set(albedo)) == 1
+    phase = {"type": "isotropic"} if water.phase_g == 0.0 else {"type": "hg", "g": water.phase_g}
+    return {
+        "type": "homogeneous",
+        "sigma_t": 1.0 if grey_t else {"type": "rgb", "value": [c / scale for c in sigma_t]},
+        "scale": scale,
+        "albedo": albedo[0] if grey_albedo else {"type": "rgb", "value": list(albedo)},
+        "phase": phase,
+    }
+
+
+def integrator(port: FlatPort | None, *, water: Water | None = None) -> dict:
     """Integrator for direct lighting at the first diffuse surface behind ``port``'s faces.
 
-    Without port geometry: Mitsuba's ``direct`` with next-event estimation only (one shadow ray
-    per sample; the scenes' lights are points and small luminous discs). With the port as
-    geometry: ``path``, cut after next-event estimation at the first surface behind its faces.
+    Clear water (``water`` None or without a medium): without port geometry, Mitsuba's ``direct``
+    with next-event estimation only (one shadow ray per sample; the scenes' lights are points and
+    small luminous discs); with the port as geometry, ``path``, cut after next-event estimation at
+    the first surface behind its faces.
+
+    Turbid water: ``volpath`` with the same depth as ``path`` (two interactions beyond the port's
+    faces, no Russian roulette). It attenuates every camera and shadow ray through the medium
+    (Beer-Lambert, by free-flight sampling: unbiased, noisier than a closed form) and adds single
+    scattering: one scattering event in the water, lit by next-event estimation, like a surface.
+    Multiple scattering is cut off, as multiple surface bounces are.
     """
+    if water is not None and water.has_medium:
+        depth = 2 + (0 if port is None else len(port.faces))
+        return {"type": "volpath", "max_depth": depth, "rr_depth": depth + 1, "hide_emitters": False}
     if port is None:
         return {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}
     depth = 2 + len(port.faces)
@@ -252,10 +326,15 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
     Returns
     -------
     mitsuba.Scene
-        Without a sensor of its own: render it with an explicit ``sensor=``.
+        Without a sensor of its own: render it with an explicit ``sensor=``. With turbid water,
+        a sensor that starts in the water needs the medium too (``medium=water_medium(...)`` of
+        :func:`simulator.sensor.plenoptic_sensor_dict` and :func:`~simulator.sensor.pinhole_sensor_dict`).
     """
     port = config.port if port_geometry else None
-    scene: dict = {"type": "scene", "integrator": integrator(port)}
+    scene: dict = {"type": "scene", "integrator": integrator(port, water=config.water)}
+    medium_spec = water_medium(config.water)
+    medium = None if medium_spec is None else mi.load_dict(medium_spec)
+    media = {} if medium is None else {"interior": medium, "exterior": medium}
     if port is not None:
         pose = config.pose.matrix
         for i, face in enumerate(port_faces(port)):
@@ -264,6 +343,8 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
                 "to_world": mi.ScalarTransform4f((pose @ face["matrix"]).tolist()),
                 "bsdf": {"type": INTERFACE, "int_ior": face["int_ior"], "ext_ior": face["ext_ior"]},
             }
+            if medium is not None and face["water_side"] is not None:
+                scene[f"port_face_{i}"][face["water_side"]] = medium
     for i, light in enumerate(config.lights):
         if isinstance(light, PointLight):
             scene[f"light_{i}"] = {
@@ -271,10 +352,12 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
                 "position": list(light.position_m),
                 "intensity": {"type": "rgb", "value": list(light.intensity_w_sr)},
             }
+            if medium is not None:
+                scene[f"light_{i}"]["medium"] = medium
         elif isinstance(light, ConstantLight):
             scene[f"light_{i}"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(light.radiance)}}
     for i in range(len(config.objects)):
-        scene[f"object_{i}"] = _object_dict(mi, config, i)
+        scene[f"object_{i}"] = _object_dict(mi, config, i, media)
     return mi.load_dict(scene)
 
 

@@ -64,20 +64,24 @@ def plenoptic_sensor_dict(
     spp: int,
     crop: tuple[int, int, int, int] | None = None,
     port: FlatPort | None = None,
+    medium: dict | None = None,
 ) -> dict:
     """Mitsuba dict of the plenoptic sensor for ``camera`` at ``pose``.
 
     ``crop`` is ``(x, y, width, height)`` in pixels for band rendering. With ``port`` the sensor
     refracts its rays through the port itself (the ``sensor`` port model): they leave from the
     port's water face, weighted by the Fresnel transmittance and ``(n_air / n_water)^2``, and the
-    scene must not contain the glass too.
+    scene must not contain the glass too. ``medium`` (a Mitsuba medium dict,
+    :func:`simulator.scene.water_medium`) is the medium the sensor's rays start in: the turbid
+    water for the ``sensor`` port model or a camera without a port, None for a camera in air
+    behind port geometry.
     """
     mla = camera.mla
-    port_props = {}
+    extra = {} if medium is None else {"medium": medium}
     if port is not None:
-        port_props = {f"port_{key}": float(getattr(port, key)) for key in _PORT_PROPS}
+        extra.update({f"port_{key}": float(getattr(port, key)) for key in _PORT_PROPS})
     return {
-        **port_props,
+        **extra,
         "type": PLENOPTIC,
         "camera_name": camera.name,
         "to_world": _to_world(mi, pose),
@@ -103,9 +107,17 @@ def pinhole_sensor_dict(
     *,
     spp: int,
     crop: tuple[int, int, int, int] | None = None,
+    medium: dict | None = None,
 ) -> dict:
-    """Mitsuba dict of the ideal pinhole sensor with OpenCV intrinsics."""
+    """Mitsuba dict of the ideal pinhole sensor with OpenCV intrinsics.
+
+    ``medium`` (a Mitsuba medium dict, :func:`simulator.scene.water_medium`) is the medium its
+    rays start in: the pinhole stands in the water, so turbid water attenuates the whole way from
+    the main-lens centre.
+    """
+    extra = {} if medium is None else {"medium": medium}
     return {
+        **extra,
         "type": PINHOLE,
         "to_world": _to_world(mi, pose),
         "focal_px": pinhole.focal_px,
