@@ -18,7 +18,10 @@ image's geometry (nearest pixel, nearest point). Against the ground truth on the
 - ``bad_0.5px``, ``bad_1px``, ``bad_2px``: Middlebury-style bad-pixel rates
   (:func:`lfrefract.metrics.disparity_errors`) of the disparity ``f B / z`` that each depth
   implies on the method's rectified rig (pixels without an estimate count as bad);
-- ``completeness``: the share of the objects' pixels with an estimate.
+- ``completeness``: the share of the objects' pixels with an estimate;
+- ``exact_share``, ``exact_median_abs_mm``, ``exact_mean_abs_mm``: the share of the objects'
+  pixels whose true surface point both cameras see through exact pixels
+  (:func:`~simulator.experiments.rigstereo.exact_coverage`), and the errors on those pixels alone.
 
 Figures: the depth error maps by matcher and method (``objects_depth_error.png``).
 """
@@ -45,9 +48,11 @@ from simulator.experiments.rigstereo import (
     aim,
     calibrated_methods,
     chessboards,
+    exact_coverage,
     match,
     render_captures,
     rig_data,
+    warp_maps,
 )
 from simulator.rig import parse_rig
 
@@ -137,8 +142,14 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
         truth = read_exr(scene.folder / "left" / "depth.exr", role="depth")
         mask = np.isfinite(truth) & (truth < objects_setup.mask_depth_m)
         view = virtual_camera_for(base.cameras[0].scene.camera)
+        warps = warp_maps(base)
+        directions = view.pixel_directions().reshape(view.height_px, view.width_px, 3)
+        surface = directions[mask] * (truth[mask] / directions[mask][:, 2])[:, None]  # left frame, m
+        exact = np.zeros_like(mask)
+        exact[mask] = exact_coverage(surface, base, warps)
         rows, errors = [], {}
-        for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress):
+        methods = calibrated_methods(base, setup, boards, progress=progress, warps=warps)
+        for method, project, rect, stereo, pairs in methods:
             left, right = rect.apply(project("left", scene), project("right", scene))
             focal_baseline = rect.focal_px * rect.baseline_m  # disparity (px) times depth (m)
             low, high = focal_baseline / farthest, focal_baseline / nearest
@@ -166,6 +177,9 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
                         "bias_mm": result.bias_m * 1e3,
                         **{f"bad_{t:g}px": f for t, f in zip(BAD_PIXEL_THRESHOLDS_PX, bad.bad_fractions, strict=True)},
                         "completeness": result.completeness,
+                        "exact_share": float(exact.sum() / max(mask.sum(), 1)),
+                        "exact_median_abs_mm": float(np.nanmedian(errors[(matcher, method)][exact])) * 1e3,
+                        "exact_mean_abs_mm": float(np.nanmean(errors[(matcher, method)][exact])) * 1e3,
                         "stereo_rms_px": stereo.rms_px,
                         "boards": pairs,
                     }
@@ -173,7 +187,8 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
     figure = _figure(Path(out_dir), errors)
     summary = "\n".join(
         f"- {r['matcher']}, {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
-        f"{r['rms_mm']:.2f} mm RMS, bad 1 px {r['bad_1px']:.2f}, completeness {r['completeness']:.2f}"
+        f"{r['rms_mm']:.2f} mm RMS, bad 1 px {r['bad_1px']:.2f}, completeness {r['completeness']:.2f}; "
+        f"exact coverage ({r['exact_share']:.2f} of the pixels): {r['exact_median_abs_mm']:.2f} mm median"
         for r in rows
     )
     return ExperimentResult(
