@@ -4,11 +4,16 @@
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--overwrite]
     lfsim demo [--out DIR]
+    lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R] [--quiet]
+    lfsim dataset check DIR [--sizes-only]
     lfsim scenes
 
 SCENE is a TOML file or the name of an embedded scene (``default``, ``white``); without it the
 embedded default scene is rendered. RIG is a stereo rig file (:mod:`simulator.rig`) or the name of
-an embedded rig (``default``).
+an embedded rig (``default``). SPEC is a sweep spec (:mod:`simulator.dataset.spec`) or the name of
+an embedded sweep (``tilt``); ``dataset run`` completes an interrupted run of the same spec in DIR,
+and exits with 1 if a sample failed; ``dataset check`` exits with 1 unless every sample is done and
+intact (docs/datasets.md).
 """
 
 from __future__ import annotations
@@ -71,8 +76,54 @@ def _parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("demo"), help="output directory (default: demo/; an earlier demo is replaced)"
     )
     demo.add_argument("--quiet", action="store_true", help="no progress bars")
-    sub.add_parser("scenes", help="list the embedded scenes and rigs")
+    dataset = sub.add_parser("dataset", help="datasets: sweeps over port tilt and conditions, on Dask")
+    dsub = dataset.add_subparsers(dest="dataset_command", required=True)
+    drun = dsub.add_parser("run", help="render every sample of a sweep spec (or complete an interrupted run)")
+    drun.add_argument("spec", help="sweep spec TOML file or embedded sweep name (e.g. 'tilt')")
+    drun.add_argument("--out", required=True, type=Path, help="dataset folder (absent, empty, or a run of SPEC)")
+    where = drun.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default 1)")
+    where.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    drun.add_argument("--threads", type=int, help="render threads per worker (default: cores / workers locally)")
+    drun.add_argument("--retries", type=int, default=2, help="extra attempts of a failing sample (default 2)")
+    drun.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant of the workers")
+    drun.add_argument("--quiet", action="store_true", help="no progress bars")
+    dcheck = dsub.add_parser("check", help="verify every sample of a dataset against its manifest")
+    dcheck.add_argument("dir", type=Path, help="dataset folder")
+    dcheck.add_argument("--sizes-only", action="store_true", help="compare file sizes, do not re-hash")
+    sub.add_parser("scenes", help="list the embedded scenes, rigs and sweeps")
     return parser
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    from simulator.dataset import check_dataset, run_dataset
+
+    if args.dataset_command == "check":
+        report = check_dataset(args.dir, hashes=not args.sizes_only)
+        for problem in report.problems:
+            print(f"{problem.id}: {problem.kind}: {problem.detail}")
+        if report.leftovers:
+            print(f"leftovers of interrupted writes (the next run removes them): {', '.join(report.leftovers)}")
+        print(report.summary())
+        return 0 if report.ok else 1
+    report = run_dataset(
+        args.spec,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        threads_per_worker=args.threads,
+        retries=args.retries,
+        variant=args.variant,
+        progress=not args.quiet,
+    )
+    for sid, error, attempts in report.failed:
+        print(f"{sid}: failed after {attempts} attempt(s): {error}", file=sys.stderr)
+    rate = report.rendered / report.seconds * 60.0 if report.seconds > 0 else 0.0
+    print(
+        f"dataset {report.out_dir}: {report.total} samples; {report.rendered} rendered now ({rate:.1f} per minute), "
+        f"{report.skipped} already done, {len(report.failed)} failed; {report.seconds:.1f} s"
+    )
+    return 0 if report.ok else 1
 
 
 def _experiment(args: argparse.Namespace) -> int:
@@ -115,7 +166,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{name}\t{path}")
             for name, path in sorted(embedded_rigs().items()):
                 print(f"{name} (rig)\t{path}")
+            from simulator.dataset.spec import embedded_sweeps
+
+            for name, path in sorted(embedded_sweeps().items()):
+                print(f"{name} (sweep)\t{path}")
             return 0
+        if args.command == "dataset":
+            return _dataset(args)
         if args.command == "rig":
             return _rig(args)
         if args.command == "experiment":

@@ -1,0 +1,156 @@
+"""Verify a dataset against its manifest: every planned sample done, with every file intact."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from simulator.dataset.manifest import (
+    MANIFEST_FILE,
+    file_digest,
+    latest_records,
+    read_dataset,
+    read_manifest,
+    staging_leftovers,
+)
+
+__all__ = ["PROBLEMS", "CheckReport", "SampleProblem", "check_dataset"]
+
+#: Kinds of problem, in the order they are reported.
+PROBLEMS = ("missing", "corrupt", "failed", "not run")
+
+
+@dataclass(frozen=True)
+class SampleProblem:
+    """One sample that is not done and intact.
+
+    Attributes
+    ----------
+    id : str
+    kind : {"missing", "corrupt", "failed", "not run"}
+        ``missing``: recorded done, but its folder or a file is gone. ``corrupt``: a file's size
+        or SHA-256 differs from the record, a file is not in the record, or the record is not
+        the planned sample's. ``failed``: its latest record is a failure. ``not run``: no record.
+    detail : str
+        What exactly (the file, the error).
+    """
+
+    id: str
+    kind: str
+    detail: str
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """What :func:`check_dataset` found.
+
+    Attributes
+    ----------
+    root : Path
+    total : int
+        Planned samples.
+    verified : int
+        Samples done with every file present and matching its size and SHA-256.
+    problems : tuple of SampleProblem
+        The others, in sample order.
+    leftovers : tuple of str
+        Staging folders and temporary files of interrupted writes (the next run removes them).
+    """
+
+    root: Path
+    total: int
+    verified: int
+    problems: tuple[SampleProblem, ...]
+    leftovers: tuple[str, ...]
+
+    @property
+    def ok(self) -> bool:
+        """Every planned sample is done and intact."""
+        return not self.problems
+
+    def count(self, kind: str) -> int:
+        """Number of problems of one kind (see :data:`PROBLEMS`)."""
+        return sum(p.kind == kind for p in self.problems)
+
+    def summary(self) -> str:
+        """One line: the counts."""
+        counts = ", ".join(f"{self.count(kind)} {kind}" for kind in PROBLEMS)
+        return f"{self.root}: {self.total} samples, {self.verified} verified; {counts}"
+
+
+def _verify(folder: Path, record: dict, *, hashes: bool) -> SampleProblem | None:
+    sid = record["id"]
+    if not folder.is_dir():
+        return SampleProblem(sid, "missing", f"folder {folder.name}/ is missing")
+    files = record.get("files") or {}
+    present = {p.relative_to(folder).as_posix(): p for p in folder.rglob("*") if p.is_file()}
+    gone = sorted(set(files) - set(present))
+    if gone:
+        return SampleProblem(sid, "missing", f"missing file(s) {gone}")
+    extra = sorted(set(present) - set(files))
+    if extra:
+        return SampleProblem(sid, "corrupt", f"file(s) not in the manifest: {extra}")
+    for name, entry in files.items():
+        path = present[name]
+        size = path.stat().st_size
+        if size != entry["bytes"]:
+            return SampleProblem(sid, "corrupt", f"{name}: {size} bytes, recorded {entry['bytes']}")
+        if hashes:
+            _, sha = file_digest(path)
+            if sha != entry["sha256"]:
+                recorded = entry["sha256"]
+                return SampleProblem(sid, "corrupt", f"{name}: SHA-256 {sha[:12]}..., recorded {recorded[:12]}...")
+    return None
+
+
+def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckReport:
+    """Check every planned sample of a dataset against the manifest.
+
+    Parameters
+    ----------
+    root : path-like
+        The dataset folder (``dataset.json``, ``manifest.jsonl``, sample folders).
+    hashes : bool
+        Re-hash every file (SHA-256); False compares sizes only.
+
+    Returns
+    -------
+    CheckReport
+
+    Raises
+    ------
+    FileFormatError
+        If ``root`` holds no ``dataset.json``, or a complete manifest line is not a record.
+    """
+    root = Path(root)
+    planned = read_dataset(root)["samples"]
+    latest = latest_records(read_manifest(root / MANIFEST_FILE))
+    problems = []
+    verified = 0
+    for sample in planned:
+        sid = sample["id"]
+        record = latest.get(sid)
+        if record is None:
+            on_disk = " (a folder exists but is not recorded)" if (root / sid).exists() else ""
+            problems.append(SampleProblem(sid, "not run", f"no manifest record{on_disk}"))
+            continue
+        if record["status"] == "failed":
+            error = record.get("error", "?")
+            problems.append(SampleProblem(sid, "failed", f"after {record.get('attempts', '?')} attempt(s): {error}"))
+            continue
+        if record.get("hash") != sample["hash"] or record.get("index") != sample["index"]:
+            problems.append(SampleProblem(sid, "corrupt", "its manifest record is not the planned sample's"))
+            continue
+        problem = _verify(root / sid, record, hashes=hashes)
+        if problem is None:
+            verified += 1
+        else:
+            problems.append(problem)
+    return CheckReport(
+        root=root,
+        total=len(planned),
+        verified=verified,
+        problems=tuple(problems),
+        leftovers=tuple(p.name for p in staging_leftovers(root)),
+    )

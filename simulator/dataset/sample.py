@@ -1,0 +1,202 @@
+"""Render one sample into its folder: the task that a worker runs.
+
+The folder (named by the sample id) is assembled in a staging folder beside it and renamed into
+place only when every file is written, so it exists complete or not at all. It holds the files
+of ``lfsim render`` (:func:`simulator.job.render_job`: ``raw.exr``, ``ideal.exr``, ``depth.exr``,
+``lenses.npz``, ``meta.json``), ``sample.json`` (id, seed, swept values, hash), ``port.txt``
+(the flat-port layout of Refractive COLMAP / calibmar) when the scene has a port, and the
+optional outputs: ``refraction_free.exr`` with ``refraction_free.coverage.exr``, ``views/``
+(the sub-aperture view stack) and ``previews/``.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lfrefract import PinholeCamera
+from lfrefract.io import read_exr, staged_directory, write_exr, write_flat_port, write_json
+from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from simulator.config import SceneConfig
+
+__all__ = ["SampleTask", "render_sample"]
+
+#: Files of a sample folder besides those of ``lfsim render``.
+SAMPLE_FILE = "sample.json"
+PORT_FILE = "port.txt"
+REFRACTION_FREE_FILE = "refraction_free.exr"
+COVERAGE_FILE = "refraction_free.coverage.exr"
+VIEWS_DIR = "views"
+
+_threads_set: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class SampleTask:
+    """Everything a worker needs to render one sample (plain, picklable data).
+
+    Attributes
+    ----------
+    id, index, seed, hash : str, int, int, str
+        As in :class:`simulator.dataset.spec.SweepSample`.
+    params : dict
+        The swept values.
+    config : SceneConfig
+        The validated scene (its render seed is ``seed``).
+    dataset_dir : str
+        Absolute path of the dataset folder (on a cluster: the same path on every worker).
+    outputs : tuple of str
+        Extras among :data:`simulator.dataset.spec.OUTPUTS`.
+    synthesis : SynthesisOptions or None
+        Options of the refraction-free image.
+    views : dict
+        Options of :func:`lfrefract.views.subaperture_stack`.
+    threads : int or None
+        Dr.Jit and numba threads of the worker process (None: their defaults, every core).
+    variant : str or None
+        Mitsuba variant (None: CUDA if present, else LLVM).
+    """
+
+    id: str
+    index: int
+    seed: int
+    hash: str
+    params: dict
+    config: SceneConfig
+    dataset_dir: str
+    outputs: tuple[str, ...] = ()
+    synthesis: SynthesisOptions | None = None
+    views: dict = field(default_factory=dict)
+    threads: int | None = None
+    variant: str | None = None
+
+
+def _limit_threads(threads: int | None, variant: str | None) -> None:
+    """Load Mitsuba in this process and cap Dr.Jit's and numba's thread pools (once per process)."""
+    global _threads_set
+    from simulator import backend
+
+    backend.load_mitsuba(variant)
+    if threads is None or _threads_set == threads:
+        return
+    import drjit as dr
+    import numba
+
+    dr.set_thread_count(threads)
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    _threads_set = threads
+
+
+def render_sample(task: SampleTask) -> dict:
+    """Render ``task``'s sample into ``dataset_dir / id`` and describe what was written.
+
+    Parameters
+    ----------
+    task : SampleTask
+
+    Returns
+    -------
+    dict
+        The sample's manifest record without ``attempts`` and ``finished_at`` (the driver adds
+        them): id, index, seed, hash, params, ``status = "done"``, ``files`` (relative path ->
+        bytes and SHA-256), ``seconds`` (render, raw, ideal, refraction_free, views, total) and
+        ``worker`` (host and process id).
+
+    Raises
+    ------
+    Exception
+        Whatever the render raises (a mesh file that cannot be read, ...); nothing is left in
+        the dataset folder then.
+    """
+    from simulator.dataset.manifest import folder_files
+    from simulator.job import render_job
+
+    start = time.perf_counter()
+    _limit_threads(task.threads, task.variant)
+    config = task.config
+    seconds: dict[str, float] = {}
+    out = Path(task.dataset_dir) / task.id
+    with staged_directory(out, overwrite=True) as stage:
+        t0 = time.perf_counter()
+        result = render_job(
+            config,
+            stage,
+            variant=task.variant,
+            progress=False,
+            write_previews="previews" in task.outputs,
+        )
+        seconds["render"] = time.perf_counter() - t0
+        seconds["raw"], seconds["ideal"] = result.raw_seconds, result.ideal_seconds
+        extras: dict[str, Any] = {}
+        if config.port is not None:
+            write_flat_port(stage / PORT_FILE, config.port)
+        raw = None
+        if "refraction_free" in task.outputs:
+            t0 = time.perf_counter()
+            raw = read_exr(stage / "raw.exr", role="raw")
+            extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task)
+            seconds["refraction_free"] = time.perf_counter() - t0
+        if "views" in task.outputs:
+            t0 = time.perf_counter()
+            raw = read_exr(stage / "raw.exr", role="raw") if raw is None else raw
+            extras["views"] = _views(stage, config, raw, result.metadata, task)
+            seconds["views"] = time.perf_counter() - t0
+        write_json(
+            stage / SAMPLE_FILE,
+            {
+                "kind": "lfsim.dataset.sample",
+                "id": task.id,
+                "index": task.index,
+                "seed": task.seed,
+                "hash": task.hash,
+                "params": task.params,
+                "outputs": list(task.outputs),
+                **extras,
+            },
+        )
+        files = folder_files(stage)
+    seconds["total"] = time.perf_counter() - start
+    return {
+        "id": task.id,
+        "index": task.index,
+        "seed": task.seed,
+        "hash": task.hash,
+        "params": task.params,
+        "status": "done",
+        "files": files,
+        "seconds": seconds,
+        "worker": f"{socket.gethostname()}:{os.getpid()}",
+    }
+
+
+def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
+    """Synthesize the refraction-free image (the ideal image's geometry) and its coverage."""
+    options = task.synthesis if task.synthesis is not None else SynthesisOptions()
+    output = PinholeCamera.from_dict(meta["ideal"])
+    warp = build_warp_map(config.camera, config.port, output=output, options=options, workers=task.threads)
+    write_exr(stage / REFRACTION_FREE_FILE, warp.apply(raw), role="refraction_free")
+    write_exr(stage / COVERAGE_FILE, warp.coverage.astype("float32"), role="coverage")
+    return {
+        "files": {"image": REFRACTION_FREE_FILE, "coverage": COVERAGE_FILE},
+        "K": warp.output.K.tolist(),
+        "options": options.to_dict(),
+        "map_key": warp.key,
+        "exact_fraction": float(warp.exact.mean()),
+        "filled_fraction": float(warp.filled.mean()),
+    }
+
+
+def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
+    """The sub-aperture view stack of the raw image (the ideal image's geometry), under ``views/``."""
+    from lfrefract.io import write_view_stack
+    from lfrefract.views import subaperture_stack
+
+    options = dict(task.views)
+    writing = {k: options.pop(k) for k in ("image_format", "white_level") if k in options}
+    stack = subaperture_stack(config.camera, raw, output=PinholeCamera.from_dict(meta["ideal"]), **options)
+    write_view_stack(stage / VIEWS_DIR, stack, metadata={"sample": task.id, "source": "raw.exr"}, **writing)
+    return {"dir": VIEWS_DIR, "grid": stack.grid, "spacing_px": stack.spacing_px, "baseline_m": stack.baseline_m}

@@ -1,0 +1,757 @@
+"""Sweep specs: a TOML file of grids and random ranges over scene keys, expanded into samples.
+
+A sweep spec has three tables::
+
+    [sweep]
+    name = "tilt"                     # label of the dataset
+    seed = 7                          # one seed for the whole sweep (integer >= 0)
+    scene = "default"                 # base scene: an embedded scene name, or a .toml path
+                                      #   relative to this file
+    repeats = 1                       # samples per grid point (each with its own seed and draws)
+    outputs = ["refraction_free"]     # optional extras: "refraction_free", "views", "previews"
+    spp = 4                           # optional: samples per pixel of every sample
+    unset = ["port.n_water"]          # optional: dotted keys removed from the base scene first
+    [sweep.synthesis]                 # optional: lfrefract.synthesis.SynthesisOptions fields
+    k = 32                            #   (only with "refraction_free")
+    [sweep.views]                     # optional (only with "views"): grid, spacing_px of
+    grid = 5                          #   lfrefract.views.subaperture_stack; image_format,
+                                      #   white_level of lfrefract.io.write_view_stack
+
+    [grid]                            # dotted scene keys -> lists of values (Cartesian product)
+    "port.tilt_x_deg" = [0.0, 10.0, 20.0, 30.0]
+    "camera.preset" = ["tiny"]
+
+    [random]                          # dotted scene keys -> one distribution each
+    "port.tilt_y_deg" = { uniform = [-5.0, 5.0] }
+    "object.1.rotation_xyz_deg" = { uniform = [[0, -20, 0], [10, -10, 0]] }
+    "object.0.texture_seed" = { integers = [0, 1000] }
+    "port.thickness_m" = { normal = [0.006, 0.0005] }
+    "light.0.intensity_w_sr" = { choice = [0.4, 0.5] }
+
+A dotted key addresses the scene TOML (:mod:`simulator.config`): ``port.tilt_x_deg``,
+``camera.preset``, ``camera.pose.position_m``, ``object.2.rotation_xyz_deg`` (the third
+``[[object]]``), ``water.temperature_c``, or a whole table or array (``object`` replaces every
+object). Missing tables on the way are created; array entries must exist. The key ``scene``
+chooses the base scene per sample (a grid of names or paths, or ``{choice = [...]}``).
+``render.seed`` and ``name`` are set per sample and cannot be swept. ``sweep.unset`` removes keys
+(or array entries, ``object.3``) from every base scene before the swept values are set: e.g.
+``port.n_water``, which a ``[water]`` salinity and temperature would otherwise contradict.
+
+Samples: the grid points in the order of ``itertools.product`` over the ``[grid]`` keys in file
+order (the first key varies slowest), each repeated ``repeats`` times; sample ``i`` (id
+``s{i:06d}``) has the seed ``SeedSequence([seed, i]).generate_state(1, uint32)[0] % 2**31``,
+which is also its render seed, and draws the value of random key ``K`` from
+``numpy.random.default_rng(SeedSequence([seed, i, crc32(K)]))``, so a key's draws do not depend
+on the other keys. Every sample is built with :func:`simulator.config.parse_scene` and checked
+with :func:`simulator.scene.check_geometry` before anything is rendered.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import re
+import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from lfrefract._validate import (
+    ParameterError,
+    finite_float,
+    finite_vector,
+    one_of,
+    positive_float,
+    positive_int,
+    reject_unknown_keys,
+)
+from lfrefract.synthesis import SynthesisOptions
+from simulator.config import SceneConfig, embedded_scenes, parse_scene, read_toml, scenes_dir
+from simulator.scene import check_geometry
+
+__all__ = [
+    "DISTRIBUTIONS",
+    "MAX_SAMPLES",
+    "OUTPUTS",
+    "Distribution",
+    "SweepSample",
+    "SweepSpec",
+    "canonical_json",
+    "embedded_sweeps",
+    "expand",
+    "key_rng",
+    "load_spec",
+    "parse_spec",
+    "sample_id",
+    "sample_seed",
+]
+
+#: Optional outputs of a sample besides the render files: the refraction-free image (and its
+#: coverage), the sub-aperture view stack, and the PNG previews of ``lfsim render``.
+OUTPUTS = ("refraction_free", "views", "previews")
+
+#: Distributions of a ``[random]`` key, with the form of their arguments.
+DISTRIBUTIONS = {
+    "uniform": "[lo, hi] with lo < hi: numbers, or equal-length vectors (per entry; lo = hi fixes an entry)",
+    "normal": "[mean, std] with std > 0: numbers, or equal-length vectors (per entry)",
+    "integers": "[lo, hi] integers with lo <= hi (both included)",
+    "choice": "a non-empty list of values, picked with equal probability",
+}
+
+#: More samples than this is a typo in a grid, not a dataset.
+MAX_SAMPLES = 1_000_000
+
+#: Keys set per sample, never swept.
+_RESERVED_KEYS = ("render.seed", "name")
+#: The key choosing the base scene.
+SCENE_KEY = "scene"
+_KEY_PART = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[0-9]+)$")
+
+
+def canonical_json(value: Any) -> str:
+    """Compact JSON with sorted keys: the form that sample and spec hashes are taken of."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False, default=str)
+
+
+def _sha256(value: Any) -> str:
+    return hashlib.sha256(canonical_json(value).encode()).hexdigest()
+
+
+def sample_id(index: int) -> str:
+    """The folder name and id of sample ``index``: ``s000042``."""
+    return f"s{index:06d}"
+
+
+def sample_seed(sweep_seed: int, index: int) -> int:
+    """Seed of sample ``index`` (also its render seed), in [0, 2**31).
+
+    ``numpy.random.SeedSequence([sweep_seed, index]).generate_state(1, uint32)[0] % 2**31``.
+    """
+    state = np.random.SeedSequence([sweep_seed, index]).generate_state(1, dtype=np.uint32)
+    return int(state[0]) % 2**31
+
+
+def key_rng(sweep_seed: int, index: int, key: str) -> np.random.Generator:
+    """Generator of random key ``key`` for sample ``index``:
+    ``default_rng(SeedSequence([sweep_seed, index, crc32(key)]))``."""
+    return np.random.default_rng(np.random.SeedSequence([sweep_seed, index, zlib.crc32(key.encode())]))
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays as Python numbers and lists (for JSON and TOML-form dicts)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Distribution:
+    """A random range of one ``[random]`` key.
+
+    Parameters
+    ----------
+    key : str
+        The dotted key (named in errors).
+    kind : {"uniform", "normal", "integers", "choice"}
+    args : tuple
+        ``(lo, hi)`` for uniform and integers, ``(mean, std)`` for normal (each a float or a
+        tuple of floats of one length), the values for choice.
+    """
+
+    key: str
+    kind: str
+    args: tuple
+
+    def __post_init__(self) -> None:
+        where = f"random {self.key!r}"
+        if self.kind not in DISTRIBUTIONS:
+            raise ParameterError(f"{where}: unknown distribution {self.kind!r}; one of {sorted(DISTRIBUTIONS)}")
+        args = self.args
+        if not isinstance(args, (list, tuple)):
+            raise ParameterError(f"{where}: {self.kind} needs {DISTRIBUTIONS[self.kind]}, got {args!r}")
+        args = tuple(args)
+        if self.kind == "choice":
+            if not args:
+                raise ParameterError(f"{where}: choice = [] is an empty range; give at least one value")
+        elif self.kind == "integers":
+            if len(args) != 2 or any(isinstance(a, bool) or not isinstance(a, int) for a in args):
+                raise ParameterError(f"{where}: integers needs {DISTRIBUTIONS['integers']}, got {list(args)!r}")
+            if args[0] > args[1]:
+                raise ParameterError(f"{where}: integers = {list(args)!r} is an empty range (lo > hi)")
+        else:
+            if len(args) != 2:
+                raise ParameterError(f"{where}: {self.kind} needs {DISTRIBUTIONS[self.kind]}, got {list(args)!r}")
+            a, b = (self._numbers(f"{where}: {self.kind}[{i}]", v) for i, v in enumerate(args))
+            if type(a) is not type(b) or (isinstance(a, tuple) and len(a) != len(b)):
+                raise ParameterError(
+                    f"{where}: {self.kind} = {list(args)!r} mixes a number and a vector, or vectors of "
+                    "different lengths"
+                )
+            av, bv = np.atleast_1d(a), np.atleast_1d(b)
+            if self.kind == "uniform" and (np.any(av > bv) or np.all(av == bv)):
+                need = "lo < hi" if av.size == 1 else "lo <= hi in every entry, lo < hi in one"
+                raise ParameterError(f"{where}: uniform = {list(args)!r} is an empty range (needs {need})")
+            if self.kind == "normal" and np.any(bv <= 0.0):
+                raise ParameterError(f"{where}: normal = {list(args)!r} needs std > 0")
+            args = (a, b)
+        object.__setattr__(self, "args", args)
+
+    @staticmethod
+    def _numbers(name: str, value: Any) -> float | tuple[float, ...]:
+        if isinstance(value, (list, tuple)):
+            if not value:
+                raise ParameterError(f"{name} is an empty vector")
+            return finite_vector(name, value, len(value))
+        return finite_float(name, value)
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        """One value: a float, a list of floats, an int, or one of the choices (a deep copy)."""
+        if self.kind == "choice":
+            return copy.deepcopy(self.args[int(rng.integers(len(self.args)))])
+        if self.kind == "integers":
+            return int(rng.integers(self.args[0], self.args[1], endpoint=True))
+        a, b = (np.asarray(v, dtype=np.float64) for v in self.args)
+        value = rng.uniform(a, b) if self.kind == "uniform" else rng.normal(a, b)
+        return _plain(value) if isinstance(self.args[0], tuple) else float(value)
+
+    def to_dict(self) -> dict:
+        """The TOML form, ``{kind: [args]}``."""
+        return {self.kind: [list(a) if isinstance(a, tuple) else a for a in self.args]}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepSample:
+    """One sample of a sweep: its id, seed, swept values and validated scene.
+
+    Attributes
+    ----------
+    id : str
+        Folder name, ``s{index:06d}``.
+    index : int
+        Position in the sweep (0-based).
+    seed : int
+        The sample's seed, also its render seed (:func:`sample_seed`).
+    params : Mapping
+        The swept values by dotted key (``scene`` included when swept), read-only.
+    hash : str
+        SHA-256 (hex) of the sample's whole scene (TOML form, after the sweep's changes), the
+        base scene's name and the outputs: equal hashes mean equal samples.
+    config : SceneConfig
+        The validated scene.
+    scene_data : Mapping
+        The scene in TOML form that ``config`` was parsed from, read-only.
+    """
+
+    id: str
+    index: int
+    seed: int
+    params: Mapping[str, Any]
+    hash: str
+    config: SceneConfig
+    scene_data: Mapping[str, Any]
+
+    def record(self) -> dict:
+        """Plain data for ``dataset.json`` and the manifest: id, index, seed, params, hash."""
+        return {"id": self.id, "index": self.index, "seed": self.seed, "params": dict(self.params), "hash": self.hash}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepSpec:
+    """A parsed, validated sweep spec (see the module docstring for the format).
+
+    Attributes
+    ----------
+    name : str
+    seed : int
+        Sweep seed, >= 0.
+    scene : str
+        The base scene as given (embedded name or path relative to ``base_dir``).
+    repeats : int
+        Samples per grid point.
+    outputs : tuple of str
+        Extras among :data:`OUTPUTS`.
+    spp : int or None
+        Samples per pixel replacing every scene's, or None to keep them.
+    unset : tuple of str
+        Dotted keys removed from every base scene before the swept values are set.
+    synthesis : SynthesisOptions or None
+        Options of the refraction-free image (None unless ``"refraction_free"`` is an output).
+    views : Mapping
+        Keyword options of :func:`lfrefract.views.subaperture_stack` (``"views"`` output).
+    grid : tuple of (str, tuple)
+        Grid keys in file order with their values.
+    random : tuple of Distribution
+        Random keys in file order.
+    base_dir : Path
+        Directory of the spec file (relative scene paths are resolved against it).
+    source : str
+        Where the spec came from.
+    data : Mapping
+        The spec as parsed TOML (recorded in ``dataset.json``; its hash is :attr:`hash`).
+    """
+
+    name: str
+    seed: int
+    scene: str
+    repeats: int = 1
+    outputs: tuple[str, ...] = ()
+    spp: int | None = None
+    unset: tuple[str, ...] = ()
+    synthesis: SynthesisOptions | None = None
+    views: Mapping[str, Any] = field(default_factory=dict)
+    grid: tuple[tuple[str, tuple], ...] = ()
+    random: tuple[Distribution, ...] = ()
+    base_dir: Path = Path(".")
+    source: str = "<memory>"
+    data: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def hash(self) -> str:
+        """SHA-256 (hex) of :attr:`data` in :func:`canonical_json` form."""
+        return _sha256(self.to_dict())
+
+    def to_dict(self) -> dict:
+        """The spec as plain TOML-form data (what :attr:`hash` is taken of)."""
+        return _thaw(self.data)
+
+    @property
+    def size(self) -> int:
+        """Number of samples: the product of the grid's lengths times ``repeats``."""
+        return math.prod(len(values) for _, values in self.grid) * self.repeats
+
+    @property
+    def swept_keys(self) -> tuple[str, ...]:
+        """Grid keys, then random keys, in file order."""
+        return tuple(k for k, _ in self.grid) + tuple(d.key for d in self.random)
+
+
+def _thaw(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_thaw(v) for v in value]
+    return value
+
+
+def _freeze(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _freeze(v) for k, v in value.items()})
+    if isinstance(value, (list, tuple)):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def _check_key(where: str, key: Any) -> str:
+    if not isinstance(key, str) or not all(_KEY_PART.match(part) for part in key.split(".")):
+        raise ParameterError(
+            f"{where} key {key!r} is not a dotted scene key (names and array indices joined by '.', "
+            "e.g. 'port.tilt_x_deg' or 'object.2.rotation_xyz_deg')"
+        )
+    if key in _RESERVED_KEYS or key.startswith("render.seed."):
+        raise ParameterError(
+            f"{where} key {key!r} is set per sample (from sweep.seed and the sample id) and cannot be swept"
+        )
+    return key
+
+
+def _scene_file(where: str, value: Any, base_dir: Path) -> Path:
+    """The base scene file for a ``scene`` value: ``*.toml`` relative to ``base_dir``, else an
+    embedded scene name."""
+    if not isinstance(value, str) or not value:
+        raise ParameterError(f"{where} must be an embedded scene name or a .toml path, got {value!r}")
+    if value.endswith(".toml"):
+        path = (base_dir / value).resolve()
+        if not path.is_file():
+            raise ParameterError(f"{where} = {value!r}: no such scene file {str(path)!r}")
+        return path
+    embedded = embedded_scenes()
+    if value not in embedded:
+        raise ParameterError(
+            f"{where} = {value!r} is not an embedded scene (one of {sorted(embedded)}) or a .toml path"
+        )
+    return embedded[value]
+
+
+def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>") -> SweepSpec:
+    """Build a :class:`SweepSpec` from a parsed TOML document (structure only).
+
+    Parameters
+    ----------
+    data : dict
+        The TOML document.
+    base_dir : path-like
+        Directory that a base scene given as a path is resolved against (the spec file's).
+    source : str
+        Where the data came from.
+
+    Returns
+    -------
+    SweepSpec
+        Validated in its form: tables, keys, ranges, outputs, base scenes. The samples
+        themselves are checked by :func:`expand`.
+
+    Raises
+    ------
+    ParameterError
+        For unknown tables or keys, empty or inverted ranges, an unknown distribution or
+        output, a reserved or malformed dotted key, a key both in ``[grid]`` and ``[random]``,
+        a missing base scene, or more than :data:`MAX_SAMPLES` samples; the message names the
+        key and value.
+    """
+    base = Path(base_dir).resolve()
+    if not isinstance(data, dict):
+        raise ParameterError(f"a sweep spec must be a TOML document (a table), got {data!r}")
+    reject_unknown_keys("sweep spec", data, {"sweep", "grid", "random"})
+    if "sweep" not in data or not isinstance(data["sweep"], dict):
+        raise ParameterError("sweep spec: missing [sweep] table (name, seed, scene)")
+    sweep = dict(data["sweep"])
+    reject_unknown_keys(
+        "[sweep]", sweep, {"name", "seed", "scene", "repeats", "outputs", "spp", "synthesis", "views", "unset"}
+    )
+    for key in ("name", "seed", "scene"):
+        if key not in sweep:
+            raise ParameterError(f"[sweep]: missing key {key!r}")
+    name = sweep["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise ParameterError(f"sweep.name must be a non-empty string, got {name!r}")
+    seed = sweep["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ParameterError(f"sweep.seed must be an integer >= 0, got {seed!r}")
+    scene = sweep["scene"]
+    _scene_file("sweep.scene", scene, base)
+    repeats = positive_int("sweep.repeats", sweep.get("repeats", 1))
+    spp = None if "spp" not in sweep else positive_int("sweep.spp", sweep["spp"])
+    unset = sweep.get("unset", [])
+    if not isinstance(unset, list):
+        raise ParameterError(f"sweep.unset must be a list of dotted scene keys, got {unset!r}")
+    for key in unset:
+        _check_key("sweep.unset", key)
+    if len(set(unset)) != len(unset):
+        raise ParameterError(f"sweep.unset lists a key twice: {unset!r}")
+
+    outputs = sweep.get("outputs", [])
+    if not isinstance(outputs, list) or any(not isinstance(o, str) for o in outputs):
+        raise ParameterError(f"sweep.outputs must be a list of names among {list(OUTPUTS)}, got {outputs!r}")
+    for o in outputs:
+        if o not in OUTPUTS:
+            raise ParameterError(f"sweep.outputs: unknown output {o!r}; one of {list(OUTPUTS)}")
+    if len(set(outputs)) != len(outputs):
+        raise ParameterError(f"sweep.outputs lists an output twice: {outputs!r}")
+    synthesis = None
+    if "synthesis" in sweep and "refraction_free" not in outputs:
+        raise ParameterError("[sweep.synthesis] is given but 'refraction_free' is not in sweep.outputs")
+    if "refraction_free" in outputs:
+        table = sweep.get("synthesis", {})
+        if not isinstance(table, dict):
+            raise ParameterError(f"[sweep.synthesis] must be a table, got {table!r}")
+        reject_unknown_keys("[sweep.synthesis]", table, {f.name for f in dataclasses.fields(SynthesisOptions)})
+        try:
+            synthesis = SynthesisOptions(**table)
+        except ParameterError as exc:
+            raise ParameterError(f"[sweep.synthesis]: {exc}") from None
+    views = sweep.get("views", {})
+    if "views" in sweep and "views" not in outputs:
+        raise ParameterError("[sweep.views] is given but 'views' is not in sweep.outputs")
+    if "views" in outputs:
+        views = _view_options(views)
+
+    grid_table = data.get("grid", {})
+    random_table = data.get("random", {})
+    if not isinstance(grid_table, dict) or not isinstance(random_table, dict):
+        raise ParameterError("[grid] and [random] must be tables of dotted keys")
+    grid: list[tuple[str, tuple]] = []
+    for key, values in grid_table.items():
+        _check_key("[grid]", key)
+        if not isinstance(values, list):
+            raise ParameterError(f"grid {key!r} must be a list of values, got {values!r}")
+        if not values:
+            raise ParameterError(f"grid {key!r} = [] is an empty range; give at least one value")
+        if key == SCENE_KEY:
+            for v in values:
+                _scene_file(f"grid {key!r}", v, base)
+        grid.append((key, tuple(values)))
+    random: list[Distribution] = []
+    for key, table in random_table.items():
+        _check_key("[random]", key)
+        if key in grid_table:
+            raise ParameterError(f"key {key!r} is both in [grid] and in [random]")
+        if not isinstance(table, dict) or len(table) != 1:
+            raise ParameterError(
+                f"random {key!r} must be a table with one distribution, one of {sorted(DISTRIBUTIONS)} "
+                f"(e.g. {{ uniform = [0, 10] }}), got {table!r}"
+            )
+        ((kind, args),) = table.items()
+        dist = Distribution(key=key, kind=kind, args=args)
+        if key == SCENE_KEY:
+            if kind != "choice":
+                raise ParameterError(
+                    f"random {key!r} chooses among base scenes: use {{ choice = [...] }}, got {kind!r}"
+                )
+            for v in dist.args:
+                _scene_file(f"random {key!r}", v, base)
+        random.append(dist)
+    if spp is not None and "render.spp" in grid_table | random_table:
+        raise ParameterError("render.spp is swept and sweep.spp is set: give one of them")
+    spec = SweepSpec(
+        name=name,
+        seed=seed,
+        scene=scene,
+        repeats=repeats,
+        outputs=tuple(outputs),
+        spp=spp,
+        unset=tuple(unset),
+        synthesis=synthesis,
+        views=MappingProxyType(dict(views)),
+        grid=tuple(grid),
+        random=tuple(random),
+        base_dir=base,
+        source=source,
+        data=_freeze(data),
+    )
+    if spec.size > MAX_SAMPLES:
+        raise ParameterError(
+            f"the sweep has {spec.size} samples, more than {MAX_SAMPLES}: check [grid] and sweep.repeats"
+        )
+    return spec
+
+
+#: Keys of ``[sweep.views]``: options of :func:`lfrefract.views.subaperture_stack` and of
+#: :func:`lfrefract.io.write_view_stack`.
+VIEW_STACK_KEYS = ("grid", "spacing_px", "image_format", "white_level")
+
+
+def _view_options(table: Any) -> dict:
+    """Validate ``[sweep.views]`` (the checks that do not depend on the camera)."""
+    from lfrefract import io as lfio
+    from lfrefract import views as lfviews
+
+    if not hasattr(lfviews, "subaperture_stack") or not hasattr(lfio, "write_view_stack"):
+        raise ParameterError(
+            "sweep.outputs: 'views' needs lfrefract.views.subaperture_stack and lfrefract.io.write_view_stack, "
+            "which this lfrefract does not have"
+        )
+    if not isinstance(table, dict):
+        raise ParameterError(f"[sweep.views] must be a table, got {table!r}")
+    reject_unknown_keys("[sweep.views]", table, set(VIEW_STACK_KEYS))
+    grid = table.get("grid", 9)
+    if isinstance(grid, bool) or not isinstance(grid, int) or grid < 3 or grid % 2 != 1:
+        raise ParameterError(f"sweep.views.grid must be an odd integer >= 3, got {grid!r}")
+    if "spacing_px" in table:
+        positive_float("sweep.views.spacing_px", table["spacing_px"])
+    if "white_level" in table:
+        positive_float("sweep.views.white_level", table["white_level"])
+    if "image_format" in table:
+        one_of("sweep.views.image_format", table["image_format"], lfio.VIEW_STACK_FORMATS)
+    return dict(table)
+
+
+def _check_views(views: Mapping[str, Any], camera) -> None:
+    """Raise unless ``camera``'s micro-images leave room for the view stack of ``views``."""
+    from lfrefract.views import subaperture_limit_px
+
+    limit = subaperture_limit_px(camera)
+    if limit <= 0.0:
+        raise ParameterError(f"camera {camera.name!r} has micro-images too small for sub-aperture views")
+    if "spacing_px" in views:
+        half = (views.get("grid", 9) - 1) // 2
+        reach = math.hypot(half * views["spacing_px"], half * views["spacing_px"])
+        if reach > limit:
+            raise ParameterError(
+                f"sweep.views.spacing_px={views['spacing_px']!r} puts the corner views {reach:.4g} px from the "
+                f"micro-image centres of camera {camera.name!r}, beyond its limit of {limit:.4g} px"
+            )
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read a sweep spec file (or an embedded sweep by name, see :func:`embedded_sweeps`).
+
+    Parameters
+    ----------
+    path : path-like
+        A TOML file, or the name of an embedded sweep (``"tilt"``).
+
+    Returns
+    -------
+    SweepSpec
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file or embedded sweep.
+    ParameterError
+        If the file is not valid TOML or not a valid spec (:func:`parse_spec`).
+    """
+    p = Path(path)
+    embedded = embedded_sweeps()
+    if not p.exists() and str(path) in embedded:
+        p = embedded[str(path)]
+    data = read_toml(p, "sweep spec")
+    return parse_spec(data, base_dir=p.parent, source=str(p))
+
+
+def embedded_sweeps() -> dict[str, Path]:
+    """Embedded sweep specs (``scenes/sweeps/*.toml``) by name (file stem)."""
+    folder = scenes_dir() / "sweeps"
+    return {p.stem: p for p in sorted(folder.glob("*.toml"))}
+
+
+# ------------------------------------------------------------------------------- expansion
+def _assign(data: dict, key: str, value: Any) -> None:
+    """Set dotted ``key`` of the scene dict ``data`` to ``value`` (tables created on the way)."""
+    parts = key.split(".")
+    node: Any = data
+    for depth, part in enumerate(parts):
+        last = depth == len(parts) - 1
+        here = ".".join(parts[:depth])  # the table or array that ``part`` addresses into
+        if isinstance(node, list):
+            if not part.isdigit():
+                example = ".".join([*parts[:depth], "0", *parts[depth:]])
+                raise ParameterError(
+                    f"{key!r}: {here!r} is an array of tables; address an entry by its index (e.g. {example!r})"
+                )
+            i = int(part)
+            if i >= len(node):
+                entries = "entry" if len(node) == 1 else "entries"
+                raise ParameterError(
+                    f"{key!r}: index {i} is out of range: the scene has {len(node)} [[{here}]] {entries}"
+                )
+            if last:
+                node[i] = value
+            else:
+                node = node[i]
+        elif isinstance(node, dict):
+            if part.isdigit():
+                raise ParameterError(f"{key!r}: {here or 'the scene'!r} is a table, not an array")
+            if last:
+                node[part] = value
+            else:
+                node = node.setdefault(part, {})
+        else:
+            raise ParameterError(f"{key!r}: {here!r} is a value ({node!r}), not a table or array")
+
+
+def _unset(data: dict, keys: tuple[str, ...]) -> None:
+    """Remove dotted ``keys`` from the scene dict ``data``; array entries by their index in the
+    base scene (all are located first, then removed, higher indices first)."""
+    targets = []
+    for key in keys:
+        parts = key.split(".")
+        node: Any = data
+        for depth, part in enumerate(parts):
+            here = ".".join(parts[: depth + 1])
+            if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+                index: Any = int(part)
+            elif isinstance(node, dict) and part in node:
+                index = part
+            else:
+                raise ParameterError(f"sweep.unset: {key!r}: the base scene has no {here!r}")
+            if depth == len(parts) - 1:
+                targets.append((id(node), node, index))
+            else:
+                node = node[index]
+    # Array entries from the highest index down, so that each index still means the base scene's.
+    for _, node, index in sorted(targets, key=lambda t: (t[0], t[2] if isinstance(t[2], int) else -1), reverse=True):
+        del node[index]
+
+
+def _describe(params: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v!r}" for k, v in params.items()) or "no swept keys"
+
+
+def expand(spec: SweepSpec, *, progress: bool = False) -> tuple[SweepSample, ...]:
+    """Every sample of ``spec``, each built and checked as a scene.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    progress : bool
+        Show a progress bar (tqdm, stderr) over the samples.
+
+    Returns
+    -------
+    tuple of SweepSample
+        In index order. The same spec always gives the same samples (ids, seeds, values, hashes).
+
+    Raises
+    ------
+    ParameterError
+        If any sample is not a valid, physically possible scene (unknown keys at any level,
+        impossible or totally reflecting port tilts, unknown presets, objects on the camera side
+        of the port, an output the scene cannot have, ...): the message names the sample, its
+        swept values and the offending key.
+    """
+    if not isinstance(spec, SweepSpec):
+        raise ParameterError(f"spec must be a SweepSpec, got {spec!r}")
+    scenes: dict[str, tuple[Path, dict]] = {}
+
+    def base_scene(value: str) -> tuple[Path, dict]:
+        if value not in scenes:
+            path = _scene_file(SCENE_KEY, value, spec.base_dir)
+            scenes[value] = (path, read_toml(path, "scene"))
+        return scenes[value]
+
+    grid_keys = [k for k, _ in spec.grid]
+    points = list(itertools.product(*(values for _, values in spec.grid)))
+    out = []
+    with tqdm(total=spec.size, desc="checking samples", unit="sample", disable=not progress) as bar:
+        for p, point in enumerate(points):
+            for r in range(spec.repeats):
+                index = p * spec.repeats + r
+                seed = sample_seed(spec.seed, index)
+                params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
+                for dist in spec.random:
+                    params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key))
+                out.append(_build_sample(spec, index, seed, params, base_scene))
+                bar.update()
+    return tuple(out)
+
+
+def _build_sample(spec: SweepSpec, index: int, seed: int, params: dict, base_scene) -> SweepSample:
+    sid = sample_id(index)
+    where = f"sample {sid} ({_describe(params)})"
+    scene_name = params.get(SCENE_KEY, spec.scene)
+    path, base = base_scene(scene_name)
+    data = copy.deepcopy(base)
+    try:
+        _unset(data, spec.unset)
+        if spec.spp is not None:
+            _assign(data, "render.spp", spec.spp)
+        for key, value in params.items():
+            if key != SCENE_KEY:
+                _assign(data, key, copy.deepcopy(value))
+        _assign(data, "render.seed", seed)
+        data["name"] = f"{spec.name}/{sid}"
+        config = parse_scene(data, base_dir=path.parent, source=f"{spec.source}#{sid}")
+        check_geometry(config)
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
+    if config.port is None and "refraction_free" in spec.outputs:
+        raise ParameterError(f"{where}: the scene has no [port], so it has no refraction-free image to write")
+    if "views" in spec.outputs:
+        try:
+            _check_views(spec.views, config.camera)
+        except ParameterError as exc:
+            raise ParameterError(f"{where}: {exc}") from None
+    digest = _sha256({"scene": data, "base_scene": scene_name, "outputs": list(spec.outputs),
+                      "synthesis": None if spec.synthesis is None else spec.synthesis.to_dict(),
+                      "views": dict(spec.views)})  # fmt: skip
+    return SweepSample(
+        id=sid,
+        index=index,
+        seed=seed,
+        params=MappingProxyType(params),
+        hash=digest,
+        config=config,
+        scene_data=_freeze(data),
+    )
