@@ -4,7 +4,8 @@
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--overwrite]
     lfsim demo [--out DIR]
-    lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R] [--quiet]
+    lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R]
+                          [--variant V] [--quiet]
     lfsim dataset check DIR [--sizes-only]
     lfsim scenes
 

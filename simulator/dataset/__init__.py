@@ -14,13 +14,14 @@ starts.
 
 from simulator.dataset.check import CheckReport, SampleProblem, check_dataset
 from simulator.dataset.loader import Dataset, Sample
-from simulator.dataset.run import DatasetMismatchError, RunReport, run_dataset
+from simulator.dataset.run import DatasetBusyError, DatasetMismatchError, RunReport, run_dataset
 from simulator.dataset.spec import OUTPUTS, SweepSample, SweepSpec, embedded_sweeps, expand, load_spec, parse_spec
 
 __all__ = [
     "OUTPUTS",
     "CheckReport",
     "Dataset",
+    "DatasetBusyError",
     "DatasetMismatchError",
     "RunReport",
     "Sample",

@@ -15,7 +15,7 @@ from simulator.dataset.manifest import (
     staging_leftovers,
 )
 
-__all__ = ["PROBLEMS", "CheckReport", "SampleProblem", "check_dataset"]
+__all__ = ["PROBLEMS", "CheckReport", "SampleProblem", "check_dataset", "verify_folder"]
 
 #: Kinds of problem, in the order they are reported.
 PROBLEMS = ("missing", "corrupt", "failed", "not run")
@@ -79,7 +79,9 @@ class CheckReport:
         return f"{self.root}: {self.total} samples, {self.verified} verified; {counts}"
 
 
-def _verify(folder: Path, record: dict, *, hashes: bool) -> SampleProblem | None:
+def verify_folder(folder: Path, record: dict, *, hashes: bool) -> SampleProblem | None:
+    """The problem of a done sample's folder against its manifest record, or None if it holds
+    exactly the recorded files with their sizes (and SHA-256s, with ``hashes``)."""
     sid = record["id"]
     if not folder.is_dir():
         return SampleProblem(sid, "missing", f"folder {folder.name}/ is missing")
@@ -142,7 +144,7 @@ def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckRepor
         if record.get("hash") != sample["hash"] or record.get("index") != sample["index"]:
             problems.append(SampleProblem(sid, "corrupt", "its manifest record is not the planned sample's"))
             continue
-        problem = _verify(root / sid, record, hashes=hashes)
+        problem = verify_folder(root / sid, record, hashes=hashes)
         if problem is None:
             verified += 1
         else:

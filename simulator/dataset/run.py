@@ -2,9 +2,11 @@
 
 The driver (this process) checks the whole spec first (:func:`simulator.dataset.spec.expand`),
 then creates the dataset folder with ``dataset.json``, or, if the folder holds an earlier run of
-the same spec, resumes it: it drops an unterminated last manifest line, removes staging
-leftovers, re-renders done samples whose files went missing, removes the folders of samples that
-are not recorded as done, and skips the done ones. Each remaining sample is one Dask task that
+the same spec, resumes it. It holds a lock on the folder (``flock``) for the whole run, so a
+second run on the same folder is refused instead of deleting the first one's work. On resume it
+drops an unterminated last manifest line, removes staging leftovers, re-renders done samples whose
+files went missing or changed size, removes the folders of samples that are not recorded as done,
+and skips the done ones. Each remaining sample is one Dask task that
 renders it into its folder (:func:`simulator.dataset.sample.render_sample`) and returns its
 manifest record; the driver alone appends records, as the tasks complete. A task that raises is
 submitted again, up to ``retries`` more times, then recorded as failed with its error and the
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import fcntl
 import logging
 import os
 import time
@@ -36,6 +39,7 @@ import lfrefract
 from lfrefract._validate import ParameterError, one_of, positive_int
 from lfrefract.io import FileFormatError, write_json
 from simulator.backend import VARIANTS
+from simulator.dataset.check import verify_folder
 from simulator.dataset.manifest import (
     DATASET_FILE,
     DATASET_KIND,
@@ -50,7 +54,7 @@ from simulator.dataset.manifest import (
 from simulator.dataset.sample import SampleTask, render_sample
 from simulator.dataset.spec import SweepSample, SweepSpec, expand, load_spec
 
-__all__ = ["DatasetMismatchError", "RunReport", "run_dataset"]
+__all__ = ["DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
 
 
 #: How long to try to reach a scheduler given by address before giving up.
@@ -59,6 +63,10 @@ SCHEDULER_TIMEOUT = "30s"
 
 class DatasetMismatchError(FileExistsError):
     """The output folder holds something other than an earlier run of this spec."""
+
+
+class DatasetBusyError(FileExistsError):
+    """Another run is using the output folder."""
 
 
 @dataclass(frozen=True)
@@ -108,7 +116,8 @@ def _check_target(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) 
     """Raise unless ``out`` is absent, empty, or a dataset of this spec with these samples (reads only)."""
     if out.exists() and not out.is_dir():
         raise DatasetMismatchError(f"output {str(out)!r} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()):
+    leftovers = set(staging_leftovers(out))  # e.g. dataset.json's temporary file: killed while creating it
+    if out.is_dir() and any(p not in leftovers for p in out.iterdir()):
         try:
             earlier = read_dataset(out)
         except FileFormatError as exc:
@@ -156,22 +165,35 @@ def _prepare(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) -> di
     for sample in samples:
         record = latest.get(sample.id)
         folder = out / sample.id
-        if record is not None and record["status"] == "done" and _sizes_match(folder, record):
+        intact = record is not None and record["status"] == "done" and record.get("hash") == sample.hash
+        if intact and verify_folder(folder, record, hashes=False) is None:
             done[sample.id] = record
         elif folder.exists():  # rendered but never recorded (killed in between), or damaged since
             remove(folder)
     return done
 
 
-def _sizes_match(folder: Path, record: dict) -> bool:
-    """The folder holds exactly the recorded files, with the recorded sizes."""
-    files = record.get("files") or {}
-    if not folder.is_dir():
-        return False
-    present = {p.relative_to(folder).as_posix(): p for p in folder.rglob("*") if p.is_file()}
-    if set(present) != set(files):
-        return False
-    return all(present[name].stat().st_size == entry["bytes"] for name, entry in files.items())
+@contextlib.contextmanager
+def _locked(out: Path) -> Iterator[None]:
+    """Create ``out`` and hold an exclusive lock on it (``flock`` of the folder) until the block ends.
+
+    Raises DatasetBusyError if another process holds it. A file system without locks is used
+    unlocked.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise DatasetBusyError(
+                f"{str(out)!r} is in use by another lfsim dataset run; wait for it to end (or kill it) and run again"
+            ) from None
+        except OSError:  # no locks on this file system
+            pass
+        yield
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
@@ -181,7 +203,7 @@ def _dask_client(workers: int, scheduler: str | None) -> Iterator:
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-        except OSError as exc:  # unreachable or no scheduler there
+        except (OSError, ValueError) as exc:  # unreachable, no scheduler there, or a malformed address
             raise ParameterError(f"scheduler={scheduler!r}: cannot reach a Dask scheduler there ({exc})") from None
         with client:
             yield client
@@ -244,6 +266,8 @@ def run_dataset(
         is written).
     DatasetMismatchError
         If ``out_dir`` holds anything but an earlier run of this same spec.
+    DatasetBusyError
+        If another run is using ``out_dir``.
     """
     start = time.perf_counter()
     if not isinstance(spec, SweepSpec):
@@ -270,6 +294,8 @@ def run_dataset(
         # A cluster given by address is reached before anything is written; a local one is
         # started only if there is work.
         client = None if scheduler is None else stack.enter_context(_dask_client(workers, scheduler))
+        stack.enter_context(_locked(out))  # one run at a time: a second one would delete this one's work
+        _check_target(out, spec, samples)  # again, under the lock
         done = _prepare(out, spec, samples)
         pending = [s for s in samples if s.id not in done]
         if pending and client is None:

@@ -1,8 +1,11 @@
-"""Sweep specs: parsing, rejection before any work, deterministic expansion (no rendering)."""
+"""Sweep specs: parsing, rejection before any work, deterministic expansion; the run's checks of its
+output folder (no rendering)."""
 
 from __future__ import annotations
 
 import copy
+import fcntl
+import os
 import re
 import subprocess
 import sys
@@ -14,7 +17,9 @@ import pytest
 
 from lfrefract import ParameterError
 from simulator.config import default_scene_path
-from simulator.dataset import expand, load_spec, parse_spec, run_dataset
+from simulator.dataset import DatasetBusyError, expand, load_spec, parse_spec, run_dataset
+from simulator.dataset.manifest import append_record, folder_files
+from simulator.dataset.run import _check_target, _prepare
 from simulator.dataset.spec import MAX_SAMPLES, key_rng, sample_seed
 
 BASE = {"sweep": {"name": "t", "seed": 11, "scene": "default", "spp": 2}}
@@ -68,6 +73,12 @@ BAD_SPECS = [
     ),
     ("normal std 0", spec_data(random={"port.distance_m": {"normal": [0.02, 0.0]}}), r"normal = .* needs std > 0"),
     ("choice empty", spec_data(random={"camera.preset": {"choice": []}}), r"choice = \[\] is an empty range"),
+    (
+        # Sweep seed 2 draws 1.0 for the one sample: the NaN is never drawn, yet the spec is refused.
+        "NaN among choices",
+        spec_data(sweep={"seed": 2}, random={"port.tilt_y_deg": {"choice": [1.0, float("nan")]}}),
+        r"sweep spec: random\.\"port\.tilt_y_deg\"\.choice\[1\] = nan is not a finite number",
+    ),
     ("integers lo > hi", spec_data(random={"object.0.texture_seed": {"integers": [5, 1]}}), r"integers = \[5, 1\]"),
     (
         "integers of floats",
@@ -223,26 +234,18 @@ def test_bad_spec_rejected_with_key_and_value(data, pattern, tmp_path):
     assert not out.exists()
 
 
-def test_views_output_rejected_or_wired():
-    """'views' needs lfrefract.views.subaperture_stack and lfrefract.io.write_view_stack."""
-    from lfrefract import io as lfio
-    from lfrefract import views as lfviews
-
+def test_views_output_options_are_checked():
     data = spec_data(sweep={"outputs": ["views"], "views": {"grid": 3}})
-    if hasattr(lfviews, "subaperture_stack") and hasattr(lfio, "write_view_stack"):
-        assert parse_spec(data).views == {"grid": 3}
-        for views, pattern in (
-            ({"grid": 4}, r"sweep.views.grid must be an odd integer >= 3, got 4"),
-            ({"image_format": "tiff"}, r"sweep.views.image_format must be one of \['png', 'exr'\], got 'tiff'"),
-            ({"grid": 9, "spacing_px": 4.0}, r"sample s000000 .*: sweep.views.spacing_px=4.0 puts the corner views"),
-        ):
-            with pytest.raises(ParameterError, match=pattern):
-                build(spec_data(sweep={"outputs": ["views"], "views": views}))
-        with pytest.raises(ParameterError, match=r"unknown key\(s\) in \[sweep.views\]: \['size'\]"):
-            parse_spec(spec_data(sweep={"outputs": ["views"], "views": {"size": 3}}))
-    else:
-        with pytest.raises(ParameterError, match=r"'views' needs lfrefract\.views\.subaperture_stack"):
-            parse_spec(data)
+    assert parse_spec(data).views == {"grid": 3}
+    for views, pattern in (
+        ({"grid": 4}, r"sweep.views.grid must be an odd integer >= 3, got 4"),
+        ({"image_format": "tiff"}, r"sweep.views.image_format must be one of \['png', 'exr'\], got 'tiff'"),
+        ({"grid": 9, "spacing_px": 4.0}, r"sample s000000 .*: sweep.views.spacing_px=4.0 puts the corner views"),
+    ):
+        with pytest.raises(ParameterError, match=pattern):
+            build(spec_data(sweep={"outputs": ["views"], "views": views}))
+    with pytest.raises(ParameterError, match=r"unknown key\(s\) in \[sweep.views\]: \['size'\]"):
+        parse_spec(spec_data(sweep={"outputs": ["views"], "views": {"size": 3}}))
 
 
 def test_cli_refuses_a_bad_spec_and_writes_nothing(tmp_path):
@@ -441,3 +444,53 @@ def test_the_documented_spec_is_valid():
     assert np.all(rot[:, 2] == 0.0)
     assert len(set(rot[:, 0])) == len(samples)
     assert all(s.config.water is not None and s.config.port.n_water == s.config.water.n_water for s in samples)
+
+
+# ------------------------------------------------------------------------- the output folder
+def test_a_folder_holding_only_a_staging_leftover_is_empty(tmp_path):
+    """A run killed while creating dataset.json leaves its temporary file: the next run goes on."""
+    spec = load_spec("tilt")
+    samples = expand(spec)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".dataset.json.k1ll3d.tmp").write_text('{"schema_')
+    _check_target(out, spec, samples)
+    assert _prepare(out, spec, samples) == {}
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json"]
+
+
+def test_resume_keeps_only_done_records_of_the_planned_sample(tmp_path):
+    """A done record whose hash is not the planned sample's is not kept: its folder is removed and
+    rendered again (check_dataset would call it corrupt for ever otherwise)."""
+    spec = load_spec("tilt")
+    samples = expand(spec)
+    out = tmp_path / "out"
+    _prepare(out, spec, samples)
+    folder = out / samples[0].id
+    for recorded_hash, kept in (("0" * 64, False), (samples[0].hash, True)):
+        folder.mkdir()
+        (folder / "raw.exr").write_bytes(b"pixels")
+        record = {**samples[0].record(), "hash": recorded_hash, "status": "done", "files": folder_files(folder)}
+        append_record(out / "manifest.jsonl", record)
+        assert (samples[0].id in _prepare(out, spec, samples)) is kept
+        assert folder.exists() is kept
+
+
+def test_a_second_run_on_a_folder_in_use_is_refused(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY)  # as a running lfsim dataset run holds it
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        with pytest.raises(DatasetBusyError, match=r"is in use by another lfsim dataset run"):
+            run_dataset("tilt", out, progress=False)
+    finally:
+        os.close(fd)
+    assert list(out.iterdir()) == []
+
+
+def test_a_malformed_scheduler_address_is_a_parameter_error(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(ParameterError, match=r"scheduler='head:port': cannot reach a Dask scheduler there"):
+        run_dataset("tilt", out, scheduler="head:port", progress=False)
+    assert not out.exists()
