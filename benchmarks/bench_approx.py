@@ -4,7 +4,7 @@
     python benchmarks/bench_approx.py --seeds 0 --depths 0.2 0.6
 
 The set-up of tests/simulator/test_approx_baseline.py (its scenes come from
-tests/simulator/chessboards.py): the tiny camera at twice its focal length and sensor
+simulator/boards.py): the tiny camera at twice its focal length and sensor
 (188 x 141 px refraction-free image, f = 240 px), a port 12 mm away with 4 mm of glass, tilted
 0 or 26.8 deg, 16 spp. ``approx@D`` is calibrated from 6 board views at D metres with their 3D
 corners known; ``proposed+distortion`` fits its residual distortion on the synthesized images of
@@ -17,43 +17,25 @@ the seeds. Needs the simulator (Mitsuba); prints a Markdown table and the timing
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from lfrefract import virtual_camera_for
-from lfrefract.methods import CalibrationViews, build_projector
+from lfrefract.methods import build_projector
+from simulator import boards
 from simulator.backend import load_mitsuba
+from simulator.boards import DIRECTIONS, STRAIGHT, TILTED, chessboard_corners_world
 from simulator.job import render_raw
-from tests.simulator import chessboards as cb
-from tests.simulator.scenes import chessboard_corners_world
-from tests.simulator.test_approx_baseline import DIRECTIONS, STRAIGHT, TILTED
-
-
-def _views(mi, tilt, depth_m: float, seed: int) -> CalibrationViews:
-    camera = cb.empty_scene(tilt).camera
-    boards = cb.calibration_boards(tilt, depth_m, virtual_camera_for(camera))
-    configs = [cb.board_scene(tilt, table, seed=seed) for table in boards]
-    return CalibrationViews(
-        raws=[render_raw(mi, c, progress=False) for c in configs],
-        pattern=cb.PATTERN,
-        square_size_m=boards[0]["square_size_m"],
-        corners_cam=[chessboard_corners_world(c.objects[0]) for c in configs],
-    )
 
 
 def measure(mi, tilt, depths, calibration_depths, seed: int) -> dict[tuple[str, float], float]:
     """Corner RMS (px) by (method label, depth) for one tilt and seed (NaN: board not found)."""
-    config = cb.empty_scene(tilt)
+    config = boards.empty_scene(tilt)
     camera, port = config.camera, config.port
     proposed = build_projector("proposed", camera, port)
     projectors = {"naive": build_projector("naive", camera, port)}
     for depth_m in calibration_depths:
-        views = _views(mi, tilt, depth_m, seed)
+        views = boards.calibration_views(mi, tilt, depth_m, seed=seed)
         projectors[f"approx@{depth_m:g}"] = build_projector("approx", camera, port, calibration=views)
         if depth_m == calibration_depths[0]:
             projectors["proposed"] = proposed
@@ -62,13 +44,15 @@ def measure(mi, tilt, depths, calibration_depths, seed: int) -> dict[tuple[str, 
             )
     errors = {}
     for depth_m in depths:
-        scene = cb.board_scene(tilt, cb.slanted_board(depth_m, DIRECTIONS[tilt], proposed.output.focal_px), seed=seed)
+        scene = boards.board_scene(
+            tilt, boards.slanted_board(depth_m, DIRECTIONS[tilt], proposed.output.focal_px), seed=seed
+        )
         raw = render_raw(mi, scene, progress=False)
         truth = chessboard_corners_world(scene.objects[0])
         for label, projector in projectors.items():
-            found = cb.find_corners(projector.apply(raw))
+            found = boards.find_corners(projector.apply(raw))
             errors[label, depth_m] = (
-                np.nan if found is None else cb.corner_rms_px(found, projector.output.project(truth))
+                np.nan if found is None else boards.corner_rms_px(found, projector.output.project(truth))
             )
     return errors
 

@@ -682,7 +682,7 @@ def port_noise_figure(seeds: int = 2) -> None:
 def port_render_figure() -> None:
     """Port calibration on renders (tiny-2x, ten boards at 32 spp per tilt, as the tests):
     port_renders.png. Light-field corners against the central view's, and the port's errors."""
-    from tests.simulator.chessboards import port_from_renders
+    from simulator.boards import port_from_renders
 
     tilts = {"0 deg": (0.0, 0.0), "15 deg": (12.0, -9.0), "27 deg": (25.0, 10.0)}
     fits = {}

@@ -1,11 +1,11 @@
-"""Small scene configs for simulator tests (not fixtures: plain builders), and their ground truth."""
+"""Small scene configs for simulator tests (not fixtures: plain builders).
+
+The chessboard set-ups and their ground truth are in :mod:`simulator.boards`.
+"""
 
 from __future__ import annotations
 
-import numpy as np
-
-from simulator import assets
-from simulator.config import Chessboard, SceneConfig, parse_scene
+from simulator.config import SceneConfig, parse_scene
 
 LIGHTS = [
     {"type": "point", "position_m": [-0.2, -0.3, 0.15], "intensity_w_sr": 0.4},
@@ -50,16 +50,3 @@ def port(tilt_x_deg: float = 0.0, tilt_y_deg: float = 0.0, thickness_m: float = 
         "n_glass": 1.5,
         "n_water": 1.333,
     }
-
-
-def chessboard_corners_world(board: Chessboard) -> np.ndarray:
-    """World positions (N, 3), metres, of a chessboard object's inner corners.
-
-    In the order of :func:`simulator.assets.chessboard_inner_corners` (row by row from the top-left
-    corner, x fastest: OpenCV's order for pattern size ``(columns - 1, rows - 1)`` on an upright
-    board). With an identity camera pose these are camera-frame points.
-    """
-    local = assets.chessboard_inner_corners(
-        squares=board.squares, square_size_m=board.square_size_m, margin_squares=board.margin_squares
-    )
-    return board.placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))

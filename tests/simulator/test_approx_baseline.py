@@ -16,11 +16,10 @@ import functools
 
 import pytest
 
-from lfrefract import virtual_camera_for
-from lfrefract.methods import CalibrationViews, build_projector
+from lfrefract.methods import build_projector
+from simulator import boards
+from simulator.boards import DIRECTIONS, STRAIGHT, TILTED, chessboard_corners_world
 from simulator.job import render_raw
-from tests.simulator import chessboards as cb
-from tests.simulator.scenes import chessboard_corners_world
 from tests.tolerances import (
     APPROX_FAR_OVER_NEAR_STRAIGHT_MIN,
     APPROX_FAR_OVER_NEAR_TILTED_MIN,
@@ -33,27 +32,17 @@ pytestmark = pytest.mark.render
 
 CALIBRATION_DEPTH_M = 0.2
 NEAR_M, FAR_M = CALIBRATION_DEPTH_M, 0.6
-STRAIGHT, TILTED = (0.0, 0.0), (25.0, 10.0)  # (tilt_x_deg, tilt_y_deg): 0 and 26.8 deg in all
-# The test board's line of sight (x / z, y / z): off the axis (the approximation's radial error
-# grows with the distance from the image centre) and inside the synthesis's exact coverage, which
-# the tilted port turns up and to the right.
-DIRECTIONS = {STRAIGHT: (0.1, -0.06), TILTED: (0.16, -0.125)}
+# The port tilts STRAIGHT and TILTED (0 and 26.8 deg in all) and the test board's line of sight
+# behind each, DIRECTIONS, come from simulator/boards.py (shared with benchmarks/bench_approx.py).
 FAR_OVER_NEAR_MIN = {STRAIGHT: APPROX_FAR_OVER_NEAR_STRAIGHT_MIN, TILTED: APPROX_FAR_OVER_NEAR_TILTED_MIN}
 
 
 @functools.cache
 def _errors(mi, tilt: tuple[float, float]) -> dict[tuple[str, float], float]:
     """Corner RMS (px) of each method at the near and far test depths behind the port of ``tilt``."""
-    camera = cb.empty_scene(tilt).camera
-    boards = cb.calibration_boards(tilt, CALIBRATION_DEPTH_M, virtual_camera_for(camera))
-    configs = [cb.board_scene(tilt, table) for table in boards]
-    views = CalibrationViews(
-        raws=[render_raw(mi, c, progress=False) for c in configs],
-        pattern=cb.PATTERN,
-        square_size_m=boards[0]["square_size_m"],
-        corners_cam=[chessboard_corners_world(c.objects[0]) for c in configs],
-    )
-    port = configs[0].port
+    config = boards.empty_scene(tilt)
+    camera, port = config.camera, config.port
+    views = boards.calibration_views(mi, tilt, CALIBRATION_DEPTH_M)
     proposed = build_projector("proposed", camera, port)
     projectors = {
         "approx": build_projector("approx", camera, port, calibration=views),
@@ -64,15 +53,15 @@ def _errors(mi, tilt: tuple[float, float]) -> dict[tuple[str, float], float]:
     }
     errors = {}
     for depth_m in (NEAR_M, FAR_M):
-        config = cb.board_scene(tilt, cb.slanted_board(depth_m, DIRECTIONS[tilt], proposed.output.focal_px))
+        config = boards.board_scene(tilt, boards.slanted_board(depth_m, DIRECTIONS[tilt], proposed.output.focal_px))
         raw = render_raw(mi, config, progress=False)
         ground_truth = chessboard_corners_world(config.objects[0])
         for name, projector in projectors.items():
             # Every method's image is a central projection from the main-lens centre with its K.
             assert projector.output == proposed.output
-            found = cb.find_corners(projector.apply(raw))
+            found = boards.find_corners(projector.apply(raw))
             assert found is not None, f"{name}: no chessboard found at {depth_m} m behind a {tilt} deg port"
-            errors[name, depth_m] = cb.corner_rms_px(found, projector.output.project(ground_truth))
+            errors[name, depth_m] = boards.corner_rms_px(found, projector.output.project(ground_truth))
     return errors
 
 

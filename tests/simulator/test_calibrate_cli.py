@@ -12,8 +12,8 @@ from lfrefract import FlatPort, virtual_camera_for
 from lfrefract import cli as core_cli
 from lfrefract.io import read_exr, read_flat_port, read_json, write_json
 from simulator import cli as sim_cli
+from simulator.boards import SQUARES, board_scene, calibration_boards, empty_scene
 from simulator.job import render_job
-from tests.simulator.chessboards import SQUARES, board_scene, calibration_boards, empty_scene
 
 pytestmark = pytest.mark.render
 

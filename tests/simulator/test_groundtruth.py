@@ -8,8 +8,9 @@ import pytest
 
 from lfrefract import PinholeCamera, Pose
 from simulator import assets, groundtruth
+from simulator.boards import chessboard_corners_world
 from simulator.scene import build_scene
-from tests.simulator.scenes import chessboard_corners_world, port, scene
+from tests.simulator.scenes import port, scene
 from tests.tolerances import DEPTH_FLOAT32_RELATIVE, IDEAL_CHESSBOARD_RMS_PX
 
 pytestmark = pytest.mark.render

@@ -16,17 +16,17 @@ import pytest
 
 from lfrefract.synthesis import WarpMap, build_warp_map
 from lfrefract.views import naive_view
+from simulator import boards
+from simulator.boards import chessboard_corners_world
 from simulator.config import SceneConfig
 from simulator.job import render_raw
-from tests.simulator import chessboards as cb
-from tests.simulator.scenes import chessboard_corners_world
 from tests.tolerances import NAIVE_CORNER_RMS_MIN_PX, SYNTH_CORNER_RMS_PX
 
 pytestmark = pytest.mark.render
 
 # The camera (tiny-2x: the tiny preset with twice its focal length and sensor, 188 x 141 px
 # refraction-free image with f = 240 px), the 7 x 5 board at 9 px per square and the port (12 mm
-# away, 4 mm glass) come from tests/simulator/chessboards.py, shared with test_approx_baseline:
+# away, 4 mm glass) come from simulator/boards.py, shared with test_approx_baseline:
 # the board fits inside the exact coverage behind a tilted port, which the larger aperture keeps
 # wide (the tiny preset's image is 92 x 69 px, too small for a board the detector finds reliably).
 
@@ -39,12 +39,12 @@ DEPTHS_M = (0.15, 0.6)
 
 
 def _scene(tilt: tuple[float, float], depth_m: float, focal_px: float) -> SceneConfig:
-    return cb.board_scene(tilt, cb.slanted_board(depth_m, TILTS[tilt], focal_px))
+    return boards.board_scene(tilt, boards.slanted_board(depth_m, TILTS[tilt], focal_px))
 
 
 @functools.cache
 def _warp_map(tilt: tuple[float, float]) -> WarpMap:
-    config = cb.empty_scene(tilt)
+    config = boards.empty_scene(tilt)
     return build_warp_map(config.camera, config.port)
 
 
@@ -57,17 +57,17 @@ def test_corners_in_synthesized_image_at_pinhole_projection(mi, tilt, depth_m):
     board = config.objects[0]
     # The whole board lies inside the exact coverage: every pixel of it is synthesized from rays the
     # camera recorded, none from the stand-ins of the field-of-view limitation.
-    uv = np.round(K.project(cb.board_points_world(board))).astype(int)
+    uv = np.round(K.project(boards.board_points_world(board))).astype(int)
     assert np.all((uv >= 0) & (uv < [K.width_px, K.height_px]))
     assert np.all(warp.exact[uv[:, 1], uv[:, 0]])
     expected = K.project(chessboard_corners_world(board))
 
     raw = render_raw(mi, config, progress=False)
-    synthesized = cb.find_corners(warp.apply(raw))
+    synthesized = boards.find_corners(warp.apply(raw))
     assert synthesized is not None, "no chessboard found in the synthesized image"
-    assert cb.corner_rms_px(synthesized, expected) < SYNTH_CORNER_RMS_PX
+    assert boards.corner_rms_px(synthesized, expected) < SYNTH_CORNER_RMS_PX
 
     # The conventional central view on the same K: the board is found, in the wrong place.
-    naive = cb.find_corners(naive_view(config.camera, raw, output=K))
+    naive = boards.find_corners(naive_view(config.camera, raw, output=K))
     assert naive is not None, "no chessboard found in the naive view"
-    assert cb.corner_rms_px(naive, expected) > NAIVE_CORNER_RMS_MIN_PX
+    assert boards.corner_rms_px(naive, expected) > NAIVE_CORNER_RMS_MIN_PX
