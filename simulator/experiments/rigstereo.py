@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lfrefract import ParameterError, Pose, virtual_camera_for
+from lfrefract import ParameterError, virtual_camera_for
 from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.io import read_exr, read_json, write_json
 from lfrefract.methods import CalibrationViews, build_projector
@@ -27,8 +27,8 @@ from lfrefract.stereo import (
     zncc_disparity,
 )
 from lfrefract.synthesis import WarpMap, build_warp_map
-from simulator.assets import chessboard_inner_corners
-from simulator.config import read_toml
+from simulator.boards import chessboard_corners_world
+from simulator.config import Chessboard, Placement, read_toml
 from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
 
 __all__ = [
@@ -160,10 +160,11 @@ def render_capture(setup: RigSetup, objects: list[dict], folder: Path) -> Captur
 
 
 def inner_corners_world(table: dict) -> np.ndarray:
-    """Inner corners (N, 3) of a chessboard table in the world frame, in the board's order."""
-    placement = Pose.from_euler_xyz_deg(table["rotation_xyz_deg"], table["position_m"])
-    local = chessboard_inner_corners(squares=tuple(table["squares"]), square_size_m=table["square_size_m"])
-    return placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))
+    """Inner corners (N, 3) of a chessboard table of :func:`chessboards` in the world frame, in the
+    board's order (:func:`simulator.boards.chessboard_corners_world`)."""
+    placement = Placement(position_m=table["position_m"], rotation_xyz_deg=table["rotation_xyz_deg"])
+    board = Chessboard(placement=placement, squares=table["squares"], square_size_m=table["square_size_m"])
+    return chessboard_corners_world(board)
 
 
 def board_points_m(square: float) -> np.ndarray:
