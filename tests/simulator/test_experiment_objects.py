@@ -27,3 +27,7 @@ def test_objects_by_method(tmp_path):
     # The approximation calibrated at 0.6 m, twice as far as the objects, misses them most.
     far, proposed = rows["approx far"]["median_abs_mm"], rows["proposed"]["median_abs_mm"]
     assert far > OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN * proposed
+    # The same on the pixels both cameras see exactly, which are part of the objects' only.
+    assert 0 < rows["proposed"]["exact_share"] < 1
+    far, proposed = rows["approx far"]["exact_median_abs_mm"], rows["proposed"]["exact_median_abs_mm"]
+    assert far > OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN * proposed
