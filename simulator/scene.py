@@ -172,8 +172,19 @@ def _plane_matrix(placement_matrix: np.ndarray, width: float, height: float) -> 
 
 def _local_mesh(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if isinstance(obj, Bowl):
-        return assets.bowl_mesh(radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
-    return assets.figurine_mesh(height_m=obj.height_m, seed=obj.seed)
+        return _procedural_mesh("bowl", radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
+    return _procedural_mesh("figurine", height_m=obj.height_m, seed=obj.seed)
+
+
+@functools.lru_cache(maxsize=64)
+def _procedural_mesh(kind: str, **shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The local mesh of a procedural object, read-only and cached: a dataset sweep checks the
+    geometry of every sample before rendering any (:func:`check_geometry`), and regenerating the
+    meshes was two thirds of that check."""
+    mesh = assets.bowl_mesh(**shape) if kind == "bowl" else assets.figurine_mesh(**shape)
+    for array in mesh:
+        array.setflags(write=False)
+    return mesh
 
 
 def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
