@@ -333,13 +333,15 @@ class Water:
     salinity_psu, temperature_c : float, optional
         Practical salinity (0 to 35 psu) and temperature (0 to 30 degrees Celsius), both or
         neither. Given, the refractive index of the water follows from them
-        (:func:`lfrefract.seawater_index`, Quan and Fry 1995) and is the port's ``n_water``.
+        (:func:`lfrefract.seawater_index`, Quan and Fry 1995; relative to air) and, times the
+        port's ``n_air`` (1 unless stated), is the port's ``n_water``.
     wavelength_nm : float, optional
         Wavelength in vacuum of that index, nanometres, 400 to 700; only with salinity and
         temperature (default then 589.3, the sodium D line).
     absorption_per_m, scattering_per_m : float or sequence of 3 floats
         Absorption and scattering coefficients sigma_a and sigma_s of the water, per metre
-        (>= 0; one number for all three colour channels, or RGB). Default 0: clear water.
+        (>= 0; one number for all three colour channels, or RGB; their sum, the extinction, is
+        either 0 in every channel or positive in every channel). Default 0: clear water.
     phase_g : float
         Asymmetry g of the Henyey-Greenstein phase function of the scattering, in (-1, 1):
         0 isotropic, towards 1 forward (typical of sea water: about 0.9). Default 0.
@@ -353,8 +355,10 @@ class Water:
     ------
     ParameterError
         For one of salinity and temperature without the other, a wavelength without them, a value
-        outside the index equation's ranges, a negative or non-finite coefficient, or ``phase_g``
-        outside (-1, 1); the message names the key (``water.<key>``) and the value.
+        outside the index equation's ranges, a negative or non-finite coefficient, an extinction
+        ``absorption_per_m + scattering_per_m`` that is 0 in some channel but positive in another
+        (Mitsuba's ``volpath`` renders such a medium as NaN), or ``phase_g`` outside (-1, 1); the
+        message names the key (``water.<key>``) and the value.
     """
 
     salinity_psu: float | None = None
@@ -391,6 +395,17 @@ class Water:
             object.__setattr__(self, "n_water", n)
         object.__setattr__(self, "absorption_per_m", _rgb("water.absorption_per_m", self.absorption_per_m))
         object.__setattr__(self, "scattering_per_m", _rgb("water.scattering_per_m", self.scattering_per_m))
+        empty = [i for i, t in enumerate(self.extinction_per_m) if t == 0.0]
+        if self.has_medium and empty:
+            # Mitsuba's volpath divides by every channel's extinction at each medium interaction:
+            # a channel at 0 beside a positive one turns the whole image into NaN.
+            raise ParameterError(
+                f"water.absorption_per_m={list(self.absorption_per_m)} plus water.scattering_per_m="
+                f"{list(self.scattering_per_m)} is 0 in channel(s) {empty} but positive in another: "
+                "Mitsuba's volpath cannot render a medium that is empty in some colour channels (the "
+                "image would be NaN); give every channel a positive absorption (water absorbs at every "
+                "visible wavelength) or make both coefficients 0 in all channels"
+            )
         g = finite_float("water.phase_g", self.phase_g)
         if not -1.0 < g < 1.0:
             raise ParameterError(f"water.phase_g must lie in (-1, 1), got {self.phase_g!r}")
@@ -421,17 +436,6 @@ class Water:
         pairs = zip(self.scattering_per_m, self.extinction_per_m, strict=True)
         return tuple(s / t if t > 0.0 else 0.0 for s, t in pairs)
 
-    def transmittance(self, path_m: Any) -> np.ndarray:
-        """Beer-Lambert transmittance ``exp(-sigma_t * path)`` per channel, shape ``(..., 3)``.
-
-        Parameters
-        ----------
-        path_m : float or array_like
-            Path lengths through the water, metres (>= 0).
-        """
-        path = np.asarray(path_m, dtype=np.float64)[..., None]
-        return np.exp(-path * np.asarray(self.extinction_per_m))
-
     def to_dict(self) -> dict:
         """Plain data: the table's keys with the effective wavelength, and the derived ``n_water``."""
         return {
@@ -449,6 +453,10 @@ class Water:
 def apply_water_index(table: dict, water: Water | None, *, where: str) -> dict:
     """A copy of a port-like table (``[port]``, a rig's ``[wall]``) with the water's ``n_water``.
 
+    The water's index is relative to air; the table's ``n_water`` becomes it times the table's
+    ``n_air`` (1 unless stated), so that ``n_water / n_air``, the ratio refraction depends on, is
+    the water's index whichever reference the table's indices use.
+
     Parameters
     ----------
     table : dict
@@ -461,22 +469,25 @@ def apply_water_index(table: dict, water: Water | None, *, where: str) -> dict:
     Raises
     ------
     ParameterError
-        If the table states an ``n_water`` that differs from the water's computed index by more
-        than :data:`N_WATER_TOLERANCE`: neither is picked silently.
+        If the table states an ``n_water`` that differs from the water's computed index (times
+        ``n_air``) by more than :data:`N_WATER_TOLERANCE`: neither is picked silently.
     """
     out = dict(table)
     if water is None or water.n_water is None:
         return out
+    n_air = finite_float(f"{where}.n_air", out.get("n_air", 1.0))
+    expected = water.n_water * n_air
     if "n_water" in out:
         stated = finite_float(f"{where}.n_water", out["n_water"])
-        if abs(stated - water.n_water) > N_WATER_TOLERANCE:
+        if abs(stated - expected) > N_WATER_TOLERANCE:
+            scaled = "" if n_air == 1.0 else f" relative to air, {expected:.6f} with {where}.n_air={n_air!r}"
             raise ParameterError(
                 f"{where}.n_water={stated!r} conflicts with the index of [water] (salinity_psu="
                 f"{water.salinity_psu!r}, temperature_c={water.temperature_c!r}, wavelength_nm="
-                f"{water.wavelength_nm!r}: n_water={water.n_water:.6f}, Quan and Fry 1995); they differ by "
-                f"{abs(stated - water.n_water):.2g} > {N_WATER_TOLERANCE:g}. Remove one of them or make them agree"
+                f"{water.wavelength_nm!r}: n_water={water.n_water:.6f}{scaled}, Quan and Fry 1995); they differ by "
+                f"{abs(stated - expected):.2g} > {N_WATER_TOLERANCE:g}. Remove one of them or make them agree"
             )
-    out["n_water"] = water.n_water
+    out["n_water"] = expected
     return out
 
 
@@ -527,12 +538,16 @@ class SceneConfig:
                 f"{list(water.scattering_per_m)}): none of its light would arrive; use point lights or luminous discs"
             )
         n_water = None if water is None else water.n_water
-        if n_water is not None and self.port is not None and abs(self.port.n_water - n_water) > N_WATER_TOLERANCE:
-            raise ParameterError(
-                f"port.n_water={self.port.n_water!r} conflicts with the index of the water "
-                f"(n_water={n_water:.6f} from water.salinity_psu={water.salinity_psu!r}, "
-                f"water.temperature_c={water.temperature_c!r}); build the port with n_water=water.n_water"
-            )
+        # The water's index is relative to air: the port's n_water / n_air must match it.
+        if n_water is not None and self.port is not None:
+            expected = n_water * self.port.n_air
+            if abs(self.port.n_water - expected) > N_WATER_TOLERANCE:
+                raise ParameterError(
+                    f"port.n_water={self.port.n_water!r} conflicts with the index of the water "
+                    f"(n_water={n_water:.6f} relative to air from water.salinity_psu={water.salinity_psu!r}, "
+                    f"water.temperature_c={water.temperature_c!r}, times port.n_air={self.port.n_air!r}); build "
+                    "the port with n_water=water.n_water * n_air"
+                )
 
     def with_overrides(self, **changes: Any) -> SceneConfig:
         """A copy with some fields replaced (validated again)."""
