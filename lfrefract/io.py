@@ -15,6 +15,7 @@ import math
 import os
 import shutil
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ import numpy as np
 import OpenEXR
 
 from lfrefract import __version__
-from lfrefract._validate import ParameterError, as_points, one_of, positive_float
+from lfrefract._validate import ParameterError, as_points, one_of, positive_float, positive_int
 from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera
 from lfrefract.port import FlatPort
@@ -454,6 +455,7 @@ VIEW_STACK_FORMATS = ("png", "exr")
 PNG_WHITE_PERCENTILE = 99.5
 
 _STACK_SIDECAR = "views.json"
+_STACK_KIND = "lfrefract.view_stack"
 _STACK_ARRAYS = "stack.npz"
 _STACK_MASK = "valid_mask.png"
 _STACK_PARAMETERS = "parameters.cfg"
@@ -466,6 +468,7 @@ def view_file_names(grid: int, image_format: str) -> list[str]:
     ``[r, c]``; numbers have three digits (the benchmark's 9 x 9 grids), more only for grids
     beyond 31 x 31, so that sorting the names keeps the order.
     """
+    positive_int("grid", grid)
     one_of("image_format", image_format, VIEW_STACK_FORMATS)
     digits = max(3, len(str(grid * grid - 1)))
     return [f"input_Cam{i:0{digits}d}.{image_format}" for i in range(grid * grid)]
@@ -564,7 +567,8 @@ def write_view_stack(
     stack : ViewStack
         Grey views or views with 1 or 3 channels.
     overwrite : bool
-        Replace an earlier view stack (a directory with a readable ``views.json``).
+        Replace an earlier view stack (a directory whose readable ``views.json`` is of kind
+        ``lfrefract.view_stack``).
     image_format : {"png", "exr"}
     white_level : float, optional
         Linear value written as white in PNG views, > 0. Default: the
@@ -583,7 +587,7 @@ def write_view_stack(
     ParameterError
         If ``stack`` is not a ViewStack, has another number of channels, or an option is invalid.
     FileExistsError
-        See :func:`staged_directory`.
+        See :func:`staged_directory`; also if ``overwrite`` meets a ``views.json`` of another kind.
     """
     if not isinstance(stack, ViewStack):
         raise ParameterError(f"stack must be a ViewStack, got {type(stack).__name__}")
@@ -620,6 +624,17 @@ def write_view_stack(
     else:
         encoding = {"type": "float32 OpenEXR, linear radiance as in the raw image", "nan": "kept (no value)"}
     out = Path(out_dir)
+    if overwrite and out.is_dir() and any(out.iterdir()):
+        # views.json is also the sidecar of ``lfrefract synth --out views.exr``: replace only a view stack.
+        try:
+            kind = read_json(out / _STACK_SIDECAR).get("kind")
+        except FileFormatError:
+            kind = _STACK_KIND  # staged_directory refuses it, with its own message
+        if kind != _STACK_KIND:
+            raise FileExistsError(
+                f"output directory {str(out)!r} holds a {_STACK_SIDECAR} of kind {kind!r}, not an lfrefract view "
+                "stack: refusing to replace it"
+            )
     with staged_directory(out, overwrite=overwrite, sidecar=_STACK_SIDECAR) as stage:
         for index, name in enumerate(names):
             view = views[index // grid, index % grid]
@@ -642,7 +657,7 @@ def write_view_stack(
         write_json(
             stage / _STACK_SIDECAR,
             {
-                "kind": "lfrefract.view_stack",
+                "kind": _STACK_KIND,
                 "layout": "HCI 4D light field benchmark (Honauer et al., ACCV 2016)",
                 "ordering": (
                     "input_CamNNN, NNN = row * grid + column; row 0 at the top (camera frame -y), column 0 at the "
@@ -695,9 +710,10 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
     if not file.is_file():
         raise FileFormatError(f"no such file: {str(file)!r}")
     try:
-        with np.load(file, allow_pickle=False) as data:
+        # Our own handle: np.load leaks the one it opens when the zip directory is unreadable.
+        with file.open("rb") as fh, np.load(fh, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise FileFormatError(f"{str(file)!r} is not a readable .npz file: {exc}") from None
     missing = sorted({"views", "offsets_px", "centres_m", "K", "camera", "schema_version"} - set(arrays))
     if missing:
@@ -721,5 +737,5 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
             output=output,
             camera=camera,
         )
-    except (ParameterError, json.JSONDecodeError, TypeError) as exc:
+    except (ValueError, TypeError) as exc:  # ParameterError, JSONDecodeError, a K of strings
         raise FileFormatError(f"{str(file)!r} does not hold a valid view stack: {exc}") from None

@@ -635,3 +635,11 @@ VIEW_STACK_SHIFT_RESIDUAL_PX = 0.15
 # measured. Light travels 0.8-1.7 m through the water to the backdrop and back (e^-0.8 to e^-1.7,
 # 0.45 to 0.18); without the medium reaching the render the ratio would be 1 up to noise.
 DATASET_TURBID_OVER_CLEAR_MAX = 0.6
+
+# ----------------------------------------------------------------------------- sub-aperture view stacks (review)
+# Fraction; darkening of the views of a default 9 x 9 stack against the central view on a uniform
+# field (raw = 1 where the captured ray passes the aperture, else 0), tiny camera: the corner views'
+# bilinear samples at the limit (micro-image radius less one pixel) give up to 7 % of their weight to
+# pixels beyond the rim; 0.47 % measured (tiny), 0.50 % (tiny-2x, f01), every other view 0. A limit at
+# the rim itself (no pixel margin) darkens the corners by half.
+VIEW_STACK_CORNER_DARKENING_MAX = 0.01
