@@ -233,7 +233,9 @@ def staged_directory(
 
     Yields a fresh staging directory beside ``out_dir``. When the block finishes without an
     exception the staging directory replaces ``out_dir``; on any exception it is deleted and
-    ``out_dir`` is left as it was.
+    ``out_dir`` is left as it was. An earlier output being replaced is first renamed aside
+    (``.<name>.*.old.partial``) and deleted after the new one is in place, so a crash in between
+    leaves it on disk.
 
     Parameters
     ----------
@@ -270,9 +272,20 @@ def staged_directory(
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
-    if out.exists():
-        shutil.rmtree(out)
-    os.replace(stage, out)
+    if not out.exists():
+        os.replace(stage, out)
+        return
+    # Move the earlier output aside before the new one takes its name, and delete it only then: at
+    # no moment is neither on disk, and a failed rename puts the earlier output back.
+    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old.partial", dir=out.parent))
+    os.replace(out, aside)
+    try:
+        os.replace(stage, out)
+    except BaseException:
+        os.replace(aside, out)
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:

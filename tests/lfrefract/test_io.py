@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -291,3 +292,26 @@ def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
     with pytest.raises(ParameterError, match="port must be a FlatPort"):
         write_flat_port(tmp_path / "x.txt", {"distance_m": 0.02})
     assert not (tmp_path / "x.txt").exists()
+
+
+def test_staged_directory_keeps_the_earlier_output_when_the_final_rename_fails(tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    with staged_directory(out) as stage:
+        write_json(stage / "meta.json", {"n": 1})
+    real_replace = os.replace
+
+    def failing_replace(src, dst):
+        if Path(src).name.endswith(".partial") and not Path(src).name.endswith(".old.partial"):
+            raise OSError("disk full")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing_replace)
+    with pytest.raises(OSError, match="disk full"), staged_directory(out, overwrite=True) as stage:
+        write_json(stage / "meta.json", {"n": 2})
+    monkeypatch.setattr(os, "replace", real_replace)
+    assert read_json(out / "meta.json")["n"] == 1  # the earlier output is back in place
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing staged or set aside is left
+    with staged_directory(out, overwrite=True) as stage:
+        write_json(stage / "meta.json", {"n": 3})
+    assert read_json(out / "meta.json")["n"] == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
