@@ -32,6 +32,8 @@ import hashlib
 import json
 import math
 import os
+import zipfile
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -306,10 +308,12 @@ class WarpMap:
         if not path.is_file():
             raise FileFormatError(f"no such file: {str(path)!r}")
         try:
-            data = np.load(path, allow_pickle=False)
-            key = str(data["key"])
-            meta = json.loads(str(data["meta"]))
-        except (OSError, ValueError, KeyError) as exc:
+            with path.open("rb") as fh, np.load(fh, allow_pickle=False) as data:
+                key = str(data["key"])
+                meta = json.loads(str(data["meta"]))
+                names = ("raw_shape", "indptr", "indices", "weights", "gain", "coverage")
+                arrays = {name: data[name] for name in names}
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
             raise FileFormatError(f"{str(path)!r} is not a warp map: {exc}") from None
         if expected_key is not None and key != expected_key:
             raise FileFormatError(
@@ -317,12 +321,12 @@ class WarpMap:
             )
         return cls(
             output=PinholeCamera.from_dict(meta["output"]),
-            raw_shape=tuple(int(x) for x in data["raw_shape"]),
-            indptr=data["indptr"],
-            indices=data["indices"],
-            weights=data["weights"],
-            gain=data["gain"],
-            coverage=data["coverage"],
+            raw_shape=tuple(int(x) for x in arrays["raw_shape"]),
+            indptr=arrays["indptr"],
+            indices=arrays["indices"],
+            weights=arrays["weights"],
+            gain=arrays["gain"],
+            coverage=arrays["coverage"],
             key=key,
             meta=meta,
         )

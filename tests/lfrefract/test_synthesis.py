@@ -152,6 +152,11 @@ def test_save_load_round_trip_and_stale_key(tmp_path, warp):
     (tmp_path / "bad.npz").write_bytes(b"not a map")
     with pytest.raises(FileFormatError, match="is not a warp map"):
         WarpMap.load(tmp_path / "bad.npz")
+    # A map cut short (an interrupted copy) is a format error too, not a zipfile exception.
+    data = path.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(FileFormatError, match="is not a warp map"):
+        WarpMap.load(tmp_path / "cut.npz")
 
 
 def test_key_changes_with_every_input(warp):
