@@ -36,6 +36,8 @@ __all__ = [
     "SCHEMA_VERSION",
     "VIEW_STACK_FORMATS",
     "FileFormatError",
+    "atomic_file",
+    "current_umask",
     "read_exr",
     "read_flat_port",
     "read_json",
@@ -47,6 +49,7 @@ __all__ = [
     "write_flat_port",
     "write_json",
     "write_ply",
+    "write_text_atomically",
     "write_view_stack",
 ]
 
@@ -64,11 +67,58 @@ class FileFormatError(ValueError):
     """A file is missing, of the wrong kind, or does not hold what it should."""
 
 
-def _atomic_target(path: Path) -> Path:
+def current_umask() -> int:
+    """The process's file-mode creation mask, read without changing it (Linux), else by setting it back."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _apply_umask(path: Path, *, directory: bool) -> None:
+    """Give a file or directory made by mkstemp / mkdtemp (0600 / 0700) the mode that ``open`` or
+    ``mkdir`` would have given it under the user's umask (0666 / 0777 less the mask)."""
+    os.chmod(path, (0o777 if directory else 0o666) & ~current_umask())
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Write one file atomically: the project's single writer of files.
+
+    Yields a temporary path beside ``path`` with a unique name (``.<name>.<random>.tmp``, so
+    writers running at once never share one). When the block ends without an exception the file
+    gets the mode the user's umask gives new files and is renamed over ``path``; on any exception
+    (KeyboardInterrupt too) it is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination file; its directory is created if needed.
+
+    Raises
+    ------
+    IsADirectoryError
+        If ``path`` is an existing directory (before anything is written).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"output file {str(path)!r} is an existing directory")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
-    return Path(tmp)
+    tmp = Path(name)
+    try:
+        yield tmp
+        _apply_umask(tmp, directory=False)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
@@ -110,14 +160,8 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
         _ROLE_KEY: str(role),
         _SCHEMA_KEY: str(SCHEMA_VERSION),
     }
-    tmp = _atomic_target(path)
-    try:
-        with OpenEXR.File(header, channels) as exr:
-            exr.write(str(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(str(tmp))
     return path
 
 
@@ -195,18 +239,14 @@ def write_json(path: str | os.PathLike, data: dict) -> Path:
         raise ParameterError(f"data must not set schema_version (got {data['schema_version']!r}); it is added here")
     payload = {"schema_version": SCHEMA_VERSION, **data}
     text = json.dumps(_finite_json(json.loads(json.dumps(payload, default=_json_default))), indent=2)
-    return _write_text_atomically(path, text + "\n")
+    return write_text_atomically(path, text + "\n")
 
 
-def _write_text_atomically(path: Path, text: str) -> Path:
-    """Write ``text`` to a temporary file beside ``path``, then rename it over ``path``."""
-    tmp = _atomic_target(path)
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+def write_text_atomically(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` (UTF-8) to a temporary file beside ``path``, then rename it over ``path``."""
+    path = Path(path)
+    with atomic_file(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return path
 
 
@@ -299,7 +339,7 @@ def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:
         raise ParameterError(f"port must be a FlatPort, got {port!r}")
     values = [*port.normal, port.distance_m, port.thickness_m, port.n_air, port.n_glass, port.n_water]
     text = "# " + " ".join(FLAT_PORT_FIELDS) + "\n" + " ".join(repr(float(v)) for v in values) + "\n"
-    return _write_text_atomically(Path(path), text)
+    return write_text_atomically(Path(path), text)
 
 
 def read_flat_port(path: str | os.PathLike) -> FlatPort:
@@ -381,15 +421,9 @@ def write_ply(path: str | os.PathLike, points_m: np.ndarray, colors: np.ndarray 
     header = ["ply", "format binary_little_endian 1.0", "comment written by lfrefract.io", f"element vertex {len(pts)}"]
     header += [f"property {'float' if kind == '<f4' else 'uchar'} {name}" for name, kind in fields]
     header.append("end_header")
-    tmp = _atomic_target(path)
-    try:
-        with tmp.open("wb") as fh:
-            fh.write(("\n".join(header) + "\n").encode("ascii"))
-            fh.write(record.tobytes())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as tmp, tmp.open("wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        fh.write(record.tobytes())
     return path
 
 

@@ -47,7 +47,7 @@ from lfrefract._kernels import gather, merge_rows, select_candidates
 from lfrefract._raytree import LazyRayTree
 from lfrefract._validate import ParameterError, non_negative_float, one_of, positive_int
 from lfrefract.camera import LightFieldCamera
-from lfrefract.io import FileFormatError
+from lfrefract.io import FileFormatError, atomic_file
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort
 
@@ -285,20 +285,18 @@ class WarpMap:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the map as a compressed ``.npz`` (atomically)."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp.npz")
-        np.savez_compressed(
-            tmp,
-            indptr=self.indptr,
-            indices=self.indices,
-            weights=self.weights,
-            gain=self.gain,
-            coverage=self.coverage,
-            raw_shape=np.asarray(self.raw_shape),
-            key=np.asarray(self.key),
-            meta=np.asarray(json.dumps(self.meta)),
-        )
-        os.replace(tmp, path)
+        with atomic_file(path) as tmp, tmp.open("wb") as fh:  # a handle: np.savez would append ".npz" to a name
+            np.savez_compressed(
+                fh,
+                indptr=self.indptr,
+                indices=self.indices,
+                weights=self.weights,
+                gain=self.gain,
+                coverage=self.coverage,
+                raw_shape=np.asarray(self.raw_shape),
+                key=np.asarray(self.key),
+                meta=np.asarray(json.dumps(self.meta)),
+            )
         return path
 
     @classmethod

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +36,7 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract._validate import ParameterError, non_negative_float, positive_float, positive_int
+from lfrefract.io import atomic_file
 
 __all__ = [
     "BLACK",
@@ -684,14 +684,8 @@ def write_ply(
     header += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
 
     out = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(("\n".join(header) + "\n").encode("ascii"))
-            fh.write(vert_rec.tobytes())
-            fh.write(face_rec.tobytes())
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(out) as tmp, tmp.open("wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        fh.write(vert_rec.tobytes())
+        fh.write(face_rec.tobytes())
     return out

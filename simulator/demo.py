@@ -14,7 +14,7 @@ import math
 import time
 from pathlib import Path
 
-from lfrefract.io import _write_text_atomically, staged_directory, write_json
+from lfrefract.io import staged_directory, write_json, write_text_atomically
 from simulator.experiments import write_table
 from simulator.experiments.planes import PLANE_DEPTHS_M, run_planes
 from simulator.experiments.rigstereo import MATCHERS, METHOD_NAMES
@@ -38,7 +38,7 @@ def run_demo(out_dir: str | Path = "demo", *, progress: bool = True, overwrite: 
         write_table(result.rows, stage)
         seconds = time.perf_counter() - start
         report = _report(result.rows, seconds, sorted(p.name for p in stage.glob("cloud_*.ply")))
-        _write_text_atomically(stage / "report.md", report)
+        write_text_atomically(stage / "report.md", report)
         write_json(
             stage / "meta.json",
             {"kind": "lfsim.demo", "experiment": "planes", "scale": "tiny", "seconds": seconds, **result.parameters},

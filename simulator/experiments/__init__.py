@@ -25,7 +25,7 @@ from pathlib import Path
 
 from lfrefract import ParameterError
 from lfrefract._validate import one_of
-from lfrefract.io import _write_text_atomically
+from lfrefract.io import write_text_atomically
 
 __all__ = ["EXPERIMENTS", "SCALES", "ExperimentResult", "load_experiments", "register", "run_experiment", "write_table"]
 
@@ -108,10 +108,10 @@ def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tup
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(keys)
     writer.writerows([[_cell(row[k]) for k in keys] for row in rows])
-    csv_path = _write_text_atomically(Path(out_dir) / f"{stem}.csv", buffer.getvalue())
+    csv_path = write_text_atomically(Path(out_dir) / f"{stem}.csv", buffer.getvalue())
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     lines += ["| " + " | ".join(_cell(row[k]) for k in keys) + " |" for row in rows]
-    md_path = _write_text_atomically(Path(out_dir) / f"{stem}.md", "\n".join(lines) + "\n")
+    md_path = write_text_atomically(Path(out_dir) / f"{stem}.md", "\n".join(lines) + "\n")
     return csv_path, md_path
 
 
