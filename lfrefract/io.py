@@ -9,14 +9,11 @@ a staging directory that is renamed into place only when everything in it has be
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import shutil
-import tempfile
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +24,7 @@ import OpenEXR
 from lfrefract import __version__
 from lfrefract._validate import ParameterError, as_points, one_of, positive_float, positive_int
 from lfrefract.camera import LightFieldCamera
+from lfrefract.outputs import atomic_file, staged_directory
 from lfrefract.pinhole import PinholeCamera
 from lfrefract.port import FlatPort
 from lfrefract.views import ViewStack
@@ -36,14 +34,11 @@ __all__ = [
     "SCHEMA_VERSION",
     "VIEW_STACK_FORMATS",
     "FileFormatError",
-    "atomic_file",
-    "current_umask",
     "read_exr",
     "read_flat_port",
     "read_json",
     "read_ply",
     "read_view_stack",
-    "staged_directory",
     "view_file_names",
     "write_exr",
     "write_flat_port",
@@ -65,60 +60,6 @@ _SCHEMA_KEY = "lfrefract_schema_version"
 
 class FileFormatError(ValueError):
     """A file is missing, of the wrong kind, or does not hold what it should."""
-
-
-def current_umask() -> int:
-    """The process's file-mode creation mask, read without changing it (Linux), else by setting it back."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except OSError:
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _apply_umask(path: Path, *, directory: bool) -> None:
-    """Give a file or directory made by mkstemp / mkdtemp (0600 / 0700) the mode that ``open`` or
-    ``mkdir`` would have given it under the user's umask (0666 / 0777 less the mask)."""
-    os.chmod(path, (0o777 if directory else 0o666) & ~current_umask())
-
-
-@contextlib.contextmanager
-def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
-    """Write one file atomically: the project's single writer of files.
-
-    Yields a temporary path beside ``path`` with a unique name (``.<name>.<random>.tmp``, so
-    writers running at once never share one). When the block ends without an exception the file
-    gets the mode the user's umask gives new files and is renamed over ``path``; on any exception
-    (KeyboardInterrupt too) it is removed and ``path`` is left as it was.
-
-    Parameters
-    ----------
-    path : path-like
-        Destination file; its directory is created if needed.
-
-    Raises
-    ------
-    IsADirectoryError
-        If ``path`` is an existing directory (before anything is written).
-    """
-    path = Path(path)
-    if path.is_dir():
-        raise IsADirectoryError(f"output file {str(path)!r} is an existing directory")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        _apply_umask(tmp, directory=False)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
@@ -263,69 +204,6 @@ def read_json(path: str | os.PathLike) -> dict:
     if version != SCHEMA_VERSION:
         raise FileFormatError(f"{str(path)!r} has schema_version {version!r}, this lfrefract reads {SCHEMA_VERSION}")
     return data
-
-
-@contextlib.contextmanager
-def staged_directory(
-    out_dir: str | os.PathLike, *, overwrite: bool = False, sidecar: str = "meta.json"
-) -> Iterator[Path]:
-    """Assemble an output directory atomically.
-
-    Yields a fresh staging directory beside ``out_dir``. When the block finishes without an
-    exception the staging directory replaces ``out_dir``; on any exception it is deleted and
-    ``out_dir`` is left as it was. An earlier output being replaced is first renamed aside
-    (``.<name>.*.old.partial``) and deleted after the new one is in place, so a crash in between
-    leaves it on disk.
-
-    Parameters
-    ----------
-    out_dir : path-like
-    overwrite : bool
-        Replace an earlier output of this package.
-    sidecar : str
-        Name of the JSON sidecar (:func:`write_json`) that marks an earlier output of the kind
-        being written (``meta.json`` for renders, ``views.json`` for view stacks).
-
-    Raises
-    ------
-    FileExistsError
-        If ``out_dir`` exists and is not empty, unless ``overwrite`` is given and it is an
-        earlier output of this package (it holds a readable ``sidecar``): a directory of
-        anything else is never deleted.
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"output {str(out)!r} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()):
-        if not overwrite:
-            raise FileExistsError(f"output directory {str(out)!r} is not empty (pass overwrite to replace it)")
-        try:
-            read_json(out / sidecar)
-        except FileFormatError:
-            raise FileExistsError(
-                f"output directory {str(out)!r} is not empty and holds no lfrefract {sidecar}: refusing to replace it"
-            ) from None
-    out.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
-    try:
-        yield stage
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    if not out.exists():
-        os.replace(stage, out)
-        return
-    # Move the earlier output aside before the new one takes its name, and delete it only then: at
-    # no moment is neither on disk, and a failed rename puts the earlier output back.
-    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old.partial", dir=out.parent))
-    os.replace(out, aside)
-    try:
-        os.replace(stage, out)
-    except BaseException:
-        os.replace(aside, out)
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
 
 
 def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:
@@ -587,6 +465,7 @@ def write_view_stack(
     image_format: str = "png",
     white_level: float | None = None,
     metadata: dict | None = None,
+    inputs: Iterable[str | os.PathLike] = (),
 ) -> Path:
     """Write a sub-aperture view stack in the HCI 4D light field benchmark layout, atomically.
 
@@ -614,8 +493,8 @@ def write_view_stack(
     stack : ViewStack
         Grey views or views with 1 or 3 channels.
     overwrite : bool
-        Replace an earlier view stack (a directory whose readable ``views.json`` is of kind
-        ``lfrefract.view_stack``).
+        Replace an earlier view stack that holds only its own files
+        (:func:`lfrefract.outputs.staged_directory`).
     image_format : {"png", "exr"}
     white_level : float, optional
         Linear value written as white in PNG views, > 0. Default: the
@@ -623,6 +502,8 @@ def write_view_stack(
         if that is not positive (a black view). Recorded in ``views.json``.
     metadata : dict, optional
         Plain data stored under ``"metadata"`` in ``views.json`` (e.g. the source raw image).
+    inputs : iterable of path-like
+        Files the caller read the stack from: ``out_dir`` may not hold one.
 
     Returns
     -------
@@ -634,7 +515,7 @@ def write_view_stack(
     ParameterError
         If ``stack`` is not a ViewStack, has another number of channels, or an option is invalid.
     FileExistsError
-        See :func:`staged_directory`; also if ``overwrite`` meets a ``views.json`` of another kind.
+        See :func:`lfrefract.outputs.staged_directory`.
     """
     if not isinstance(stack, ViewStack):
         raise ParameterError(f"stack must be a ViewStack, got {type(stack).__name__}")
@@ -671,18 +552,7 @@ def write_view_stack(
     else:
         encoding = {"type": "float32 OpenEXR, linear radiance as in the raw image", "nan": "kept (no value)"}
     out = Path(out_dir)
-    if overwrite and out.is_dir() and any(out.iterdir()):
-        # views.json is also the sidecar of ``lfrefract synth --out views.exr``: replace only a view stack.
-        try:
-            kind = read_json(out / _STACK_SIDECAR).get("kind")
-        except FileFormatError:
-            kind = _STACK_KIND  # staged_directory refuses it, with its own message
-        if kind != _STACK_KIND:
-            raise FileExistsError(
-                f"output directory {str(out)!r} holds a {_STACK_SIDECAR} of kind {kind!r}, not an lfrefract view "
-                "stack: refusing to replace it"
-            )
-    with staged_directory(out, overwrite=overwrite, sidecar=_STACK_SIDECAR) as stage:
+    with staged_directory(out, kind=_STACK_KIND, overwrite=overwrite, inputs=inputs) as stage:
         for index, name in enumerate(names):
             view = views[index // grid, index % grid]
             if image_format == "png":

@@ -47,7 +47,8 @@ from lfrefract._kernels import gather, merge_rows, select_candidates
 from lfrefract._raytree import LazyRayTree
 from lfrefract._validate import ParameterError, non_negative_float, one_of, positive_int
 from lfrefract.camera import LightFieldCamera
-from lfrefract.io import FileFormatError, atomic_file
+from lfrefract.io import FileFormatError
+from lfrefract.outputs import atomic_file
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort
 

@@ -36,7 +36,7 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract._validate import ParameterError, non_negative_float, positive_float, positive_int
-from lfrefract.io import atomic_file
+from lfrefract.outputs import atomic_file
 
 __all__ = [
     "BLACK",

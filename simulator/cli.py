@@ -3,7 +3,7 @@
     lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--seed S] [--overwrite]
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--overwrite]
-    lfsim demo [--out DIR]
+    lfsim demo [--out DIR] [--overwrite]
     lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R]
                           [--variant V] [--quiet]
     lfsim dataset check DIR [--sizes-only]
@@ -55,7 +55,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant")
     render.add_argument("--band-pixels", type=int, default=DEFAULT_MAX_BAND_PIXELS, help="pixels per render band")
-    render.add_argument("--overwrite", action="store_true", help="replace a non-empty output directory")
+    render.add_argument("--overwrite", action="store_true", help="replace an earlier render output (only that)")
     render.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     render.add_argument("--quiet", action="store_true", help="no progress bars")
     rig = sub.add_parser("rig", help="render every camera of a stereo rig behind one wall, with ground truth")
@@ -73,9 +73,8 @@ def _parser() -> argparse.ArgumentParser:
     exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
     exp.add_argument("--quiet", action="store_true", help="no progress bars")
     demo = sub.add_parser("demo", help="the main job: stereo behind a glass wall by every method, with a report")
-    demo.add_argument(
-        "--out", type=Path, default=Path("demo"), help="output directory (default: demo/; an earlier demo is replaced)"
-    )
+    demo.add_argument("--out", type=Path, default=Path("demo"), help="output directory (default: demo/)")
+    demo.add_argument("--overwrite", action="store_true", help="replace an earlier demo output")
     demo.add_argument("--quiet", action="store_true", help="no progress bars")
     dataset = sub.add_parser("dataset", help="datasets: sweeps over port tilt and conditions, on Dask")
     dsub = dataset.add_subparsers(dest="dataset_command", required=True)
@@ -181,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "demo":
             from simulator.demo import run_demo
 
-            report = run_demo(args.out, progress=not args.quiet, overwrite=True)
+            report = run_demo(args.out, progress=not args.quiet, overwrite=args.overwrite)
             print(report.read_text().split("![")[0].rstrip())
             print(f"\nwrote {report} (figures, table.csv, point clouds beside it)")
             return 0
@@ -206,7 +205,9 @@ def main(argv: list[str] | None = None) -> int:
             progress=not args.quiet,
             write_previews=not args.no_previews,
         )
-    except (ParameterError, FileNotFoundError, FileExistsError, FileFormatError) as exc:
+    except (ParameterError, FileFormatError, OSError) as exc:
+        # OSError covers refusals (FileExistsError), missing files and failed writes (read-only, disk full):
+        # one line naming the path; outputs are staged, so an earlier output is still in place.
         print(f"lfsim: error: {exc}", file=sys.stderr)
         return 2
     cam = config.camera

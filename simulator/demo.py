@@ -14,7 +14,8 @@ import math
 import time
 from pathlib import Path
 
-from lfrefract.io import staged_directory, write_json, write_text_atomically
+from lfrefract.io import write_json, write_text_atomically
+from lfrefract.outputs import staged_directory
 from simulator.experiments import write_table
 from simulator.experiments.planes import PLANE_DEPTHS_M, run_planes
 from simulator.experiments.rigstereo import MATCHERS, METHOD_NAMES
@@ -33,7 +34,7 @@ def run_demo(out_dir: str | Path = "demo", *, progress: bool = True, overwrite: 
     """
     start = time.perf_counter()
     out = Path(out_dir)
-    with staged_directory(out, overwrite=overwrite) as stage:
+    with staged_directory(out, kind="lfsim.demo", overwrite=overwrite) as stage:
         result = run_planes(stage, scale="tiny", progress=progress, write_clouds=True)
         write_table(result.rows, stage)
         seconds = time.perf_counter() - start

@@ -11,14 +11,15 @@ import numpy as np
 
 import lfrefract
 from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
-from lfrefract.io import staged_directory, write_exr, write_json
+from lfrefract.io import write_exr, write_json
+from lfrefract.outputs import staged_directory
 from simulator import backend, groundtruth, previews
-from simulator.config import SceneConfig
+from simulator.config import MeshFile, SceneConfig
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
 from simulator.scene import build_scene, check_geometry, integrator, water_medium
 from simulator.sensor import plenoptic_sensor_dict
 
-__all__ = ["RenderResult", "render_job", "render_raw"]
+__all__ = ["RENDER_KIND", "RenderResult", "render_job", "render_raw", "scene_inputs"]
 
 
 def render_raw(
@@ -84,6 +85,16 @@ class RenderResult:
     metadata: dict
 
 
+#: Kind of a render output directory (its manifest and ``meta.json``).
+RENDER_KIND = "lfsim.render"
+
+
+def scene_inputs(config: SceneConfig) -> list[Path]:
+    """The files a render of ``config`` reads: its scene file and its meshes (an output may hold none)."""
+    files = [Path(config.source)] if Path(config.source).is_file() else []
+    return files + [obj.path for obj in config.objects if isinstance(obj, MeshFile)]
+
+
 def render_job(
     config: SceneConfig,
     out_dir: str | Path,
@@ -130,7 +141,7 @@ def render_job(
     pinhole = ideal if ideal is not None else virtual_camera_for(camera)
     spp, seed = config.render.spp, config.render.seed
     port_geometry = config.port is not None and config.render.port_model == "geometry"
-    with staged_directory(out_dir, overwrite=overwrite) as stage:
+    with staged_directory(out_dir, kind=RENDER_KIND, overwrite=overwrite, inputs=scene_inputs(config)) as stage:
         mi = backend.load_mitsuba(variant)
         glass_free = build_scene(mi, config, port_geometry=False)
         start = time.perf_counter()
@@ -144,7 +155,7 @@ def render_job(
         write_exr(stage / "depth.exr", truth.depth_m, role="depth")
         np.savez_compressed(stage / "lenses.npz", **truth.lenses)
         metadata = {
-            "kind": "lfsim.render",
+            "kind": RENDER_KIND,
             "files": {
                 "raw": "raw.exr",
                 "ideal": "ideal.exr",

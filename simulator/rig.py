@@ -31,10 +31,11 @@ import numpy as np
 
 from lfrefract import FlatPort, ParameterError, Pose
 from lfrefract._validate import finite_vector, positive_float, reject_unknown_keys, require_keys
-from lfrefract.io import staged_directory, write_json
+from lfrefract.io import write_json
+from lfrefract.outputs import staged_directory
 from simulator.config import SceneConfig, Water, apply_water_index, parse_scene, read_toml, scenes_dir
 
-__all__ = ["RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
+__all__ = ["RIG_KIND", "RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
 
 _WALL_KEYS = {"normal", "distance_m", "thickness_m", "n_air", "n_glass", "n_water"}
 
@@ -214,6 +215,10 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
     return parse_rig(read_toml(p, "rig"), base_dir=p.parent, source=str(p))
 
 
+#: Kind of a rig output directory (its manifest and ``meta.json``).
+RIG_KIND = "lfsim.rig"
+
+
 def render_rig(
     rig: RigConfig,
     out_dir: str | Path,
@@ -222,12 +227,15 @@ def render_rig(
     progress: bool = True,
     write_previews: bool = True,
     variant: str | None = None,
+    metadata: dict | None = None,
 ) -> Path:
     """Render every camera of ``rig`` with its ground truth into ``out_dir/<name>/``.
 
     Writes ``meta.json`` (kind ``lfsim.rig``): the wall, the water (None without ``[water]``),
     each camera's folder, pose and port, and the stereo ground truth (each camera's rotation and
-    translation relative to the first, and the baseline). The directory appears only when every camera is rendered.
+    translation relative to the first, and the baseline), plus the plain data of ``metadata`` (the
+    caller's own keys, e.g. what the scene holds). The directory appears only when every camera is
+    rendered; ``overwrite`` replaces only an earlier rig output (:func:`lfrefract.outputs.staged_directory`).
 
     Returns
     -------
@@ -237,7 +245,7 @@ def render_rig(
     from simulator.job import render_job
 
     out = Path(out_dir)
-    with staged_directory(out, overwrite=overwrite) as stage:
+    with staged_directory(out, kind=RIG_KIND, overwrite=overwrite) as stage:
         cameras = {}
         for index, camera in enumerate(rig.cameras):
             if progress:
@@ -258,11 +266,11 @@ def render_rig(
                 },
             }
         meta = {
-            "kind": "lfsim.rig",
+            "kind": RIG_KIND,
             "name": rig.name,
             "source": rig.source,
             "wall": rig.wall.to_dict(),
             "water": None if rig.water is None else rig.water.to_dict(),
         }
-        write_json(stage / "meta.json", {**meta, "cameras": cameras})
+        write_json(stage / "meta.json", {**meta, "cameras": cameras, **(metadata or {})})
     return out

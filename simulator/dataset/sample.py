@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from lfrefract import PinholeCamera
-from lfrefract.io import read_exr, staged_directory, write_exr, write_flat_port, write_json
+from lfrefract.io import read_exr, write_exr, write_flat_port, write_json
+from lfrefract.outputs import staged_directory
 from lfrefract.synthesis import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
 
@@ -120,7 +121,7 @@ def render_sample(task: SampleTask) -> dict:
     config = task.config
     seconds: dict[str, float] = {}
     out = Path(task.dataset_dir) / task.id
-    with staged_directory(out, overwrite=True) as stage:
+    with staged_directory(out, kind="lfsim.dataset.sample", overwrite=True) as stage:
         t0 = time.perf_counter()
         result = render_job(
             config,
@@ -158,7 +159,7 @@ def render_sample(task: SampleTask) -> dict:
                 **extras,
             },
         )
-        files = folder_files(stage)
+    files = folder_files(out)  # after the rename: the output's manifest is among them
     seconds["total"] = time.perf_counter() - start
     return {
         "id": task.id,

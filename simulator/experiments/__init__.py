@@ -137,13 +137,14 @@ def run_experiment(
     """
     import time
 
-    from lfrefract.io import staged_directory, write_json
+    from lfrefract.io import write_json
+    from lfrefract.outputs import staged_directory
 
     experiments = load_experiments()
     function = experiments[one_of("experiment", name, tuple(sorted(experiments)))]
     check_scale(scale)
     start = time.perf_counter()
-    with staged_directory(out_dir, overwrite=overwrite) as stage:
+    with staged_directory(out_dir, kind=f"lfsim.experiment.{name}", overwrite=overwrite) as stage:
         result = function(stage, scale=scale, progress=progress)
         write_table(result.rows, stage)
         write_json(

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from lfrefract import ParameterError, virtual_camera_for
 from lfrefract.calibration.approx import detect_chessboard
-from lfrefract.io import read_exr, read_json, write_json
+from lfrefract.io import read_exr, read_json
 from lfrefract.methods import CalibrationViews, build_projector
 from lfrefract.stereo import (
     Rectification,
@@ -153,9 +153,7 @@ def render_capture(setup: RigSetup, objects: list[dict], folder: Path) -> Captur
     rig = parse_rig(rig_data(setup, objects))
     meta = folder / "meta.json"
     if not (meta.is_file() and read_json(meta).get("objects") == objects):
-        render_rig(rig, folder, progress=False, write_previews=False, overwrite=True)
-        kept = {k: v for k, v in read_json(meta).items() if k != "schema_version"}
-        write_json(meta, {**kept, "objects": objects})
+        render_rig(rig, folder, progress=False, write_previews=False, overwrite=True, metadata={"objects": objects})
     return Capture(folder)
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import SCHEMA_VERSION, FileFormatError, read_exr, read_json, staged_directory, write_exr, write_json
+from lfrefract.io import SCHEMA_VERSION, FileFormatError, read_exr, read_json, write_exr, write_json
 
 SPECIAL = np.array([0.0, -0.0, 1.5, np.inf, -np.inf, np.nan, 1e-45, -3.4e38, 65504.0, 1e-8], dtype=np.float32)
 # Non-canonical NaN payloads (quiet, negative, signalling) must survive too.
@@ -181,94 +180,6 @@ def test_json_unserialisable_value_writes_nothing(tmp_path):
     assert only_entry(tmp_path) == []
 
 
-# =============================================================================== staged directories
-def test_staged_directory_success(tmp_path):
-    out = tmp_path / "run"
-    with staged_directory(out) as stage:
-        assert stage.parent == tmp_path
-        assert not out.exists()  # nothing visible until the block finishes
-        (stage / "a.txt").write_text("a")
-    assert only_entry(out) == ["a.txt"]
-    assert only_entry(tmp_path) == ["run"]
-
-
-def write_then_fail(out: Path, exc: BaseException, **kwargs) -> None:
-    """Write a file into a staged ``out`` and raise ``exc`` before the block ends."""
-    with staged_directory(out, **kwargs) as stage:
-        (stage / "new.txt").write_text("new")
-        raise exc
-
-
-def test_staged_directory_leaves_nothing_when_the_block_raises(tmp_path):
-    out = tmp_path / "run"
-    with pytest.raises(RuntimeError, match="boom"):
-        write_then_fail(out, RuntimeError("boom"))
-    assert only_entry(tmp_path) == []
-    # Also for exceptions that are not Exceptions (Ctrl-C).
-    with pytest.raises(KeyboardInterrupt):
-        write_then_fail(out, KeyboardInterrupt())
-    assert only_entry(tmp_path) == []
-
-
-def test_staged_directory_refuses_a_non_empty_directory(tmp_path):
-    out = tmp_path / "run"
-    out.mkdir()
-    (out / "old.txt").write_text("old")
-    with (
-        pytest.raises(FileExistsError, match=re.escape(f"output directory {str(out)!r} is not empty")),
-        staged_directory(out),
-    ):
-        pytest.fail("the block must not run")
-    assert (out / "old.txt").read_text() == "old"
-    assert only_entry(tmp_path) == ["run"]
-
-
-def test_staged_directory_overwrite_replaces(tmp_path):
-    out = tmp_path / "run"
-    out.mkdir()
-    (out / "old.txt").write_text("old")
-    write_json(out / "meta.json", {"kind": "an earlier output"})
-    with staged_directory(out, overwrite=True) as stage:
-        (stage / "new.txt").write_text("new")
-        assert (out / "old.txt").exists()  # the old output stays until the new one is complete
-    assert only_entry(out) == ["new.txt"]
-    assert only_entry(tmp_path) == ["run"]
-
-
-def test_staged_directory_overwrite_refuses_a_foreign_directory(tmp_path):
-    out = tmp_path / "home"
-    out.mkdir()
-    (out / "thesis.tex").write_text("precious")
-    with pytest.raises(FileExistsError, match=r"holds no lfrefract meta\.json"), staged_directory(out, overwrite=True):
-        pass
-    assert only_entry(out) == ["thesis.tex"]
-    assert only_entry(tmp_path) == ["home"]
-
-
-def test_staged_directory_overwrite_keeps_old_output_on_failure(tmp_path):
-    out = tmp_path / "run"
-    out.mkdir()
-    (out / "old.txt").write_text("old")
-    write_json(out / "meta.json", {"kind": "an earlier output"})
-    with pytest.raises(KeyError):
-        write_then_fail(out, KeyError("x"), overwrite=True)
-    assert only_entry(out) == ["meta.json", "old.txt"]
-    assert only_entry(tmp_path) == ["run"]
-
-
-def test_staged_directory_accepts_empty_and_refuses_a_file(tmp_path):
-    empty = tmp_path / "empty"
-    empty.mkdir()
-    with staged_directory(empty) as stage:
-        (stage / "x").write_text("x")
-    assert only_entry(empty) == ["x"]
-    file_out = tmp_path / "file"
-    file_out.write_text("not a dir")
-    with pytest.raises(FileExistsError, match="exists and is not a directory"), staged_directory(file_out):
-        pytest.fail("the block must not run")
-    assert file_out.read_text() == "not a dir"
-
-
 def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
     from lfrefract import FlatPort
     from lfrefract.io import read_flat_port, write_flat_port
@@ -292,26 +203,3 @@ def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
     with pytest.raises(ParameterError, match="port must be a FlatPort"):
         write_flat_port(tmp_path / "x.txt", {"distance_m": 0.02})
     assert not (tmp_path / "x.txt").exists()
-
-
-def test_staged_directory_keeps_the_earlier_output_when_the_final_rename_fails(tmp_path, monkeypatch):
-    out = tmp_path / "run"
-    with staged_directory(out) as stage:
-        write_json(stage / "meta.json", {"n": 1})
-    real_replace = os.replace
-
-    def failing_replace(src, dst):
-        if Path(src).name.endswith(".partial") and not Path(src).name.endswith(".old.partial"):
-            raise OSError("disk full")
-        return real_replace(src, dst)
-
-    monkeypatch.setattr(os, "replace", failing_replace)
-    with pytest.raises(OSError, match="disk full"), staged_directory(out, overwrite=True) as stage:
-        write_json(stage / "meta.json", {"n": 2})
-    monkeypatch.setattr(os, "replace", real_replace)
-    assert read_json(out / "meta.json")["n"] == 1  # the earlier output is back in place
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing staged or set aside is left
-    with staged_directory(out, overwrite=True) as stage:
-        write_json(stage / "meta.json", {"n": 3})
-    assert read_json(out / "meta.json")["n"] == 3
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]

@@ -205,7 +205,7 @@ def test_the_hci_layout_on_disk(tmp_path, rgb_stack):
     names = [f"input_Cam{i:03d}.png" for i in range(25)]
     assert view_file_names(5, "png") == names
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        [*names, "parameters.cfg", "stack.npz", "valid_mask.png", "views.json"]
+        [*names, ".lfrefract-output.json", "parameters.cfg", "stack.npz", "valid_mask.png", "views.json"]
     )
     meta = json.loads((out / "views.json").read_text())
     assert meta["central_view"] == "input_Cam012.png"
@@ -285,7 +285,7 @@ def test_writing_is_atomic_and_never_replaces_a_foreign_directory(tmp_path, rgb_
     foreign = tmp_path / "thesis"
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("precious")
-    with pytest.raises(FileExistsError, match=r"holds no lfrefract views\.json"):
+    with pytest.raises(FileExistsError, match=r"is not an lfrefract output"):
         write_view_stack(foreign, rgb_stack, overwrite=True)
     # A failure half-way leaves the earlier output as it was and no staging directory behind.
     import lfrefract.io
@@ -402,7 +402,7 @@ def test_overwrite_never_replaces_a_views_json_of_another_kind(tmp_path, rgb_sta
     capture = tmp_path / "cap"
     write_exr(capture / "raw.exr", np.zeros((4, 4), dtype=np.float32), role="raw")
     write_json(capture / "views.json", {"kind": "lfrefract.synth", "files": {"image": "views.exr"}})
-    with pytest.raises(FileExistsError, match=r"holds a views\.json of kind 'lfrefract\.synth'.*refusing"):
+    with pytest.raises(FileExistsError, match=r"is not an lfrefract output.*refusing"):
         write_view_stack(capture, rgb_stack, overwrite=True)
     assert sorted(p.name for p in capture.iterdir()) == ["raw.exr", "views.json"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cap"]

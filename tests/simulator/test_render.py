@@ -215,5 +215,5 @@ def test_corrupt_user_mesh_is_a_clear_error(tmp_path):
 def test_cli_never_replaces_a_foreign_directory(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert cli.main(["render", "white", "--out", str(tmp_path), "--overwrite", "--quiet"]) == 2
-    assert "holds no lfrefract meta.json" in capsys.readouterr().err
+    assert "is not an lfrefract output" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]

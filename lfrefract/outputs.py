@@ -1,0 +1,495 @@
+"""Where commands write, and what ``--overwrite`` may replace: the project's data-safety rules.
+
+Every file the project writes goes through :func:`atomic_file` (a unique temporary name beside
+the destination, renamed into place when complete, removed on failure). Every output directory
+goes through :func:`staged_directory`: it is assembled in a hidden staging directory beside its
+destination and renamed into place only when complete, and it ends with a manifest,
+``.lfrefract-output.json``, naming its kind and every file and folder in it with its size.
+
+The rules (``docs/conventions.md``, "Outputs and --overwrite"):
+
+* a command refuses an existing output unless told to overwrite it;
+* ``overwrite`` replaces a directory only if its manifest says it is an output of the same kind
+  and it holds nothing but the files the manifest lists, each of the size it was written with
+  (a file added, a file edited, a folder of anything else: refused, with the path in the way);
+* ``overwrite`` replaces a single file only if it is the same kind of output (the role in an
+  EXR header, the ``kind`` of a JSON sidecar, or a companion listed in such a sidecar);
+* no command writes over one of its inputs, nor replaces a directory that holds one, nor uses
+  the current directory (or one of its parents) as an output directory;
+* staging directories left by a killed process (no live process holds their lock) are removed
+  by the next output into the same parent; an earlier output moved aside for replacement is put
+  back if the new one never took its place.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import shutil
+import stat
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = [
+    "MANIFEST_NAME",
+    "ExpectedKind",
+    "atomic_file",
+    "current_umask",
+    "output_manifest",
+    "prepare_output_files",
+    "refuse_own_inputs",
+    "remove_stale_staging",
+    "staged_directory",
+]
+
+#: Name of the manifest that :func:`staged_directory` writes into every output directory.
+MANIFEST_NAME = ".lfrefract-output.json"
+
+_MANIFEST_SCHEMA = 1
+_STAGING_MARKER = ".lfrefract-staging"
+_STAGE_SUFFIX = ".partial"
+_ASIDE_SUFFIX = ".old.partial"
+_MAX_LISTED = 5  # paths named in a refusal; the rest are counted
+
+
+# =============================================================================== files
+def current_umask() -> int:
+    """The process's file-mode creation mask, read without changing it (Linux), else by setting it back."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _apply_umask(path: Path, *, directory: bool) -> None:
+    """Give a file or directory made by mkstemp / mkdtemp (0600 / 0700) the mode that ``open`` or
+    ``mkdir`` would have given it under the user's umask (0666 / 0777 less the mask)."""
+    os.chmod(path, (0o777 if directory else 0o666) & ~current_umask())
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Write one file atomically: the project's single writer of files.
+
+    Yields a temporary path beside ``path`` with a unique name (``.<name>.<random>.tmp``, so
+    writers running at once never share one). When the block ends without an exception the file
+    gets the mode the user's umask gives new files and is renamed over ``path``; on any exception
+    (KeyboardInterrupt too) it is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination file; its directory is created if needed.
+
+    Raises
+    ------
+    IsADirectoryError
+        If ``path`` is an existing directory (before anything is written).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"output file {str(path)!r} is an existing directory")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        _apply_umask(tmp, directory=False)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# =============================================================================== inputs
+def _resolved(path: str | os.PathLike) -> Path:
+    return Path(os.path.abspath(Path(path).expanduser())).resolve()
+
+
+def refuse_own_inputs(outputs: Iterable[str | os.PathLike], inputs: Iterable[str | os.PathLike]) -> None:
+    """Refuse outputs that are one of the inputs, or directories that hold one.
+
+    Parameters
+    ----------
+    outputs : iterable of path-like
+        Files or directories about to be written (or replaced).
+    inputs : iterable of path-like
+        Files the command reads (paths that do not exist are ignored).
+
+    Raises
+    ------
+    FileExistsError
+        Naming the output and the input it would destroy.
+    """
+    sources = [(str(p), _resolved(p)) for p in inputs if Path(p).exists()]
+    for out in outputs:
+        target = _resolved(out)
+        for given, source in sources:
+            if source == target or target in source.parents:
+                what = "is" if source == target else "holds"
+                raise FileExistsError(
+                    f"output {str(out)!r} {what} the command's own input {given!r}: refusing to write over it"
+                )
+
+
+def _refuse_working_directory(out: Path, given: str | os.PathLike) -> None:
+    cwd = Path.cwd().resolve()
+    if out == cwd or out in cwd.parents:
+        raise FileExistsError(
+            f"output directory {str(given)!r} is the current directory or one of its parents: name a folder "
+            "inside it (an output directory is replaced as a whole)"
+        )
+    if not out.name:
+        raise FileExistsError(f"output directory {str(given)!r} is a filesystem root")
+
+
+# =============================================================================== single files
+@dataclass(frozen=True)
+class ExpectedKind:
+    """What an existing file must be for ``overwrite`` to replace it.
+
+    Exactly one of the fields is set: ``exr_role`` (an EXR whose header role is this),
+    ``json_kind`` (a JSON sidecar whose ``kind`` is this), or ``listed_in`` (a companion named in
+    the ``files`` of the JSON sidecar at that path, itself of kind ``listed_kind``).
+    """
+
+    exr_role: str | None = None
+    json_kind: str | None = None
+    listed_in: Path | None = None
+    listed_kind: str | None = None
+
+    def __post_init__(self) -> None:
+        given = [x is not None for x in (self.exr_role, self.json_kind, self.listed_in)]
+        if sum(given) != 1 or (self.listed_in is not None) != (self.listed_kind is not None):
+            raise ValueError(f"ExpectedKind needs exactly one of exr_role, json_kind, listed_in(+kind): {self!r}")
+
+    def describe(self) -> str:
+        if self.exr_role is not None:
+            return f"an EXR image of role {self.exr_role!r}"
+        if self.json_kind is not None:
+            return f"a JSON sidecar of kind {self.json_kind!r}"
+        return f"a file listed in the {self.listed_kind!r} sidecar {str(self.listed_in)!r}"
+
+
+def _json_object(path: Path) -> dict | None:
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _exr_role(path: Path) -> str | None:
+    import OpenEXR
+
+    try:
+        with path.open("rb") as fh:
+            if fh.read(4) != b"\x76\x2f\x31\x01":
+                return None
+        with OpenEXR.File(str(path), header_only=True) as exr:
+            role = exr.header().get("lfrefract_role")
+    except (OSError, RuntimeError, ValueError, TypeError):
+        return None
+    return role if isinstance(role, str) else None
+
+
+def _is_kind(path: Path, expected: ExpectedKind) -> bool:
+    if expected.exr_role is not None:
+        return _exr_role(path) == expected.exr_role
+    if expected.json_kind is not None:
+        data = _json_object(path)
+        return data is not None and data.get("kind") == expected.json_kind
+    sidecar = _json_object(Path(expected.listed_in))
+    if sidecar is None or sidecar.get("kind") != expected.listed_kind:
+        return False
+    files = sidecar.get("files")
+    return isinstance(files, dict) and path.name in [v for v in files.values() if isinstance(v, str)]
+
+
+def prepare_output_files(
+    outputs: Mapping[str | os.PathLike, ExpectedKind],
+    *,
+    inputs: Iterable[str | os.PathLike] = (),
+    overwrite: bool = False,
+) -> None:
+    """Check, before anything is written, that a command may write these files.
+
+    Parameters
+    ----------
+    outputs : mapping of path-like to ExpectedKind
+        Every file the command will write, with what an existing one must be to be replaced.
+    inputs : iterable of path-like
+        Every file the command reads: none may be an output.
+    overwrite : bool
+        Replace existing outputs of the expected kinds (without it, any existing output is refused).
+
+    Raises
+    ------
+    FileExistsError
+        If an output is an input, is a directory, or exists and may not be replaced; the message
+        names the path and what is in the way.
+    """
+    paths = {Path(p): kind for p, kind in outputs.items()}
+    resolved = [_resolved(p) for p in paths]
+    if len(set(resolved)) != len(resolved):
+        raise FileExistsError(f"two outputs are the same file: {sorted(str(p) for p in paths)}")
+    refuse_own_inputs(paths, inputs)
+    for path, expected in paths.items():
+        if path.is_dir():
+            raise FileExistsError(f"output file {str(path)!r} is an existing directory")
+        if not (path.exists() or path.is_symlink()):
+            continue
+        if not overwrite:
+            raise FileExistsError(f"output {str(path)!r} exists (pass --overwrite to replace an earlier output)")
+        if path.is_symlink() or not path.is_file():
+            raise FileExistsError(f"output {str(path)!r} is not a regular file: refusing to replace it")
+        if not _is_kind(path, expected):
+            raise FileExistsError(
+                f"output {str(path)!r} exists and is not {expected.describe()}: refusing to replace it"
+            )
+
+
+# =============================================================================== directories
+def output_manifest(directory: str | os.PathLike) -> dict | None:
+    """The manifest of an output directory written by :func:`staged_directory`, or None.
+
+    Returns
+    -------
+    dict or None
+        ``{"kind": str, "files": {relative POSIX path: bytes}, "directories": [relative path]}``,
+        or None if the directory holds no readable manifest.
+    """
+    data = _json_object(Path(directory) / MANIFEST_NAME)
+    if data is None or data.get("schema_version") != _MANIFEST_SCHEMA:
+        return None
+    kind, files, dirs = data.get("kind"), data.get("files"), data.get("directories")
+    if not (isinstance(kind, str) and isinstance(files, dict) and isinstance(dirs, list)):
+        return None
+    if not all(isinstance(k, str) and isinstance(v, int) for k, v in files.items()):
+        return None
+    return {"kind": kind, "files": files, "directories": [d for d in dirs if isinstance(d, str)]}
+
+
+def _walk(directory: Path) -> tuple[dict[str, os.stat_result], list[str]]:
+    """Every non-directory entry (relative POSIX path -> lstat) and every folder under ``directory``."""
+    entries, folders = {}, []
+    for root, dirnames, filenames in os.walk(directory):
+        base = Path(root)
+        for name in dirnames:
+            full = base / name
+            rel = full.relative_to(directory).as_posix()
+            if full.is_symlink():  # os.walk does not descend into it; it is an entry, not a folder
+                entries[rel] = full.lstat()
+            else:
+                folders.append(rel)
+        for name in filenames:
+            full = base / name
+            entries[full.relative_to(directory).as_posix()] = full.lstat()
+    return entries, sorted(folders)
+
+
+def _write_manifest(stage: Path, kind: str) -> None:
+    entries, folders = _walk(stage)
+    entries.pop(MANIFEST_NAME, None)
+    manifest = {
+        "schema_version": _MANIFEST_SCHEMA,
+        "kind": kind,
+        "note": "the files of this lfrefract output: --overwrite replaces it only while it holds just these",
+        "files": {rel: st.st_size for rel, st in sorted(entries.items())},
+        "directories": folders,
+    }
+    with atomic_file(stage / MANIFEST_NAME) as tmp:
+        tmp.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+
+
+def _refuse_replacing(out: Path, kind: str) -> None:
+    """Raise unless ``out`` is an output of ``kind`` holding only the files its manifest lists."""
+    manifest = output_manifest(out)
+    if manifest is None:
+        raise FileExistsError(
+            f"output directory {str(out)!r} is not empty and is not an lfrefract output (no readable {MANIFEST_NAME}): "
+            "refusing to replace it"
+        )
+    if manifest["kind"] != kind:
+        raise FileExistsError(
+            f"output directory {str(out)!r} holds an output of kind {manifest['kind']!r}, not {kind!r}: "
+            "refusing to replace it"
+        )
+    entries, folders = _walk(out)
+    listed, listed_dirs = manifest["files"], set(manifest["directories"])
+    problems = [f"{rel!r} (a folder it did not make)" for rel in folders if rel not in listed_dirs]
+    for rel, st in sorted(entries.items()):
+        if rel == MANIFEST_NAME:
+            continue
+        if rel not in listed:
+            problems.append(f"{rel!r} (not written by it)")
+        elif not stat.S_ISREG(st.st_mode):
+            problems.append(f"{rel!r} (no longer a regular file)")
+        elif st.st_size != listed[rel]:
+            problems.append(f"{rel!r} (changed: {st.st_size} bytes, written as {listed[rel]})")
+    if problems:
+        shown = ", ".join(problems[:_MAX_LISTED])
+        more = f" and {len(problems) - _MAX_LISTED} more" if len(problems) > _MAX_LISTED else ""
+        raise FileExistsError(
+            f"output directory {str(out)!r} is an earlier {kind} output but holds what it did not write: "
+            f"{shown}{more}; refusing to replace it"
+        )
+
+
+def _try_lock(path: Path) -> int | None:
+    """An open descriptor of ``path`` holding an exclusive flock, or None if another process holds one."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def remove_stale_staging(parent: str | os.PathLike) -> list[Path]:
+    """Remove what killed writers left in ``parent``; put back earlier outputs they had moved aside.
+
+    A staging directory (``.<name>.<random>.partial`` holding the staging marker) that no live
+    process holds locked is deleted. An earlier output moved aside for replacement
+    (``.<name>.<random>.old.partial`` holding an output manifest) is renamed back to ``<name>``
+    if nothing has taken that name, else deleted (the new output is in place). Nothing else is
+    touched.
+
+    Returns
+    -------
+    list of Path
+        What was removed or put back.
+    """
+    parent = Path(parent)
+    done: list[Path] = []
+    try:
+        candidates = sorted(p for p in parent.iterdir() if p.name.startswith(".") and p.name.endswith(_STAGE_SUFFIX))
+    except OSError:
+        return done
+    for path in candidates:
+        if path.is_symlink() or not path.is_dir():
+            continue
+        aside = path.name.endswith(_ASIDE_SUFFIX)
+        if not (path / (MANIFEST_NAME if aside else _STAGING_MARKER)).is_file():
+            continue
+        fd = _try_lock(path)
+        if fd is None:
+            continue  # a live writer holds it
+        try:
+            original = parent / path.name[1 : -len(_ASIDE_SUFFIX)].rsplit(".", 1)[0] if aside else None
+            if original is not None and original.name and not (original.exists() or original.is_symlink()):
+                os.replace(path, original)
+            else:
+                shutil.rmtree(path)
+            done.append(path)
+        except OSError:
+            pass  # left for a later run; never fatal to this one
+        finally:
+            os.close(fd)
+    return done
+
+
+@contextlib.contextmanager
+def staged_directory(
+    out_dir: str | os.PathLike,
+    *,
+    kind: str,
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
+) -> Iterator[Path]:
+    """Assemble an output directory atomically, and replace only what may be replaced.
+
+    Yields a fresh staging directory beside ``out_dir`` (held under an flock while the block
+    runs). When the block finishes without an exception, the manifest (``MANIFEST_NAME``: the
+    kind, every file with its size, every folder) is written into it and it takes the place of
+    ``out_dir``; on any exception it is deleted and ``out_dir`` is left as it was. An earlier
+    output being replaced is first renamed aside and deleted only after the new one is in place.
+    Stale staging directories of killed writers in the same parent are removed first
+    (:func:`remove_stale_staging`). Directories get the mode the user's umask gives.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The directory to create or replace (resolved first: ``.`` or a parent of the current
+        directory is refused).
+    kind : str
+        What the output is (``"lfsim.render"``, ``"lfrefract.view_stack"``, ...).
+    overwrite : bool
+        Replace an earlier output of the same ``kind`` that holds only the files its manifest lists.
+    inputs : iterable of path-like
+        Files the command reads: ``out_dir`` may not be one of them nor hold one.
+
+    Raises
+    ------
+    FileExistsError
+        If ``out_dir`` is a file, the current directory, holds an input, or is not empty and may
+        not be replaced (the message names the path and what is in the way).
+    """
+    if not isinstance(kind, str) or not kind:
+        raise ValueError(f"kind must be a non-empty string, got {kind!r}")
+    out = _resolved(out_dir)
+    _refuse_working_directory(out, out_dir)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"output {str(out_dir)!r} exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()):
+        if not overwrite:
+            raise FileExistsError(
+                f"output directory {str(out_dir)!r} is not empty (pass --overwrite to replace an earlier {kind} output)"
+            )
+        refuse_own_inputs([out], inputs)
+        _refuse_replacing(out, kind)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_staging(out.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=_STAGE_SUFFIX, dir=out.parent))
+    lock = _try_lock(stage)
+    try:
+        (stage / _STAGING_MARKER).touch()
+        yield stage
+        (stage / _STAGING_MARKER).unlink()
+        _write_manifest(stage, kind)
+        _apply_umask(stage, directory=True)
+        _commit(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    finally:
+        if lock is not None:
+            os.close(lock)
+
+
+def _commit(stage: Path, out: Path) -> None:
+    """Put ``stage`` in the place of ``out``; an earlier ``out`` is moved aside and deleted only
+    after the new one is in place (at no moment is neither on disk; a failed rename puts it back)."""
+    if not out.exists():
+        os.replace(stage, out)
+        return
+    if not any(out.iterdir()):
+        os.replace(stage, out)  # an empty directory: rename replaces it
+        return
+    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=_ASIDE_SUFFIX, dir=out.parent))
+    os.replace(out, aside)
+    aside_lock = _try_lock(aside)
+    try:
+        try:
+            os.replace(stage, out)
+        except BaseException:
+            os.replace(aside, out)
+            raise
+        shutil.rmtree(aside, ignore_errors=True)
+    finally:
+        if aside_lock is not None:
+            os.close(aside_lock)
