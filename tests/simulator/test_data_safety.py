@@ -1,0 +1,143 @@
+"""Data safety of the simulator's commands, on real folders through the real CLIs (issue 12):
+--overwrite replaces only an earlier output of the same kind holding nothing but its own files,
+``--out .`` is refused, and failed writes end in one line with the earlier output kept."""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+from lfrefract import cli as core_cli
+from lfrefract.outputs import MANIFEST_NAME
+from simulator import cli
+
+pytestmark = pytest.mark.render
+
+QUICK = ["--spp", "1", "--quiet", "--no-previews"]
+
+
+def tree(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` with its content (hidden ones too)."""
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory):
+    """A real render (the white scene) and a real rig output, rendered once at 1 spp."""
+    base = tmp_path_factory.mktemp("outputs")
+    assert cli.main(["render", "white", "--out", str(base / "render"), *QUICK]) == 0
+    assert cli.main(["rig", "--out", str(base / "rig"), *QUICK]) == 0
+    return base
+
+
+def thesis_folder(root: Path) -> Path:
+    home = root / "H"
+    (home / "Documents").mkdir(parents=True)
+    (home / "Documents" / "thesis.tex").write_text("t")
+    return home
+
+
+def refused(capsys, argv: list[str], *, main=cli.main) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    return err
+
+
+def test_render_overwrite_keeps_a_home_folder_with_a_copied_meta_json(tmp_path, outputs, capsys):
+    home = thesis_folder(tmp_path)
+    shutil.copy(outputs / "render" / "meta.json", home / "meta.json")
+    before = tree(home)
+    err = refused(capsys, ["render", "white", "--out", str(home), "--overwrite", *QUICK])
+    assert "is not an lfrefract output" in err
+    # Even with the manifest copied as well, the thesis is a file the render did not write.
+    shutil.copy(outputs / "render" / MANIFEST_NAME, home / MANIFEST_NAME)
+    err = refused(capsys, ["render", "white", "--out", str(home), "--overwrite", *QUICK])
+    assert "'Documents' (a folder it did not make)" in err
+    assert (home / "Documents" / "thesis.tex").read_text() == "t"
+    assert {k: v for k, v in tree(home).items() if k != MANIFEST_NAME} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["H"]
+
+
+def test_a_calibration_written_as_meta_json_does_not_make_a_folder_replaceable(tmp_path, outputs, capsys):
+    home = thesis_folder(tmp_path)
+    white = outputs / "render" / "raw.exr"
+    assert core_cli.main(["calibrate", "mla", str(white), "--out", str(home / "meta.json")]) == 0
+    capsys.readouterr()
+    before = tree(home)
+    refused(capsys, ["render", "white", "--out", str(home), "--overwrite", *QUICK])
+    assert tree(home) == before
+
+
+def test_outputs_of_other_kinds_are_never_replaced(tmp_path, outputs, capsys):
+    render, rig = tmp_path / "render", tmp_path / "rig"
+    shutil.copytree(outputs / "render", render)
+    shutil.copytree(outputs / "rig", rig)
+    before = {"render": tree(render), "rig": tree(rig)}
+    err = refused(capsys, ["render", "white", "--out", str(rig), "--overwrite", *QUICK])
+    assert "holds an output of kind 'lfsim.rig', not 'lfsim.render'" in err
+    err = refused(capsys, ["rig", "--out", str(render), "--overwrite", *QUICK])
+    assert "holds an output of kind 'lfsim.render', not 'lfsim.rig'" in err
+    err = refused(capsys, ["experiment", "fov", "--out", str(render), "--overwrite", "--quiet"])
+    assert "not 'lfsim.experiment.fov'" in err
+    err = refused(capsys, ["demo", "--out", str(rig), "--overwrite", "--quiet"])
+    assert "not 'lfsim.demo'" in err
+    assert {"render": tree(render), "rig": tree(rig)} == before
+
+
+def test_the_demo_refuses_an_existing_output_unless_told(tmp_path, capsys):
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "report.md").write_text("my notes")
+    err = refused(capsys, ["demo", "--out", str(out), "--quiet"])
+    assert "is not empty (pass --overwrite" in err
+    refused(capsys, ["demo", "--out", str(out), "--quiet", "--overwrite"])
+    assert (out / "report.md").read_text() == "my notes"
+
+
+def test_render_overwrite_replaces_its_own_earlier_output(tmp_path, outputs, capsys):
+    out = tmp_path / "render"
+    shutil.copytree(outputs / "render", out)
+    refused(capsys, ["render", "white", "--out", str(out), *QUICK])
+    assert cli.main(["render", "white", "--out", str(out), "--overwrite", "--seed", "7", *QUICK]) == 0
+    assert '"seed": 7' in (out / "meta.json").read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["render"]
+
+
+def test_out_dot_is_refused_before_rendering(tmp_path, monkeypatch, capsys):
+    """``--out .`` used to render in full, then crash with EBUSY leaving two hidden folders."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "scene-notes.txt").write_text("mine")
+    for out in (".", "./", str(tmp_path)):
+        err = refused(capsys, ["render", "white", "--out", out, "--overwrite", *QUICK])
+        assert "is the current directory or one of its parents" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene-notes.txt"]
+
+
+def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, outputs, monkeypatch, capsys):
+    out = tmp_path / "render"
+    shutil.copytree(outputs / "render", out)
+    before = tree(out)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    err = refused(capsys, ["render", "white", "--out", str(blocker / "sub"), *QUICK])
+    assert "a-file" in err
+    real_replace = os.replace
+
+    def disk_full(src, dst):
+        if Path(dst) == out and not Path(src).name.endswith(".old.partial"):  # the new output's rename
+            raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", disk_full)
+    err = refused(capsys, ["render", "white", "--out", str(out), "--overwrite", *QUICK])
+    assert "No space left on device" in err
+    assert str(out) in err
+    monkeypatch.setattr(os, "replace", real_replace)
+    assert tree(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "render"]
