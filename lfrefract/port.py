@@ -15,7 +15,13 @@ Port geometry, in the camera frame (metres):
   ``t = 0`` is a single air/water interface.
 
 Refraction follows Snell's law in vector form. Total internal reflection (TIR) and rays that
-never reach the port are reported in masks, never dropped.
+never reach the port are reported in masks, never dropped. A ray that meets a face it must cross
+at a cosine below :data:`GRAZING_COS_MIN` counts as never reaching it (see there): no ray whose
+mask says valid carries a NaN or infinite point or direction.
+
+Accepted parameter ranges (anything else is a :class:`~lfrefract._validate.ParameterError`):
+refractive indices in [:data:`N_MIN`, :data:`N_MAX`], distance in (0, :data:`MAX_DISTANCE_M`],
+thickness in [0, :data:`MAX_THICKNESS_M`], each tilt angle in (-pi/2, pi/2) with ``n_z > 0``.
 """
 
 from __future__ import annotations
@@ -36,7 +42,60 @@ from lfrefract._validate import (
     require_keys,
 )
 
-__all__ = ["FlatPort", "PortTrace", "fresnel_transmittance", "refract"]
+__all__ = [
+    "GRAZING_COS_MIN",
+    "MAX_DISTANCE_M",
+    "MAX_THICKNESS_M",
+    "N_MAX",
+    "N_MIN",
+    "FlatPort",
+    "PortTrace",
+    "fresnel_transmittance",
+    "refract",
+]
+
+#: Smallest and largest refractive index accepted (absolute, i.e. relative to vacuum; air is
+#: 1.0003, so indices relative to air are the same to 3e-4). Every transparent medium has a phase
+#: index of at least 1 at optical wavelengths; the largest of real window and immersion media are
+#: diamond 2.42, rutile 2.9 and, in the infrared, silicon 3.4 and germanium 4.0. Five leaves a
+#: margin above all of them while keeping every index ratio within [0.2, 5], so the squares and
+#: products of the Snell and Fresnel terms stay within a factor 25 of 1 (an index of 1e300
+#: overflowed them). Below 1 a medium would be faster than light in vacuum: a typo (0.133 for
+#: 1.33) or an index relative to another medium, which this model does not take.
+N_MIN = 1.0
+N_MAX = 5.0
+
+#: Largest perpendicular distance from the main-lens centre to the air-side face, metres. A
+#: camera housing's port is millimetres to centimetres away, a camera behind an aquarium wall a
+#: few metres; 100 m is beyond any window one looks through and keeps every hit point of a trace
+#: (distance / cos, cos >= GRAZING_COS_MIN) below 1e8 m, far inside float64 and float32 range.
+MAX_DISTANCE_M = 100.0
+
+#: Largest glass thickness, metres. Port glass is millimetres thick; the thickest windows built
+#: (acrylic aquarium panels) are under 0.8 m.
+MAX_THICKNESS_M = 1.0
+
+#: Smallest cosine between a ray and the normal of a face it must cross for the ray to count as
+#: reaching it. The hit distance ``h / cos`` (``h`` the gap to the face) is computed from a cosine
+#: that carries an absolute round-off of a few 1e-16 (a dot product of unit vectors), i.e. a
+#: relative error of about ``1e-16 / cos`` in the hit distance and in the hit point's position
+#: along the face: at 1e-6 that is ~1e-10, so every valid ray's points are good to about 1e-10 of
+#: their distance, while rays closer to grazing are not (at cos = 1e-10 the old trace gave
+#: infinite exit points: the refracted cosine rounded to 0). Physically such rays carry nothing
+#: (the Fresnel transmittance vanishes linearly in cos: below 1e-5 at cos = 1e-6) and would cross
+#: a 5 cm gap 50 km from where they started. Rays refracted into the glass within
+#: ``GRAZING_COS_MIN**2 / 2`` (5e-13) of the critical sine are caught by it at the second face.
+GRAZING_COS_MIN = 1e-6
+
+
+def _index(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise unless it is a refractive index in [N_MIN, N_MAX]."""
+    out = finite_float(name, value)
+    if not N_MIN <= out <= N_MAX:
+        raise ParameterError(
+            f"{name}={value!r} is not the refractive index of a real medium (accepted: {N_MIN} to {N_MAX})"
+        )
+    return out
 
 
 def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: float) -> tuple[np.ndarray, np.ndarray]:
@@ -49,7 +108,7 @@ def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: fl
     normals : ndarray, shape (3,) or (N, 3)
         Unit interface normals oriented along the travel, ``normals . directions >= 0``.
     n_from, n_to : float
-        Refractive indices before and after the interface.
+        Refractive indices before and after the interface, in [:data:`N_MIN`, :data:`N_MAX`].
 
     Returns
     -------
@@ -57,7 +116,14 @@ def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: fl
         Unit refracted directions; NaN where TIR occurs.
     tir : ndarray of bool, shape (N,)
         True where the ray is totally internally reflected.
+
+    Raises
+    ------
+    ParameterError
+        For an index outside the accepted range or a direction against the normal.
     """
+    n_from = _index("n_from", n_from)
+    n_to = _index("n_to", n_to)
     d = np.asarray(directions, dtype=np.float64)
     nrm = np.broadcast_to(np.asarray(normals, dtype=np.float64), d.shape)
     cos_i = np.sum(d * nrm, axis=1)
@@ -68,24 +134,62 @@ def refract(directions: np.ndarray, normals: np.ndarray, n_from: float, n_to: fl
     return _refract(d, nrm, cos_i, n_from / n_to)
 
 
+def _cos2_transmitted(cos_i: np.ndarray, eta: float) -> np.ndarray:
+    """``cos^2`` of the refraction angle, ``1 - eta^2 (1 - cos_i^2)``, negative under TIR.
+
+    Written as ``(1 - eta)(1 + eta) + (eta cos_i)^2`` so that it keeps its relative precision
+    near grazing incidence: the textbook form loses ``cos_i^2`` against 1 (at ``eta = 1`` and
+    ``cos_i = 1e-10`` it gave exactly 0, a refracted ray along the face).
+    """
+    return (1.0 - eta) * (1.0 + eta) + (eta * cos_i) ** 2
+
+
 def _refract(d: np.ndarray, nrm: np.ndarray, cos_i: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
     """Snell's law for unit ``d`` (N, 3), normals ``nrm`` along the travel, ``eta = n_from / n_to``."""
-    sin2_t = eta**2 * np.maximum(0.0, 1.0 - cos_i**2)
-    tir = sin2_t > 1.0
-    cos_t = np.sqrt(np.where(tir, np.nan, 1.0 - sin2_t))
+    cos2_t = _cos2_transmitted(cos_i, eta)
+    tir = cos2_t < 0.0
+    cos_t = np.sqrt(np.where(tir, np.nan, cos2_t))
     out = eta * d + (cos_t - eta * cos_i)[:, None] * nrm
     return out, tir
 
 
 def fresnel_transmittance(cos_i: np.ndarray, n_from: float, n_to: float) -> np.ndarray:
-    """Unpolarised Fresnel power transmittance at a smooth interface, shape (N,); 0 under TIR."""
-    cos_i = np.abs(np.asarray(cos_i, dtype=np.float64))
+    """Unpolarised Fresnel power transmittance at a smooth interface; 0 under TIR.
+
+    Parameters
+    ----------
+    cos_i : array_like, shape (N,)
+        Cosines of the angle of incidence (the sign is ignored), in [-1, 1].
+    n_from, n_to : float
+        Refractive indices before and after the interface, in [:data:`N_MIN`, :data:`N_MAX`].
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Transmitted fraction of the power, in [0, 1].
+
+    Raises
+    ------
+    ParameterError
+        For an index outside the accepted range or a cosine that is not finite or beyond 1.
+    """
+    n_from = _index("n_from", n_from)
+    n_to = _index("n_to", n_to)
+    cos_i = np.asarray(cos_i, dtype=np.float64)
+    bad = ~(np.abs(cos_i) <= 1.0 + 1e-12)  # round-off of a dot product of unit vectors; catches NaN
+    if np.any(bad):
+        raise ParameterError(f"cos_i must be finite cosines in [-1, 1], got {float(cos_i[bad].ravel()[0])!r}")
+    return _fresnel(cos_i, n_from, n_to)
+
+
+def _fresnel(cos_i: np.ndarray, n_from: float, n_to: float) -> np.ndarray:
+    """:func:`fresnel_transmittance` without the checks (NaN in, NaN out)."""
+    cos_i = np.minimum(np.abs(cos_i), 1.0)
     if n_from == n_to:
         return np.ones_like(cos_i)
-    eta = n_from / n_to
-    sin2_t = eta**2 * (1.0 - cos_i**2)
-    ok = sin2_t <= 1.0
-    cos_t = np.sqrt(np.where(ok, 1.0 - sin2_t, 0.0))
+    cos2_t = _cos2_transmitted(cos_i, n_from / n_to)
+    ok = cos2_t >= 0.0
+    cos_t = np.sqrt(np.where(ok, cos2_t, 0.0))
     rs = ((n_from * cos_i - n_to * cos_t) / (n_from * cos_i + n_to * cos_t)) ** 2
     rp = ((n_from * cos_t - n_to * cos_i) / (n_from * cos_t + n_to * cos_i)) ** 2
     return np.where(ok, 1.0 - 0.5 * (rs + rp), 0.0)
@@ -106,11 +210,16 @@ class PortTrace:
     transmittance : ndarray, shape (N,)
         Product of the unpolarised Fresnel transmittances of the faces (0 where invalid).
     misses : ndarray of bool, shape (N,)
-        The ray travels parallel to or away from the port and never reaches it.
+        The ray never reaches a face it must cross: it starts past the first face, travels
+        parallel to or away from a face, or meets it at a cosine below :data:`GRAZING_COS_MIN`
+        (including a ray refracted into the glass so close to the critical angle that it runs
+        along the face), or its points overflow float64 (origins of ~1e300 m).
     tir : ndarray of bool, shape (N,)
-        The ray is totally internally reflected at some face.
+        The ray is totally internally reflected at some face (and reached it: ``misses`` and
+        ``tir`` are disjoint).
 
-    Invalid rays (``misses | tir``) have NaN points and directions.
+    Invalid rays (``misses | tir``) have NaN points and directions and zero transmittance;
+    valid rays have finite ones.
     """
 
     entry_points_cam: np.ndarray
@@ -133,19 +242,23 @@ class FlatPort:
     Parameters
     ----------
     distance_m : float
-        Perpendicular distance d from the main-lens centre to the air-side face, metres (> 0).
+        Perpendicular distance d from the main-lens centre to the air-side face, metres,
+        in (0, :data:`MAX_DISTANCE_M`].
     thickness_m : float
-        Glass thickness t, metres (>= 0; 0 is a single air/water interface).
+        Glass thickness t, metres, in [0, :data:`MAX_THICKNESS_M`] (0 is a single air/water
+        interface).
     tilt_x_rad, tilt_y_rad : float
-        Tilt of the normal about the camera x and y axes, radians (see module docstring).
+        Tilt of the normal about the camera x and y axes, radians, each in (-pi/2, pi/2) (see
+        module docstring): every normal with ``n_z > 0`` has exactly one such pair, the one
+        :meth:`from_normal` gives.
     n_air, n_glass, n_water : float
-        Refractive indices (> 0).
+        Refractive indices, in [:data:`N_MIN`, :data:`N_MAX`].
 
     Raises
     ------
     ParameterError
-        For non-finite values, a non-positive distance or index, negative thickness, or a tilt
-        that puts the port behind the camera (``n_z <= 0``).
+        For non-finite or non-numeric values, values outside the ranges above, or a tilt that
+        puts the port behind the camera (``n_z <= 1e-9``).
     """
 
     distance_m: float
@@ -157,18 +270,32 @@ class FlatPort:
     n_water: float = 1.333
 
     def __post_init__(self) -> None:
-        positive_float("port.distance_m", self.distance_m)
-        non_negative_float("port.thickness_m", self.thickness_m)
+        # The one place every constructor (from_degrees, from_normal, from_dict) passes through.
+        distance = positive_float("port.distance_m", self.distance_m)
+        if distance > MAX_DISTANCE_M:
+            raise ParameterError(f"port.distance_m={self.distance_m!r} exceeds {MAX_DISTANCE_M} m")
+        thickness = non_negative_float("port.thickness_m", self.thickness_m)
+        if thickness > MAX_THICKNESS_M:
+            raise ParameterError(f"port.thickness_m={self.thickness_m!r} exceeds {MAX_THICKNESS_M} m")
         finite_float("port.tilt_x_rad", self.tilt_x_rad)
         finite_float("port.tilt_y_rad", self.tilt_y_rad)
         for name in ("n_air", "n_glass", "n_water"):
-            positive_float(f"port.{name}", getattr(self, name))
+            _index(f"port.{name}", getattr(self, name))
         if self.normal[2] <= 1e-9:
             raise ParameterError(
                 f"port tilt (tilt_x_rad={self.tilt_x_rad!r}, tilt_y_rad={self.tilt_y_rad!r}) makes the "
                 f"normal {self.normal.round(6).tolist()} point away from the view: the port would be "
                 "behind the camera"
             )
+        for name in ("tilt_x_rad", "tilt_y_rad"):
+            # Past +-pi/2 the pair is a second name for a normal that has one inside (e.g. (pi, pi)
+            # for the optical axis): refused rather than reduced, so that a sidecar's angles are
+            # the ones from_normal would give.
+            if not abs(getattr(self, name)) < math.pi / 2:
+                raise ParameterError(
+                    f"port.{name}={getattr(self, name)!r} is outside (-pi/2, pi/2); the normal "
+                    f"{self.normal.round(6).tolist()} has tilt angles inside that range"
+                )
 
     @classmethod
     def from_degrees(
@@ -313,6 +440,14 @@ class FlatPort:
         -------
         PortTrace
             ``directions_cam`` are the water-side directions; ``exit_points_cam`` lie on the water face.
+            Rays that do not reach a face (see :attr:`PortTrace.misses`) or are totally internally
+            reflected are flagged and NaN, never dropped; every valid ray's values are finite.
+
+        Raises
+        ------
+        ParameterError
+            For arrays of the wrong shape, non-finite values or directions that are not unit
+            vectors (to 1e-6).
         """
         return self._trace(origins_cam, directions_cam, into_water=True)
 
@@ -330,6 +465,12 @@ class FlatPort:
         -------
         PortTrace
             ``directions_cam`` are the air-side directions; ``exit_points_cam`` lie on the air face.
+            Invalid rays are flagged as for :meth:`trace_from_air`.
+
+        Raises
+        ------
+        ParameterError
+            As :meth:`trace_from_air`.
         """
         return self._trace(points_cam, directions_cam, into_water=False)
 
@@ -347,25 +488,33 @@ class FlatPort:
         n = self.normal
         faces = self.faces if into_water else [(off, b, a) for off, a, b in reversed(self.faces)]
         travel_normal = n if into_water else -n
-        cos0 = d @ travel_normal
-        misses = cos0 <= 0.0
-        # A ray that already lies past the first face also misses it.
+        # A ray that already lies past the first face misses it.
         start = (o @ n) - faces[0][0]
-        misses |= (start > 1e-12) if into_water else (start < -1e-12)
+        misses = ~(start <= 1e-12) if into_water else ~(start >= -1e-12)
         tir = np.zeros(o.shape[0], dtype=bool)
+        alive = ~misses  # rays still travelling; misses and tir stay disjoint
         transmittance = np.ones(o.shape[0])
         point, direction = o.copy(), d.copy()
         entry = None
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             for offset, n_from, n_to in faces:
+                cos_i = direction @ travel_normal
+                # Parallel to the face, away from it, or too close to grazing for the hit to be
+                # determined (GRAZING_COS_MIN): the ray does not reach this face.
+                grazing = alive & ~(cos_i >= GRAZING_COS_MIN)
+                misses |= grazing
+                alive &= ~grazing
                 t = (offset - point @ n) / (direction @ n)
                 point = point + t[:, None] * direction
                 if entry is None:
                     entry = point.copy()
-                cos_i = direction @ travel_normal
-                transmittance *= fresnel_transmittance(cos_i, n_from, n_to)
+                transmittance *= _fresnel(cos_i, n_from, n_to)
                 direction, tir_here = _refract(direction, travel_normal, cos_i, n_from / n_to)
-                tir |= tir_here
+                tir |= alive & tir_here
+                alive &= ~tir_here
+            # Backstop: origins far beyond any port (finite, but ~1e300 m) can still overflow.
+            finite = np.isfinite(np.concatenate([entry, point, direction], axis=1)).all(axis=1)
+            misses |= alive & ~finite
         bad = misses | tir
         for arr in (entry, point, direction):
             arr[bad] = np.nan
@@ -376,5 +525,5 @@ class FlatPort:
             directions_cam=direction,
             transmittance=transmittance,
             misses=misses,
-            tir=tir & ~misses,
+            tir=tir,
         )

@@ -643,3 +643,26 @@ DATASET_TURBID_OVER_CLEAR_MAX = 0.6
 # pixels beyond the rim; 0.47 % measured (tiny), 0.50 % (tiny-2x, f01), every other view 0. A limit at
 # the rim itself (no pixel margin) darkens the corners by half.
 VIEW_STACK_CORNER_DARKENING_MAX = 0.01
+
+# ----------------------------------------------------------------------------- port properties
+# tests/lfrefract/test_port_properties.py and test_port.py (issue 12): random ports and rays,
+# grazing ones included, through lfrefract.port.FlatPort.
+
+# Dimensionless; Snell's tangential invariant n (d - (d . n) n) of unit directions across one or
+# two faces, indices up to N_MAX = 5. Each refraction keeps the tangential part to a few ulps of
+# O(5) values (~1e-15); the glass direction, taken from the trace's entry and exit points, is used
+# only where those points are at least 1e-5 of their own size apart (error < 1e-10). The issue's
+# bound; an index off by 1e-6 or a ray out of the plane of incidence fails it.
+PORT_SNELL_INVARIANT = 1e-9
+
+# Relative to the largest point involved (metres), and absolute for unit directions: a ray traced
+# out and back. Hit distances h / cos come from cosines with an absolute round-off of a few 1e-16,
+# so their relative error is below ~1e-10 for cos >= GRAZING_COS_MIN = 1e-6 (a ray at cos 1e-6
+# travels 1e6 gaps: only relative errors are meaningful). The issue's bound.
+PORT_REVERSAL_RELATIVE = 1e-9
+
+# Relative; band around the critical angle, |n1 sin1 / n2 - 1|, in which the TIR flag is not
+# asserted. Round-off of cos^2 = (1 - eta)(1 + eta) + (eta cos)^2 is ~25 eps = 6e-15 at eta = 5,
+# and rays refracted into the glass within GRAZING_COS_MIN^2 / 2 = 5e-13 of the critical sine run
+# along the face and are flagged misses instead; 1e-11 covers both with a margin of 20.
+PORT_TIR_BAND = 1e-11

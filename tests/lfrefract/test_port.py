@@ -17,12 +17,14 @@ from hypothesis.extra import numpy as hnp
 from scipy.optimize import minimize_scalar
 
 from lfrefract import FlatPort, ParameterError, fresnel_transmittance, refract
+from lfrefract.port import GRAZING_COS_MIN, MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
 from tests.tolerances import (
     FLOAT64_ANGLE_DEG,
     FLOAT64_ANGLE_RAD,
     FLOAT64_GEOMETRY_M,
     FLOAT64_UNIT,
     FRESNEL_NEAR_GRAZING,
+    PORT_REVERSAL_RELATIVE,
     QUOTED_TILT_DEG,
 )
 
@@ -430,7 +432,7 @@ def test_tir_inside_the_glass_from_the_water_side():
         ({"distance_m": float("nan")}, "port.distance_m must be finite, got nan"),
         ({"distance_m": 0.0}, "port.distance_m must be positive, got 0.0"),
         ({"distance_m": -0.05}, "port.distance_m must be positive, got -0.05"),
-        ({"distance_m": 0.05, "n_glass": 0.0}, "port.n_glass must be positive, got 0.0"),
+        ({"distance_m": 0.05, "n_glass": 0.0}, "port.n_glass=0.0 is not the refractive index of a real medium"),
         ({"distance_m": 0.05, "n_water": float("inf")}, "port.n_water must be finite, got inf"),
         ({"distance_m": 0.05, "tilt_x_rad": float("nan")}, "port.tilt_x_rad must be finite, got nan"),
         ({"distance_m": "0.05"}, "port.distance_m must be a real number, got '0.05'"),
@@ -527,3 +529,125 @@ def test_from_dict_reads_to_dict_back():
     # A sidecar whose derived normal disagrees with its tilt angles is refused, not repaired.
     with pytest.raises(ParameterError, match=re.escape("port.normal=[0.0, 0.0, 1.0] disagrees with the tilt angles")):
         FlatPort.from_dict({**data, "normal": [0.0, 0.0, 1.0]})
+
+
+# =============================================================================== hostile input (issue 12)
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"n_glass": 1e300, "thickness_m": 0.01}, "port.n_glass=1e+300 is not the refractive index of a real medium"),
+        ({"n_water": 0.5}, "port.n_water=0.5 is not the refractive index of a real medium"),
+        ({"n_air": 0.999}, "port.n_air=0.999 is not the refractive index of a real medium"),
+        ({"n_glass": 5.01}, "port.n_glass=5.01 is not the refractive index of a real medium"),
+        ({"distance_m": 1e300}, "port.distance_m=1e+300 exceeds 100.0 m"),
+        ({"distance_m": 100.5}, "port.distance_m=100.5 exceeds 100.0 m"),
+        ({"thickness_m": 1e300}, "port.thickness_m=1e+300 exceeds 1.0 m"),
+        ({"thickness_m": 1.5}, "port.thickness_m=1.5 exceeds 1.0 m"),
+        # (pi, pi) is a second name for the optical axis; 1e300 rad is no angle at all.
+        ({"tilt_x_rad": math.pi, "tilt_y_rad": math.pi}, f"port.tilt_x_rad={math.pi!r} is outside (-pi/2, pi/2)"),
+        ({"tilt_x_rad": 0.0, "tilt_y_rad": 2 * math.pi}, f"port.tilt_y_rad={2 * math.pi!r} is outside (-pi/2, pi/2)"),
+    ],
+)
+def test_port_fields_have_physical_ranges(kwargs, pattern):
+    """Issue 12: n_glass = 1e300 reached fresnel_transmittance and raised OverflowError; every
+    numeric field now has a range, enforced by every constructor."""
+    data = {"distance_m": 0.05, **kwargs}
+    with pytest.raises(ParameterError, match=re.escape(pattern)):
+        FlatPort(**data)
+    with pytest.raises(ParameterError, match=re.escape(pattern)):
+        FlatPort.from_dict(data)
+    if "tilt_x_rad" not in kwargs:
+        with pytest.raises(ParameterError, match=re.escape(pattern)):
+            FlatPort.from_degrees(**data)
+        with pytest.raises(ParameterError, match=re.escape(pattern)):
+            FlatPort.from_dict({**data, "tilt_x_deg": 10.0})
+        with pytest.raises(ParameterError, match=re.escape(pattern)):
+            FlatPort.from_normal([0.1, -0.2, 1.0], **data)
+
+
+def test_port_range_limits_are_accepted():
+    for n in (N_MIN, N_MAX):
+        port = FlatPort(distance_m=MAX_DISTANCE_M, thickness_m=MAX_THICKNESS_M, n_air=n, n_glass=n, n_water=n)
+        assert port.trace_from_air(np.zeros(3), port.normal).valid[0]
+    edge = math.pi / 2 - 1e-6
+    assert FlatPort(distance_m=0.05, tilt_x_rad=edge).normal[2] == pytest.approx(1e-6, rel=1e-6)
+    # from_normal's angles always lie inside the range, also for normals close to the face.
+    port = FlatPort.from_normal([-1.0, 0.5, 1e-3], distance_m=0.05)
+    assert abs(port.tilt_x_rad) < math.pi / 2
+    assert abs(port.tilt_y_rad) < math.pi / 2
+
+
+def test_refract_and_fresnel_refuse_impossible_indices_and_cosines():
+    """Issue 12: fresnel_transmittance(cos, 1e300, 1.0) raised OverflowError (eta ** 2)."""
+    d = np.array([[0.0, 0.0, 1.0]])
+    with pytest.raises(ParameterError, match=re.escape("n_from=1e+300 is not the refractive index of a real medium")):
+        fresnel_transmittance(np.array([0.5]), 1e300, 1.0)
+    with pytest.raises(ParameterError, match=re.escape("n_to=0.5 is not the refractive index of a real medium")):
+        fresnel_transmittance(np.array([0.5]), 1.0, 0.5)
+    with pytest.raises(ParameterError, match=re.escape("n_from=1e-300 is not the refractive index")):
+        refract(d, d[0], 1e-300, 1.5)
+    with pytest.raises(ParameterError, match=re.escape("n_to must be finite, got nan")):
+        refract(d, d[0], 1.0, float("nan"))
+    with pytest.raises(ParameterError, match=re.escape("cos_i must be finite cosines in [-1, 1], got nan")):
+        fresnel_transmittance(np.array([0.5, float("nan")]), 1.0, 1.5)
+    with pytest.raises(ParameterError, match=re.escape("cos_i must be finite cosines in [-1, 1], got 2.0")):
+        fresnel_transmittance(np.array([2.0]), 1.0, 1.5)
+
+
+@pytest.mark.parametrize("cos", [0.0, 1e-300, 1e-10, 9.9e-7])
+def test_grazing_rays_are_misses_not_nan(cos):
+    """Issue 12: a ray at cos 1e-10 to the normal was valid with an infinite exit point (the
+    refracted cosine rounded to 0, so the ray ran along the glass). Below GRAZING_COS_MIN a ray
+    does not reach the face; from either side."""
+    port = FlatPort(distance_m=0.02, thickness_m=0.006, n_air=1.0, n_glass=1.0, n_water=1.0)
+    sin = math.sqrt(1.0 - cos * cos)
+    fwd = port.trace_from_air([[0.0, 0.0, 0.0]], [[0.0, sin, cos]])
+    back = port.trace_from_water([[0.0, 0.0, 0.5]], [[0.0, sin, -cos]])
+    for tr in (fwd, back):
+        np.testing.assert_array_equal(tr.misses, [True])
+        np.testing.assert_array_equal(tr.valid, [False])
+        assert np.all(np.isnan(tr.exit_points_cam))
+        assert np.all(np.isnan(tr.directions_cam))
+        assert tr.transmittance[0] == 0.0
+
+
+def test_the_exact_grazing_repro_of_issue_12():
+    port = FlatPort(distance_m=0.02, thickness_m=0.006, n_air=1, n_glass=1, n_water=1)
+    tr = port.trace_from_air([[0, 0, 0]], [[0, 1, 1e-10]])
+    assert not tr.valid[0]
+    assert tr.misses[0]
+
+
+def test_rays_just_above_grazing_stay_valid_and_exact():
+    """cos = 1e-5 and 1.0001e-6: valid, and with equal indices on the straight line to 1e-9 of
+    the distance travelled (GRAZING_COS_MIN's precision argument)."""
+    port = FlatPort(distance_m=0.02, thickness_m=0.006, n_air=1.0, n_glass=1.0, n_water=1.0)
+    cos = np.array([1e-5, 1.0001 * GRAZING_COS_MIN])
+    d = np.stack([np.zeros(2), np.sqrt(1.0 - cos**2), cos], axis=1)
+    tr = port.trace_from_air(np.zeros((2, 3)), d)
+    assert tr.valid.all()
+    np.testing.assert_allclose(tr.directions_cam, d, rtol=0, atol=FLOAT64_UNIT)
+    reach = np.linalg.norm(tr.exit_points_cam, axis=1)
+    np.testing.assert_allclose(reach, 0.026 / cos, rtol=PORT_REVERSAL_RELATIVE)
+    assert np.all(distance_point_to_line(tr.exit_points_cam, np.zeros(3), d) <= PORT_REVERSAL_RELATIVE * reach)
+
+
+def test_refraction_into_the_glass_at_the_critical_angle_is_flagged():
+    """Dense air into light glass exactly at the critical sine: the refracted ray runs along the
+    face and never reaches the water face (it was valid with an infinite exit point)."""
+    port = FlatPort(distance_m=0.05, thickness_m=0.01, n_air=1.5, n_glass=1.0, n_water=1.0)
+    sines = (1.0 / 1.5) * (1.0 + np.array([-1e-9, 0.0, 1e-16, 1e-9]))
+    d = np.stack([sines, np.zeros(4), np.sqrt(1.0 - sines**2)], axis=1)
+    tr = port.trace_from_air(np.zeros((4, 3)), d)
+    np.testing.assert_array_equal(tr.valid, [True, False, False, False])
+    np.testing.assert_array_equal(tr.tir, [False, False, False, True])
+    assert not (tr.tir & tr.misses).any()
+    assert np.all(np.isfinite(tr.exit_points_cam[tr.valid]))
+
+
+def test_overflowing_origins_are_flagged_not_infinite():
+    """Origins are only required to be finite; one at 1.5e308 m overflowed to an infinite entry
+    point on a valid ray."""
+    tr = FlatPort(distance_m=0.05).trace_from_air([[0.0, 1.5e308, -1e308]], [[0.0, 0.6, 0.8]])
+    assert not tr.valid[0]
+    assert tr.misses[0]
