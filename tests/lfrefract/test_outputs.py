@@ -346,3 +346,47 @@ def test_prepare_output_files_replaces_only_the_same_kind_and_never_an_input(tmp
     with pytest.raises(FileExistsError, match="is an existing directory"):
         prepare_output_files({tmp_path: ExpectedKind(json_kind="x")}, overwrite=True)
     assert json.loads(sidecar.read_text())["kind"] == "lfsim.render"  # nothing was written by the checks
+
+
+# =============================================================================== the warp-map cache
+SAVE_LOOP = """
+import sys
+from lfrefract.synthesis import WarpMap
+warp = WarpMap.load(sys.argv[1])
+for _ in range(15):
+    warp.save(sys.argv[2])
+"""
+
+
+@pytest.fixture(scope="module")
+def small_map(tmp_path_factory):
+    from lfrefract import FlatPort, camera_preset
+    from lfrefract.synthesis import build_warp_map
+
+    warp = build_warp_map(camera_preset("tiny"), FlatPort.from_degrees(distance_m=0.02, tilt_x_deg=20.0))
+    return warp.save(tmp_path_factory.mktemp("map") / "source.npz")
+
+
+def test_warp_maps_saved_at_once_into_one_cache_never_collide(tmp_path, small_map):
+    """Two ``synth --map-cache C`` runs at once crashed (a fixed temporary name, 2 of 6 trials)."""
+    from lfrefract.synthesis import WarpMap
+
+    target = tmp_path / "cache" / "key.npz"
+    runs = [
+        subprocess.Popen([sys.executable, "-c", SAVE_LOOP, str(small_map), str(target)], stderr=subprocess.PIPE)
+        for _ in range(3)
+    ]
+    errors = [run.communicate()[1].decode() for run in runs]
+    assert [run.returncode for run in runs] == [0, 0, 0], errors
+    assert entries(target.parent) == ["key.npz"]  # no temporary file left
+    assert WarpMap.load(target).key == WarpMap.load(small_map).key
+
+
+def test_a_warp_map_saved_over_a_directory_leaves_nothing(tmp_path, small_map):
+    from lfrefract.synthesis import WarpMap
+
+    (tmp_path / "key.npz").mkdir()
+    with pytest.raises(IsADirectoryError, match="is an existing directory"):
+        WarpMap.load(small_map).save(tmp_path / "key.npz")
+    assert entries(tmp_path) == ["key.npz"]
+    assert entries(tmp_path / "key.npz") == []
