@@ -191,8 +191,8 @@ BAD_SPECS = [
     ),
     (
         "every ray totally reflected",
-        spec_data(grid={"port.tilt_x_deg": [60.0], "port.n_water": [0.5]}),
-        r"sample s000000 \(port.tilt_x_deg=60.0, port.n_water=0.5\): every captured ray is totally internally "
+        spec_data(grid={"port.tilt_x_deg": [60.0], "port.n_air": [2.5]}),
+        r"sample s000000 \(port.tilt_x_deg=60.0, port.n_air=2.5\): every captured ray is totally internally "
         r"reflected",
     ),
     (
