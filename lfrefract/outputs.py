@@ -28,8 +28,10 @@ import fcntl
 import json
 import os
 import shutil
+import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +46,7 @@ __all__ = [
     "refuse_own_inputs",
     "remove_stale_staging",
     "staged_directory",
+    "terminate_cleanly",
 ]
 
 #: Name of the manifest that :func:`staged_directory` writes into every output directory.
@@ -493,3 +496,25 @@ def _commit(stage: Path, out: Path) -> None:
     finally:
         if aside_lock is not None:
             os.close(aside_lock)
+
+
+@contextlib.contextmanager
+def terminate_cleanly() -> Iterator[None]:
+    """Turn SIGTERM into ``SystemExit(143)`` while the block runs, so that staged outputs and
+    temporary files are cleaned up as on Ctrl-C (Python's default for SIGTERM runs no cleanup).
+
+    Only the main thread can install signal handlers; elsewhere the block runs unchanged. The
+    previous handler is restored afterwards.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def _exit(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, _exit)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from lfrefract import PRESETS, ParameterError, camera_preset
 from lfrefract.io import FileFormatError
+from lfrefract.outputs import terminate_cleanly
 from simulator.config import PORT_MODELS, embedded_scenes, load_scene
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
@@ -158,6 +159,11 @@ def _rig(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = _parser().parse_args(argv)
+    with terminate_cleanly():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         if args.command == "scenes":
             from simulator.rig import embedded_rigs

@@ -141,3 +141,25 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, outpu
     monkeypatch.setattr(os, "replace", real_replace)
     assert tree(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "render"]
+
+
+def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
+    """SIGTERM used to end the process without cleanup, leaving a hidden ``.NAME.*.partial``."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "render"
+    code = "import sys; from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
+    argv = [sys.executable, "-c", code, "render", "--out", str(out), "--spp", "64", "--quiet", "--no-previews"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not any(p.name.endswith(".partial") for p in tmp_path.iterdir()):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert list(tmp_path.iterdir()) == []
