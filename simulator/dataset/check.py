@@ -1,4 +1,5 @@
-"""Verify a dataset against its manifest: every planned sample done, with every file intact."""
+"""Verify a dataset against its manifest: every planned sample done, with every file intact, and
+rendered from input files (meshes) that are still what they were when the run was planned."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 from simulator.dataset.manifest import (
     MANIFEST_FILE,
+    DigestCache,
     file_digest,
     latest_records,
     read_dataset,
@@ -18,7 +20,7 @@ from simulator.dataset.manifest import (
 __all__ = ["PROBLEMS", "CheckReport", "SampleProblem", "check_dataset", "verify_folder"]
 
 #: Kinds of problem, in the order they are reported.
-PROBLEMS = ("missing", "corrupt", "failed", "not run")
+PROBLEMS = ("missing", "corrupt", "stale", "failed", "not run")
 
 
 @dataclass(frozen=True)
@@ -28,10 +30,12 @@ class SampleProblem:
     Attributes
     ----------
     id : str
-    kind : {"missing", "corrupt", "failed", "not run"}
+    kind : {"missing", "corrupt", "stale", "failed", "not run"}
         ``missing``: recorded done, but its folder or a file is gone. ``corrupt``: a file's size
         or SHA-256 differs from the record, a file is not in the record, or the record is not
-        the planned sample's. ``failed``: its latest record is a failure. ``not run``: no record.
+        the planned sample's. ``stale``: done and intact, but an input file it was rendered from
+        (a mesh) has changed since the run was planned. ``failed``: its latest record is a
+        failure. ``not run``: no record.
     detail : str
         What exactly (the file, the error).
     """
@@ -51,11 +55,15 @@ class CheckReport:
     total : int
         Planned samples.
     verified : int
-        Samples done with every file present and matching its size and SHA-256.
+        Samples done with every file present and matching its size and SHA-256, and their input
+        files unchanged.
     problems : tuple of SampleProblem
         The others, in sample order.
     leftovers : tuple of str
         Staging folders and temporary files of interrupted writes (the next run removes them).
+    inputs_gone : tuple of str
+        Input files (meshes) recorded in ``dataset.json`` that are not on this machine (a copied
+        dataset, say): the samples that read them cannot be checked against them.
     """
 
     root: Path
@@ -63,6 +71,7 @@ class CheckReport:
     verified: int
     problems: tuple[SampleProblem, ...]
     leftovers: tuple[str, ...]
+    inputs_gone: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -79,9 +88,12 @@ class CheckReport:
         return f"{self.root}: {self.total} samples, {self.verified} verified; {counts}"
 
 
-def verify_folder(folder: Path, record: dict, *, hashes: bool) -> SampleProblem | None:
+def verify_folder(
+    folder: Path, record: dict, *, hashes: bool, hash_max_bytes: int | None = None
+) -> SampleProblem | None:
     """The problem of a done sample's folder against its manifest record, or None if it holds
-    exactly the recorded files with their sizes (and SHA-256s, with ``hashes``)."""
+    exactly the recorded files with their sizes (and SHA-256s, with ``hashes``: of every file,
+    or of those of at most ``hash_max_bytes``)."""
     sid = record["id"]
     if not folder.is_dir():
         return SampleProblem(sid, "missing", f"folder {folder.name}/ is missing")
@@ -98,7 +110,7 @@ def verify_folder(folder: Path, record: dict, *, hashes: bool) -> SampleProblem 
         size = path.stat().st_size
         if size != entry["bytes"]:
             return SampleProblem(sid, "corrupt", f"{name}: {size} bytes, recorded {entry['bytes']}")
-        if hashes:
+        if hashes and (hash_max_bytes is None or size <= hash_max_bytes):
             _, sha = file_digest(path)
             if sha != entry["sha256"]:
                 recorded = entry["sha256"]
@@ -114,7 +126,7 @@ def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckRepor
     root : path-like
         The dataset folder (``dataset.json``, ``manifest.jsonl``, sample folders).
     hashes : bool
-        Re-hash every file (SHA-256); False compares sizes only.
+        Re-hash every file (SHA-256), input files included; False compares sizes only.
 
     Returns
     -------
@@ -126,8 +138,11 @@ def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckRepor
         If ``root`` holds no ``dataset.json``, or a complete manifest line is not a record.
     """
     root = Path(root)
-    planned = read_dataset(root)["samples"]
+    info = read_dataset(root)
+    planned = info["samples"]
+    recorded_inputs = info.get("inputs") or {}
     latest = latest_records(read_manifest(root / MANIFEST_FILE))
+    changed_inputs, gone = _changed_inputs(recorded_inputs, hashes=hashes)
     problems = []
     verified = 0
     for sample in planned:
@@ -146,6 +161,10 @@ def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckRepor
             continue
         problem = verify_folder(root / sid, record, hashes=hashes)
         if problem is None:
+            edited = [changed_inputs[p] for p in sample.get("inputs", ()) if p in changed_inputs]
+            if edited:
+                problem = SampleProblem(sid, "stale", f"rendered from an input file that changed since: {edited[0]}")
+        if problem is None:
             verified += 1
         else:
             problems.append(problem)
@@ -155,4 +174,27 @@ def check_dataset(root: str | os.PathLike, *, hashes: bool = True) -> CheckRepor
         verified=verified,
         problems=tuple(problems),
         leftovers=tuple(p.name for p in staging_leftovers(root)),
+        inputs_gone=tuple(gone),
     )
+
+
+def _changed_inputs(recorded: dict, *, hashes: bool) -> tuple[dict[str, str], list[str]]:
+    """Input files that differ from ``dataset.json``'s record (path -> what differs), and those
+    that are gone."""
+    digests = DigestCache()
+    changed: dict[str, str] = {}
+    gone = []
+    for path, entry in sorted(recorded.items()):
+        if not Path(path).is_file():
+            gone.append(path)
+            continue
+        if hashes:
+            size, sha = digests.digest(path)
+        else:
+            size, sha = Path(path).stat().st_size, entry["sha256"]
+        if size != entry["bytes"] or sha != entry["sha256"]:
+            changed[path] = (
+                f"{path!r} ({size} bytes, SHA-256 {sha[:12]}...; when planned {entry['bytes']} bytes, "
+                f"{entry['sha256'][:12]}...)"
+            )
+    return changed, gone

@@ -18,6 +18,7 @@ included, is on disk: an unterminated last line (a run killed while writing it) 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -29,6 +30,7 @@ from lfrefract.io import FileFormatError, read_json
 __all__ = [
     "DATASET_FILE",
     "MANIFEST_FILE",
+    "DigestCache",
     "append_record",
     "file_digest",
     "folder_files",
@@ -56,6 +58,32 @@ def file_digest(path: Path) -> tuple[int, str]:
     return size, digest.hexdigest()
 
 
+class DigestCache:
+    """Sizes and SHA-256s of files, each file read once while its path, size and modification
+    time (ns) stay the same: a mesh that many samples of a run use is hashed once.
+
+    An edit that keeps a file's size and modification time to the nanosecond is not seen.
+    """
+
+    def __init__(self) -> None:
+        self._known: dict[tuple[str, int, int], tuple[int, str]] = {}
+
+    def digest(self, path: str | os.PathLike) -> tuple[int, str]:
+        """Size in bytes and SHA-256 (hex) of the file at ``path`` (:func:`file_digest`).
+
+        Raises
+        ------
+        OSError
+            If it cannot be read.
+        """
+        path = Path(path)
+        stat = path.stat()
+        key = (str(path), stat.st_size, stat.st_mtime_ns)
+        if key not in self._known:
+            self._known[key] = file_digest(path)
+        return self._known[key]
+
+
 def folder_files(folder: Path) -> dict[str, dict]:
     """Every file under ``folder`` (relative POSIX path -> ``{"bytes", "sha256"}``), sorted."""
     folder = Path(folder)
@@ -72,11 +100,31 @@ def read_dataset(root: Path) -> dict:
     Raises
     ------
     FileFormatError
-        If it is missing, unreadable, or not a dataset description.
+        If it is missing, not UTF-8 JSON, or not a dataset description (``kind``, a list of
+        ``samples`` with ``id``, ``index`` and ``hash``, and ``inputs``, if given, a table of
+        files with their ``bytes`` and ``sha256``).
     """
-    data = read_json(Path(root) / DATASET_FILE)
-    if data.get("kind") != DATASET_KIND or not isinstance(data.get("samples"), list):
-        raise FileFormatError(f"{str(Path(root) / DATASET_FILE)!r} is not an lfsim dataset description")
+    path = Path(root) / DATASET_FILE
+    try:
+        data = read_json(path)
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{str(path)!r} is not UTF-8 text (byte {exc.start} cannot be decoded): not a dataset description"
+        ) from None
+    samples = data.get("samples")
+    if data.get("kind") != DATASET_KIND or not isinstance(samples, list):
+        raise FileFormatError(f"{str(path)!r} is not an lfsim dataset description")
+    for i, sample in enumerate(samples):
+        if not isinstance(sample, dict) or not {"id", "index", "hash"} <= set(sample):
+            raise FileFormatError(
+                f"{str(path)!r}: samples[{i}] is not a planned sample (id, index, hash): {sample!r:.200}"
+            )
+    inputs = data.get("inputs", {})
+    if not isinstance(inputs, dict) or not all(
+        isinstance(e, dict) and isinstance(e.get("bytes"), int) and isinstance(e.get("sha256"), str)
+        for e in inputs.values()
+    ):
+        raise FileFormatError(f"{str(path)!r}: 'inputs' is not a table of files with their bytes and sha256")
     return data
 
 
@@ -93,11 +141,14 @@ def read_manifest(path: Path, *, repair: bool = False) -> list[dict]:
     Raises
     ------
     FileFormatError
-        If a complete line is not a JSON record with an ``id`` and a ``status``.
+        If the path is not a regular file (a folder, say), or a complete line is not a UTF-8
+        JSON record with an ``id`` and a ``status``.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         return []
+    if not path.is_file():
+        raise FileFormatError(f"{str(path)!r} is not a file: a dataset manifest is a file of JSON lines")
     data = path.read_bytes()
     end = data.rfind(b"\n") + 1
     if end < len(data) and repair:
@@ -108,8 +159,10 @@ def read_manifest(path: Path, *, repair: bool = False) -> list[dict]:
     records = []
     for number, line in enumerate(data[:end].splitlines(), start=1):
         try:
-            record = json.loads(line)
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            record = json.loads(line.decode("utf-8"))
+        except UnicodeDecodeError as exc:
+            raise FileFormatError(f"{str(path)!r} line {number} is not UTF-8 text (byte {exc.start})") from None
+        except json.JSONDecodeError as exc:
             raise FileFormatError(f"{str(path)!r} line {number} is not a JSON record: {exc}") from None
         if not isinstance(record, dict) or "id" not in record or record.get("status") not in ("done", "failed"):
             raise FileFormatError(f"{str(path)!r} line {number} is not a sample record: {line[:200]!r}")
@@ -118,12 +171,30 @@ def read_manifest(path: Path, *, repair: bool = False) -> list[dict]:
 
 
 def append_record(path: Path, record: dict) -> None:
-    """Append one record as a JSON line, flushed and fsynced before returning."""
-    line = json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n"
-    with Path(path).open("a", encoding="utf-8") as fh:
-        fh.write(line)
-        fh.flush()
-        os.fsync(fh.fileno())
+    """Append one record as a JSON line, flushed and fsynced before returning.
+
+    Raises
+    ------
+    OSError
+        If the line cannot be written (disk full, file too large, read-only, ...): the file is
+        first cut back to its earlier length, so no part of the line stays (if that cut fails
+        too, the next run drops the unterminated line).
+    """
+    line = (json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8")
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    try:
+        end = os.lseek(fd, 0, os.SEEK_END)
+        try:
+            view = memoryview(line)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        except OSError:
+            with contextlib.suppress(OSError):  # the write's error is the one to report
+                os.ftruncate(fd, end)
+            raise
+    finally:
+        os.close(fd)
 
 
 def latest_records(records: list[dict]) -> dict[str, dict]:

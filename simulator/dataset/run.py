@@ -1,16 +1,18 @@
 """Run a sweep: every sample rendered by Dask workers, recorded in the manifest, resumable.
 
-The driver (this process) checks the whole spec first (:func:`simulator.dataset.spec.expand`),
-then creates the dataset folder with ``dataset.json``, or, if the folder holds an earlier run of
-the same spec, resumes it. It holds a lock on the folder (``flock``) for the whole run, so a
-second run on the same folder is refused instead of deleting the first one's work. On resume it
-drops an unterminated last manifest line, removes staging leftovers, re-renders done samples whose
-files went missing or changed size, removes the folders of samples that are not recorded as done,
-and skips the done ones. Each remaining sample is one Dask task that
-renders it into its folder (:func:`simulator.dataset.sample.render_sample`) and returns its
-manifest record; the driver alone appends records, as the tasks complete. A task that raises is
-submitted again, up to ``retries`` more times, then recorded as failed with its error and the
-attempt count; a later run tries failed samples again.
+The driver (this process) checks the whole spec first (:func:`simulator.dataset.spec.iter_samples`,
+holding only each sample's small record), then creates the dataset folder with ``dataset.json``,
+or, if the folder holds an earlier run of the same spec with the same samples (input files
+included), resumes it. It holds a lock on the folder (``flock``) for the whole run, so a second run
+on the same folder is refused instead of deleting the first one's work. On resume it drops an
+unterminated last manifest line, removes staging leftovers, re-renders done samples whose files
+went missing, changed size or, for files of at most :data:`RESUME_HASH_MAX_BYTES`, changed their
+SHA-256, removes the folders of samples that are not recorded as done, and skips the done ones.
+Each remaining sample is one Dask task that renders it into its folder
+(:func:`simulator.dataset.sample.render_sample`) and returns its manifest record; the driver builds
+the tasks as it goes, keeping a bounded number in flight, and alone appends records, as the tasks
+complete. A task that raises is submitted again, up to ``retries`` more times, then recorded as
+failed with its error and the attempt count; a later run tries failed samples again.
 
 Locally (the default) a Dask ``LocalCluster`` of ``workers`` processes with one task thread each
 runs the tasks, and each worker's Dr.Jit and numba use ``cores / workers`` threads. With
@@ -44,6 +46,7 @@ from simulator.dataset.manifest import (
     DATASET_FILE,
     DATASET_KIND,
     MANIFEST_FILE,
+    DigestCache,
     append_record,
     latest_records,
     read_dataset,
@@ -52,13 +55,26 @@ from simulator.dataset.manifest import (
     staging_leftovers,
 )
 from simulator.dataset.sample import SampleTask, render_sample
-from simulator.dataset.spec import SweepSample, SweepSpec, expand, load_spec
+from simulator.dataset.spec import SweepSpec, iter_samples, load_spec
 
-__all__ = ["DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
+__all__ = ["RESUME_HASH_MAX_BYTES", "DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
 
 
 #: How long to try to reach a scheduler given by address before giving up.
 SCHEDULER_TIMEOUT = "30s"
+
+#: A resumed run re-hashes (SHA-256) the files of done samples up to this size and checks larger
+#: ones by size. Measured on the 2-core CI machine (files in the page cache, SHA-256 at about
+#: 1.2 GB/s): a tiny sample's 9 files (6.3 MB, raw.exr 1.4 MB of it) hash in 4.5 ms, its 8 files of
+#: at most 1 MiB (the sidecars meta.json, sample.json, port.txt, and lenses.npz and the small EXRs,
+#: 0.57 MB) in 0.5 ms; an Illum sample's raw.exr (about 0.5 GB) alone takes 0.4 s, or 5 s from a
+#: 100 MB/s network file system, on every resume. ``lfsim dataset check`` re-hashes everything.
+RESUME_HASH_MAX_BYTES = 1 << 20
+
+#: Tasks kept in flight: this many per worker thread of the cluster, at least ``_IN_FLIGHT_MIN``
+#: (the rest are built as these complete, so the driver never holds every sample's scene).
+_IN_FLIGHT_PER_THREAD = 4
+_IN_FLIGHT_MIN = 64
 
 
 class DatasetMismatchError(FileExistsError):
@@ -86,6 +102,11 @@ class RunReport:
         ``(id, error, attempts)`` of the samples that failed every attempt in this run.
     seconds : float
         Wall time of this run, seconds.
+    damaged : tuple of str
+        Samples recorded done by an earlier run whose folder failed the resume's verification
+        (a file missing, of another size, or with another SHA-256): removed and rendered again.
+    verification : str
+        What the resume verified and how (one sentence; empty when no sample was done before).
     """
 
     out_dir: Path
@@ -94,6 +115,8 @@ class RunReport:
     rendered: int
     failed: tuple[tuple[str, str, int], ...]
     seconds: float
+    damaged: tuple[str, ...] = ()
+    verification: str = ""
 
     @property
     def ok(self) -> bool:
@@ -112,8 +135,26 @@ def _cpus() -> int:
         return os.cpu_count() or 1
 
 
-def _check_target(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) -> None:
-    """Raise unless ``out`` is absent, empty, or a dataset of this spec with these samples (reads only)."""
+def _plan(spec: SweepSpec, digests: DigestCache, progress: bool) -> tuple[list[dict], dict[str, dict]]:
+    """Build and check every sample (one at a time); return their records (``dataset.json``'s
+    ``samples``) and the input files they read (path -> ``{"bytes", "sha256"}``)."""
+    planned = []
+    inputs: dict[str, dict] = {}
+    for sample in iter_samples(spec, progress=progress, digests=digests):
+        planned.append(sample.record())
+        for path, entry in sample.inputs.items():
+            entry = dict(entry)
+            if inputs.setdefault(path, entry) != entry:
+                raise FileFormatError(
+                    f"input file {path!r} changed while the sweep was being checked (SHA-256 {entry['sha256']}, "
+                    f"earlier {inputs[path]['sha256']}): run again once it stays the same"
+                )
+    return planned, inputs
+
+
+def _check_target(out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[str, dict]) -> None:
+    """Raise unless ``out`` is absent, empty, or a dataset of this spec with these samples and
+    input files (reads only)."""
     if out.exists() and not out.is_dir():
         raise DatasetMismatchError(f"output {str(out)!r} exists and is not a directory")
     leftovers = set(staging_leftovers(out))  # e.g. dataset.json's temporary file: killed while creating it
@@ -130,17 +171,28 @@ def _check_target(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) 
                 f"{spec.hash!r}): refusing to mix datasets; use another --out, or the spec it was made with"
             )
         known = {s["id"]: s.get("hash") for s in earlier["samples"]}
-        changed = [s.id for s in samples if known.get(s.id) != s.hash]
-        if changed or len(known) != len(samples):
+        changed = [s["id"] for s in planned if known.get(s["id"]) != s["hash"]]
+        if changed or len(known) != len(planned):
+            before = earlier.get("inputs") if isinstance(earlier.get("inputs"), dict) else {}
+            edited = sorted(p for p, entry in inputs.items() if p in before and before[p] != entry)
+            why = (
+                f"input file(s) edited since: {edited[:3]}"
+                if edited
+                else "a base scene or an input file (mesh, hashed by content) may have changed"
+            )
             raise DatasetMismatchError(
-                f"{str(out)!r} was made from this spec but its samples differ now ({len(changed)} of {len(samples)} "
-                f"changed, e.g. {changed[:3]}; a base scene or a mesh path may have changed): refusing to mix datasets"
+                f"{str(out)!r} was made from this spec but its samples differ now ({len(changed)} of {len(planned)} "
+                f"changed, e.g. {changed[:3]}; {why}): refusing to mix datasets; use another --out, or restore "
+                "the files it was made with"
             )
 
 
-def _prepare(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) -> dict[str, dict]:
+def _prepare(
+    out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[str, dict]
+) -> tuple[dict[str, dict], list[str], str]:
     """Create the dataset folder, or tidy an earlier run of the same spec (see the module
-    docstring); return the latest manifest record of every sample that is done and intact."""
+    docstring); return the latest manifest record of every sample that is done and intact, the
+    ids of done samples that failed verification (removed), and what was verified (a sentence)."""
     if not (out / DATASET_FILE).is_file():
         out.mkdir(parents=True, exist_ok=True)
         write_json(
@@ -155,22 +207,43 @@ def _prepare(out: Path, spec: SweepSpec, samples: tuple[SweepSample, ...]) -> di
                 "swept_keys": list(spec.swept_keys),
                 "created": _now(),
                 "lfrefract": lfrefract.__version__,
-                "samples": [s.record() for s in samples],
+                "inputs": inputs,
+                "samples": planned,
             },
         )
     for leftover in staging_leftovers(out):
         remove(leftover)
     latest = latest_records(read_manifest(out / MANIFEST_FILE, repair=True))
     done = {}
-    for sample in samples:
-        record = latest.get(sample.id)
-        folder = out / sample.id
-        intact = record is not None and record["status"] == "done" and record.get("hash") == sample.hash
-        if intact and verify_folder(folder, record, hashes=False) is None:
-            done[sample.id] = record
-        elif folder.exists():  # rendered but never recorded (killed in between), or damaged since
+    damaged = []
+    hashed = sized = 0
+    for sample in planned:
+        sid = sample["id"]
+        record = latest.get(sid)
+        folder = out / sid
+        intact = record is not None and record["status"] == "done" and record.get("hash") == sample["hash"]
+        if intact and verify_folder(folder, record, hashes=True, hash_max_bytes=RESUME_HASH_MAX_BYTES) is None:
+            done[sid] = record
+            for entry in record["files"].values():
+                if entry["bytes"] <= RESUME_HASH_MAX_BYTES:
+                    hashed += 1
+                else:
+                    sized += 1
+            continue
+        if intact:
+            damaged.append(sid)
+        if folder.exists():  # rendered but never recorded (killed in between), or damaged since
             remove(folder)
-    return done
+    verification = ""
+    if done or damaged:
+        verification = (
+            f"resume verified {len(done) + len(damaged)} done sample(s): {hashed} file(s) of at most "
+            f"{RESUME_HASH_MAX_BYTES >> 20} MiB (the sidecars among them) by SHA-256, {sized} larger file(s) by "
+            f"size; {len(damaged)} failed and {'were' if len(damaged) != 1 else 'was'} rendered again"
+            + (f" ({', '.join(damaged[:5])}{', ...' if len(damaged) > 5 else ''})" if damaged else "")
+            + f"; `lfsim dataset check {out}` re-hashes every file"
+        )
+    return done, damaged, verification
 
 
 @contextlib.contextmanager
@@ -285,9 +358,10 @@ def run_dataset(
         threads_per_worker = positive_int("threads_per_worker", threads_per_worker)
     elif scheduler is None:
         threads_per_worker = max(1, _cpus() // workers)
-    samples = expand(spec, progress=progress and spec.size >= 100)
+    digests = DigestCache()  # an input file many samples read is hashed once per run
+    planned, inputs = _plan(spec, digests, progress and spec.size >= 100)
     out = Path(out_dir).resolve()
-    _check_target(out, spec, samples)
+    _check_target(out, spec, planned, inputs)
     failed: list[tuple[str, str, int]] = []
     rendered = 0
     with contextlib.ExitStack() as stack:
@@ -295,65 +369,88 @@ def run_dataset(
         # started only if there is work.
         client = None if scheduler is None else stack.enter_context(_dask_client(workers, scheduler))
         stack.enter_context(_locked(out))  # one run at a time: a second one would delete this one's work
-        _check_target(out, spec, samples)  # again, under the lock
-        done = _prepare(out, spec, samples)
-        pending = [s for s in samples if s.id not in done]
+        _check_target(out, spec, planned, inputs)  # again, under the lock
+        done, damaged, verification = _prepare(out, spec, planned, inputs)
+        pending = [r for r in planned if r["id"] not in done]
         if pending and client is None:
             client = stack.enter_context(_dask_client(workers, None))
-        tasks = {
-            s.id: SampleTask(
-                id=s.id,
-                index=s.index,
-                seed=s.seed,
-                hash=s.hash,
-                params=dict(s.params),
-                config=s.config,
-                dataset_dir=str(out),
-                outputs=spec.outputs,
-                synthesis=spec.synthesis,
-                views=dict(spec.views),
-                threads=threads_per_worker,
-                variant=variant,
-            )
-            for s in pending
-        }
-        if tasks:
-            rendered, failed = _execute(out, tasks, client, retries, progress)
+
+        def tasks() -> Iterator[SampleTask]:
+            """The pending samples' tasks, built one at a time (again from the spec: each must
+            still be the planned sample, its input files unchanged)."""
+            hashes = {r["index"]: r["hash"] for r in pending}
+            for s in iter_samples(spec, indices=sorted(hashes), digests=digests):
+                if s.hash != hashes[s.index]:
+                    raise DatasetMismatchError(
+                        f"sample {s.id} differs from the one planned at the start of this run (a base scene or an "
+                        f"input file such as {sorted(s.inputs)[:2]} changed during the run): nothing more is "
+                        "submitted; the samples recorded so far are kept, and a new run on this folder is refused "
+                        "until the files are restored"
+                    )
+                yield SampleTask(
+                    id=s.id,
+                    index=s.index,
+                    seed=s.seed,
+                    hash=s.hash,
+                    params=dict(s.params),
+                    config=s.config,
+                    dataset_dir=str(out),
+                    outputs=spec.outputs,
+                    synthesis=spec.synthesis,
+                    views=dict(spec.views),
+                    inputs={path: entry["sha256"] for path, entry in s.inputs.items()},
+                    threads=threads_per_worker,
+                    variant=variant,
+                )
+
+        if pending:
+            rendered, failed = _execute(out, tasks(), len(pending), client, retries, progress)
             for leftover in staging_leftovers(out):  # from attempts that died mid-write
                 remove(leftover)
     return RunReport(
         out_dir=out,
-        total=len(samples),
+        total=len(planned),
         skipped=len(done),
         rendered=rendered,
         failed=tuple(failed),
         seconds=time.perf_counter() - start,
+        damaged=tuple(damaged),
+        verification=verification,
     )
 
 
+def _in_flight(client) -> int:
+    """How many tasks to keep submitted: a few per worker thread of the cluster."""
+    threads = sum(client.nthreads().values())
+    return max(_IN_FLIGHT_MIN, _IN_FLIGHT_PER_THREAD * threads)
+
+
 def _execute(
-    out: Path, tasks: dict[str, SampleTask], client, retries: int, progress: bool
+    out: Path, tasks: Iterator[SampleTask], total: int, client, retries: int, progress: bool
 ) -> tuple[int, list[tuple[str, str, int]]]:
-    """Submit every task to ``client``, record each as it completes, retry failures; return
-    (rendered, failed)."""
+    """Submit the tasks to ``client`` (a bounded number at a time), record each as it completes,
+    retry failures; return (rendered, failed)."""
     from dask.distributed import as_completed
 
     manifest = out / MANIFEST_FILE
     rendered = 0
     failed: list[tuple[str, str, int]] = []
     run = uuid.uuid4().hex[:8]
+    window = _in_flight(client)
+    attempts: dict[str, tuple[SampleTask, int]] = {}
+    queue = as_completed()
 
-    def submit(task: SampleTask, attempt: int):
-        return client.submit(render_sample, task, key=f"lfsim-{task.id}-{run}-a{attempt}", pure=False, retries=0)
+    def submit(task: SampleTask, attempt: int) -> None:
+        future = client.submit(render_sample, task, key=f"lfsim-{task.id}-{run}-a{attempt}", pure=False, retries=0)
+        attempts[future.key] = (task, attempt)
+        queue.add(future)
 
-    attempts = {}
-    futures = []
-    for task in tasks.values():
-        future = submit(task, 1)
-        attempts[future.key] = (task, 1)
-        futures.append(future)
-    queue = as_completed(futures)
-    with tqdm(total=len(tasks), desc="samples", unit="sample", disable=not progress) as bar:
+    def top_up() -> None:
+        while len(attempts) < window and (task := next(tasks, None)) is not None:
+            submit(task, 1)
+
+    top_up()
+    with tqdm(total=total, desc="samples", unit="sample", disable=not progress) as bar:
         for future in queue:
             task, attempt = attempts.pop(future.key)
             if future.status == "finished":
@@ -364,9 +461,7 @@ def _execute(
             else:
                 error = _error_text(future)
                 if attempt <= retries:
-                    retry = submit(task, attempt + 1)
-                    attempts[retry.key] = (task, attempt + 1)
-                    queue.add(retry)
+                    submit(task, attempt + 1)
                 else:
                     append_record(
                         manifest,
@@ -387,6 +482,7 @@ def _execute(
                     bar.update()
                     bar.set_postfix(failed=len(failed))
             future.release()
+            top_up()
     return rendered, failed
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from lfrefract import PinholeCamera
-from lfrefract.io import read_exr, write_exr, write_flat_port, write_json
+from lfrefract.io import FileFormatError, read_exr, write_exr, write_flat_port, write_json
 from lfrefract.outputs import staged_directory
 from lfrefract.synthesis import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
@@ -34,6 +34,7 @@ COVERAGE_FILE = "refraction_free.coverage.exr"
 VIEWS_DIR = "views"
 
 _threads_set: int | None = None
+_digests = None  # this worker process's DigestCache (a mesh that many samples use is hashed once)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -56,6 +57,9 @@ class SampleTask:
         Options of the refraction-free image.
     views : dict
         Options of :func:`lfrefract.views.subaperture_stack`.
+    inputs : dict
+        The files the scene reads (mesh files): absolute path -> SHA-256 (hex) when the sample
+        was planned. The render fails if one differs once the scene has been read.
     threads : int or None
         Dr.Jit and numba threads of the worker process (None: their defaults, every core).
     variant : str or None
@@ -72,6 +76,7 @@ class SampleTask:
     outputs: tuple[str, ...] = ()
     synthesis: SynthesisOptions | None = None
     views: dict = field(default_factory=dict)
+    inputs: dict = field(default_factory=dict)
     threads: int | None = None
     variant: str | None = None
 
@@ -109,6 +114,8 @@ def render_sample(task: SampleTask) -> dict:
 
     Raises
     ------
+    FileFormatError
+        If an input file (a mesh) is not what was planned (edited since): nothing is written.
     Exception
         Whatever the render raises (a mesh file that cannot be read, ...); nothing is left in
         the dataset folder then.
@@ -131,6 +138,7 @@ def render_sample(task: SampleTask) -> dict:
             write_previews="previews" in task.outputs,
         )
         seconds["render"] = time.perf_counter() - t0
+        _check_inputs(task)  # once the render has read them
         seconds["raw"], seconds["ideal"] = result.raw_seconds, result.ideal_seconds
         extras: dict[str, Any] = {}
         if config.port is not None:
@@ -172,6 +180,22 @@ def render_sample(task: SampleTask) -> dict:
         "seconds": seconds,
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
+
+
+def _check_inputs(task: SampleTask) -> None:
+    """Raise unless every input file of ``task`` still has its planned SHA-256."""
+    global _digests
+    from simulator.dataset.manifest import DigestCache
+
+    if _digests is None:
+        _digests = DigestCache()
+    for path, planned in task.inputs.items():
+        _, sha = _digests.digest(path)
+        if sha != planned:
+            raise FileFormatError(
+                f"sample {task.id}: input file {path!r} changed after the run was planned (SHA-256 {sha}, planned "
+                f"{planned}): the sample is not written; the dataset would mix old and new files"
+            )
 
 
 def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:

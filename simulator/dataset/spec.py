@@ -44,6 +44,11 @@ which is also its render seed, and draws the value of random key ``K`` from
 ``numpy.random.default_rng(SeedSequence([seed, i, crc32(K)]))``, so a key's draws do not depend
 on the other keys. Every sample is built with :func:`simulator.config.parse_scene` and checked
 with :func:`simulator.scene.check_geometry` before anything is rendered.
+
+Files a sample's scene reads besides its TOML (mesh files: every path in the scene) are its
+*inputs*: their SHA-256 is part of the sample's hash, so an edited mesh makes another sample.
+:func:`iter_samples` builds the samples one at a time (a run holds only their small records);
+:func:`expand` holds them all.
 """
 
 from __future__ import annotations
@@ -51,12 +56,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
-import itertools
 import json
 import math
 import re
+import time
+import tomllib
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -74,8 +80,10 @@ from lfrefract._validate import (
     positive_int,
     reject_unknown_keys,
 )
+from lfrefract.io import FileFormatError
 from lfrefract.synthesis import SynthesisOptions
-from simulator.config import SceneConfig, embedded_scenes, parse_scene, read_toml, scenes_dir
+from simulator.config import SceneConfig, embedded_scenes, parse_scene, scenes_dir
+from simulator.dataset.manifest import DigestCache
 from simulator.scene import check_geometry
 
 __all__ = [
@@ -88,6 +96,7 @@ __all__ = [
     "canonical_json",
     "embedded_sweeps",
     "expand",
+    "iter_samples",
     "key_rng",
     "load_spec",
     "parse_spec",
@@ -107,8 +116,13 @@ DISTRIBUTIONS = {
     "choice": "a non-empty list of values, picked with equal probability",
 }
 
-#: More samples than this is a typo in a grid, not a dataset.
-MAX_SAMPLES = 1_000_000
+#: Most samples of one sweep. Measured on the 2-core CI machine (default scene): every sample is
+#: built and checked before any work, at 4-10 ms each (100 000 samples: 7-16 min, said up front with
+#: a progress bar), and the driver reads ``dataset.json`` (about 0.3 kB per sample) and the manifest
+#: (about 1.5 kB per line, about 6 kB per record in memory) whole on resume and in ``check``: at this
+#: limit some 0.6 GB. Split a bigger sweep into several specs (other seeds, or parts of a grid) in
+#: folders of their own.
+MAX_SAMPLES = 100_000
 
 #: Keys set per sample, never swept.
 _RESERVED_KEYS = ("render.seed", "name")
@@ -246,11 +260,15 @@ class SweepSample:
         The swept values by dotted key (``scene`` included when swept), read-only.
     hash : str
         SHA-256 (hex) of the sample's whole scene (TOML form, after the sweep's changes), the
-        base scene's name and the outputs: equal hashes mean equal samples.
+        base scene's name, the outputs and the content (SHA-256) of its input files: equal hashes
+        mean equal samples.
     config : SceneConfig
         The validated scene.
     scene_data : Mapping
         The scene in TOML form that ``config`` was parsed from, read-only.
+    inputs : Mapping
+        The files the scene reads besides its TOML (mesh files), read-only: absolute path ->
+        ``{"bytes", "sha256"}`` as hashed when the sample was built.
     """
 
     id: str
@@ -260,10 +278,19 @@ class SweepSample:
     hash: str
     config: SceneConfig
     scene_data: Mapping[str, Any]
+    inputs: Mapping[str, Mapping[str, Any]] = field(default_factory=lambda: MappingProxyType({}))
 
     def record(self) -> dict:
-        """Plain data for ``dataset.json`` and the manifest: id, index, seed, params, hash."""
-        return {"id": self.id, "index": self.index, "seed": self.seed, "params": dict(self.params), "hash": self.hash}
+        """Plain data for ``dataset.json``: id, index, seed, params, hash, and the paths of its
+        input files (``inputs``, sorted)."""
+        return {
+            "id": self.id,
+            "index": self.index,
+            "seed": self.seed,
+            "params": dict(self.params),
+            "hash": self.hash,
+            "inputs": sorted(self.inputs),
+        }
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -604,8 +631,38 @@ def load_spec(path: str | Path) -> SweepSpec:
     embedded = embedded_sweeps()
     if not p.exists() and str(path) in embedded:
         p = embedded[str(path)]
-    data = read_toml(p, "sweep spec")
+    data = _read_toml(p, "sweep spec")
     return parse_spec(data, base_dir=p.parent, source=str(p))
+
+
+def _read_toml(path: Path, what: str) -> dict:
+    """The TOML document at ``path`` (``what`` names it in errors: "sweep spec", "scene").
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    FileFormatError
+        If it is not UTF-8 text (TOML's only encoding; a UTF-16 or Latin-1 file, say).
+    ParameterError
+        If it is not valid TOML.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        hint = " (it starts with a UTF-16 byte-order mark)" if data[:2] in (b"\xff\xfe", b"\xfe\xff") else ""
+        raise FileFormatError(
+            f"{what} file {str(path)!r} is not UTF-8 text{hint}: byte {exc.start} "
+            f"({data[exc.start : exc.start + 1]!r}) cannot be decoded; TOML files must be UTF-8"
+        ) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(f"{what} file {str(path)!r} is not valid TOML: {exc}") from None
 
 
 def embedded_sweeps() -> dict[str, Path]:
@@ -678,7 +735,8 @@ def _describe(params: Mapping[str, Any]) -> str:
 
 
 def expand(spec: SweepSpec, *, progress: bool = False) -> tuple[SweepSample, ...]:
-    """Every sample of ``spec``, each built and checked as a scene.
+    """Every sample of ``spec``, each built and checked as a scene (all held in memory: for
+    small sweeps; :func:`iter_samples` builds them one at a time).
 
     Parameters
     ----------
@@ -689,43 +747,143 @@ def expand(spec: SweepSpec, *, progress: bool = False) -> tuple[SweepSample, ...
     Returns
     -------
     tuple of SweepSample
-        In index order. The same spec always gives the same samples (ids, seeds, values, hashes).
+        In index order. The same spec (and input files) always gives the same samples (ids,
+        seeds, values, hashes).
+
+    Raises
+    ------
+    ParameterError, FileFormatError
+        As :func:`iter_samples`.
+    """
+    return tuple(iter_samples(spec, progress=progress))
+
+
+#: With a progress bar, the estimate of the whole check is printed once the first samples took
+#: this long (seconds), if the whole check will take longer than ``_ESTIMATE_MIN_S``.
+_ESTIMATE_AFTER_S = 1.0
+_ESTIMATE_MIN_S = 10.0
+
+
+def iter_samples(
+    spec: SweepSpec,
+    *,
+    indices: Iterable[int] | None = None,
+    progress: bool = False,
+    digests: DigestCache | None = None,
+) -> Iterator[SweepSample]:
+    """Build and check the samples of ``spec`` one at a time, in index order.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    indices : iterable of int, optional
+        Only these samples (increasing indices); default every sample.
+    progress : bool
+        Show a progress bar (tqdm, stderr) over the samples and, once the first ones have taken
+        a second, print how long the whole check will take when that is more than 10 s.
+    digests : DigestCache, optional
+        Cache of input file hashes to use (and fill): one per run reads a mesh that many samples
+        use once. Default: a new one for this call.
+
+    Yields
+    ------
+    SweepSample
+        The same spec (and input files) always gives the same samples (ids, seeds, values,
+        hashes). Only the sample being yielded is held: memory does not grow with the count.
 
     Raises
     ------
     ParameterError
-        If any sample is not a valid, physically possible scene (unknown keys at any level,
+        If a sample is not a valid, physically possible scene (unknown keys at any level,
         impossible or totally reflecting port tilts, unknown presets, objects on the camera side
         of the port, an output the scene cannot have, ...): the message names the sample, its
-        swept values and the offending key.
+        swept values and the offending key. Also for an index outside the sweep.
+    FileFormatError
+        If a base scene file is not UTF-8 text.
     """
     if not isinstance(spec, SweepSpec):
         raise ParameterError(f"spec must be a SweepSpec, got {spec!r}")
+    digests = DigestCache() if digests is None else digests
     scenes: dict[str, tuple[Path, dict]] = {}
 
     def base_scene(value: str) -> tuple[Path, dict]:
         if value not in scenes:
             path = _scene_file(SCENE_KEY, value, spec.base_dir)
-            scenes[value] = (path, read_toml(path, "scene"))
+            scenes[value] = (path, _read_toml(path, "scene"))
         return scenes[value]
 
+    wanted = range(spec.size) if indices is None else indices
+    total = spec.size if indices is None else None
+    if total is None and hasattr(wanted, "__len__"):
+        total = len(wanted)
     grid_keys = [k for k, _ in spec.grid]
-    points = list(itertools.product(*(values for _, values in spec.grid)))
-    out = []
-    with tqdm(total=spec.size, desc="checking samples", unit="sample", disable=not progress) as bar:
-        for p, point in enumerate(points):
-            for r in range(spec.repeats):
-                index = p * spec.repeats + r
-                seed = sample_seed(spec.seed, index)
-                params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
-                for dist in spec.random:
-                    params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key))
-                out.append(_build_sample(spec, index, seed, params, base_scene))
-                bar.update()
-    return tuple(out)
+    start = time.perf_counter()
+    estimated = False
+    with tqdm(total=total, desc="checking samples", unit="sample", disable=not progress) as bar:
+        last = -1
+        for index in wanted:
+            if isinstance(index, bool) or not isinstance(index, int) or not last < index < spec.size:
+                raise ParameterError(f"sample index {index!r} is not an increasing index in [0, {spec.size})")
+            last = index
+            seed = sample_seed(spec.seed, index)
+            point = _grid_point(spec, index // spec.repeats)
+            params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
+            for dist in spec.random:
+                params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key))
+            yield _build_sample(spec, index, seed, params, base_scene, digests)
+            bar.update()
+            elapsed = time.perf_counter() - start
+            if progress and not estimated and elapsed >= _ESTIMATE_AFTER_S and total:
+                estimated = True
+                whole = elapsed / bar.n * total
+                if whole > _ESTIMATE_MIN_S:
+                    bar.write(
+                        f"checking {total} samples before any work: about {_duration(whole)} "
+                        f"({elapsed / bar.n * 1e3:.1f} ms per sample)"
+                    )
 
 
-def _build_sample(spec: SweepSpec, index: int, seed: int, params: dict, base_scene) -> SweepSample:
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def _grid_point(spec: SweepSpec, p: int) -> tuple:
+    """Grid point ``p`` in ``itertools.product`` order (the first key varies slowest)."""
+    values = []
+    for _, choices in reversed(spec.grid):
+        p, i = divmod(p, len(choices))
+        values.append(choices[i])
+    return tuple(reversed(values))
+
+
+def _input_files(config: SceneConfig) -> list[tuple[str, Path]]:
+    """Every file path in ``config`` (where in the config, path): the files its render reads."""
+    found: list[tuple[str, Path]] = []
+
+    def walk(value: Any, where: str) -> None:
+        if isinstance(value, Path):
+            found.append((where, value))
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            for f in dataclasses.fields(value):
+                walk(getattr(value, f.name), f"{where}.{f.name}" if where else f.name)
+        elif isinstance(value, (list, tuple)):
+            for i, v in enumerate(value):
+                walk(v, f"{where}[{i}]")
+        elif isinstance(value, Mapping):
+            for k, v in value.items():
+                walk(v, f"{where}.{k}")
+
+    walk(config, "")
+    return found
+
+
+def _build_sample(
+    spec: SweepSpec, index: int, seed: int, params: dict, base_scene, digests: DigestCache
+) -> SweepSample:
     sid = sample_id(index)
     where = f"sample {sid} ({_describe(params)})"
     scene_name = params.get(SCENE_KEY, spec.scene)
@@ -751,15 +909,24 @@ def _build_sample(spec: SweepSpec, index: int, seed: int, params: dict, base_sce
             _check_views(spec.views, config.camera)
         except ParameterError as exc:
             raise ParameterError(f"{where}: {exc}") from None
-    digest = _sha256({"scene": data, "base_scene": scene_name, "outputs": list(spec.outputs),
-                      "synthesis": None if spec.synthesis is None else spec.synthesis.to_dict(),
-                      "views": dict(spec.views)})  # fmt: skip
+    inputs: dict[str, dict] = {}
+    content = []
+    for location, path in _input_files(config):
+        size, sha = digests.digest(path)
+        inputs[str(path)] = {"bytes": size, "sha256": sha}
+        content.append([location, sha])
+    hashed = {"scene": data, "base_scene": scene_name, "outputs": list(spec.outputs),
+              "synthesis": None if spec.synthesis is None else spec.synthesis.to_dict(),
+              "views": dict(spec.views)}  # fmt: skip
+    if content:  # (a sample without input files keeps the hash it had before inputs were hashed)
+        hashed["inputs"] = content
     return SweepSample(
         id=sid,
         index=index,
         seed=seed,
         params=MappingProxyType(params),
-        hash=digest,
+        hash=_sha256(hashed),
         config=config,
         scene_data=_freeze(data),
+        inputs=MappingProxyType({k: MappingProxyType(v) for k, v in inputs.items()}),
     )

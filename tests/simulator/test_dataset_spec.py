@@ -18,8 +18,8 @@ import pytest
 from lfrefract import ParameterError
 from simulator.config import default_scene_path
 from simulator.dataset import DatasetBusyError, expand, load_spec, parse_spec, run_dataset
-from simulator.dataset.manifest import append_record, folder_files
-from simulator.dataset.run import _check_target, _prepare
+from simulator.dataset.manifest import DigestCache, append_record, folder_files
+from simulator.dataset.run import _check_target, _plan, _prepare
 from simulator.dataset.spec import MAX_SAMPLES, key_rng, sample_seed
 
 BASE = {"sweep": {"name": "t", "seed": 11, "scene": "default", "spp": 2}}
@@ -392,6 +392,7 @@ def test_sample_names_and_records():
         "seed": s.seed,
         "params": {"port.tilt_x_deg": 7.0},
         "hash": s.hash,
+        "inputs": [],
     }
     assert re.fullmatch(r"[0-9a-f]{64}", s.hash)
     with pytest.raises(TypeError):
@@ -450,12 +451,12 @@ def test_the_documented_spec_is_valid():
 def test_a_folder_holding_only_a_staging_leftover_is_empty(tmp_path):
     """A run killed while creating dataset.json leaves its temporary file: the next run goes on."""
     spec = load_spec("tilt")
-    samples = expand(spec)
+    planned, inputs = _plan(spec, DigestCache(), False)
     out = tmp_path / "out"
     out.mkdir()
     (out / ".dataset.json.k1ll3d.tmp").write_text('{"schema_')
-    _check_target(out, spec, samples)
-    assert _prepare(out, spec, samples) == {}
+    _check_target(out, spec, planned, inputs)
+    assert _prepare(out, spec, planned, inputs)[0] == {}
     assert sorted(p.name for p in out.iterdir()) == ["dataset.json"]
 
 
@@ -464,15 +465,16 @@ def test_resume_keeps_only_done_records_of_the_planned_sample(tmp_path):
     rendered again (check_dataset would call it corrupt for ever otherwise)."""
     spec = load_spec("tilt")
     samples = expand(spec)
+    planned, inputs = _plan(spec, DigestCache(), False)
     out = tmp_path / "out"
-    _prepare(out, spec, samples)
+    _prepare(out, spec, planned, inputs)
     folder = out / samples[0].id
     for recorded_hash, kept in (("0" * 64, False), (samples[0].hash, True)):
         folder.mkdir()
         (folder / "raw.exr").write_bytes(b"pixels")
         record = {**samples[0].record(), "hash": recorded_hash, "status": "done", "files": folder_files(folder)}
         append_record(out / "manifest.jsonl", record)
-        assert (samples[0].id in _prepare(out, spec, samples)) is kept
+        assert (samples[0].id in _prepare(out, spec, planned, inputs)[0]) is kept
         assert folder.exists() is kept
 
 
