@@ -105,6 +105,8 @@ def _dataset(args: argparse.Namespace) -> int:
             print(f"{problem.id}: {problem.kind}: {problem.detail}")
         if report.leftovers:
             print(f"leftovers of interrupted writes (the next run removes them): {', '.join(report.leftovers)}")
+        if report.inputs_gone:
+            print(f"input files not found here (their samples are not checked against them): {report.inputs_gone}")
         print(report.summary())
         return 0 if report.ok else 1
     report = run_dataset(
@@ -124,6 +126,8 @@ def _dataset(args: argparse.Namespace) -> int:
         f"dataset {report.out_dir}: {report.total} samples; {report.rendered} rendered now ({rate:.1f} per minute), "
         f"{report.skipped} already done, {len(report.failed)} failed; {report.seconds:.1f} s"
     )
+    if report.verification:
+        print(report.verification)
     return 0 if report.ok else 1
 
 
