@@ -41,6 +41,8 @@ from lfrefract._validate import (
 
 __all__ = [
     "GRID_TYPES",
+    "MAX_IMAGE_SIDE_PX",
+    "MAX_SENSOR_PIXELS",
     "CapturedRays",
     "LightFieldCamera",
     "MicrolensArray",
@@ -51,6 +53,23 @@ GRID_TYPES = ("hex", "square")
 GridType = Literal["hex", "square"]
 
 _SQRT3 = math.sqrt(3.0)
+
+#: Largest width or height, pixels, of a sensor or an image (:class:`SensorGeometry`,
+#: :class:`lfrefract.pinhole.PinholeCamera`): 65536, the practical limit of image files and of
+#: OpenCV (whose remap and PNG paths take sizes below 2^15-2^16), and 8.5 times the Illum's 7728.
+#: It refuses typing errors (a 200000 x 200000 image) at once rather than after minutes of work.
+MAX_IMAGE_SIDE_PX = 65536
+
+#: Most pixels of a sensor: a warp map stores raw pixel indices as int32.
+MAX_SENSOR_PIXELS = 2**31 - 1
+
+
+def image_side_px(name: str, value: object) -> int:
+    """``value`` as an int, or raise unless it is an integer in [1, :data:`MAX_IMAGE_SIDE_PX`]."""
+    out = positive_int(name, value)
+    if out > MAX_IMAGE_SIDE_PX:
+        raise ParameterError(f"{name} must be at most {MAX_IMAGE_SIDE_PX} px, got {value!r}")
+    return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,7 +181,8 @@ class SensorGeometry:
     Parameters
     ----------
     width_px, height_px : int
-        Number of pixel columns and rows.
+        Number of pixel columns and rows, each at most :data:`MAX_IMAGE_SIDE_PX`, and at most
+        :data:`MAX_SENSOR_PIXELS` in all.
     pixel_pitch_m : float
         Pixel size (square pixels), metres.
     """
@@ -172,8 +192,13 @@ class SensorGeometry:
     pixel_pitch_m: float
 
     def __post_init__(self) -> None:
-        positive_int("sensor.width_px", self.width_px)
-        positive_int("sensor.height_px", self.height_px)
+        image_side_px("sensor.width_px", self.width_px)
+        image_side_px("sensor.height_px", self.height_px)
+        if self.width_px * self.height_px > MAX_SENSOR_PIXELS:
+            raise ParameterError(
+                f"sensor.width_px x sensor.height_px must be at most {MAX_SENSOR_PIXELS} pixels (int32 raw indices), "
+                f"got {self.width_px} x {self.height_px}"
+            )
         positive_float("sensor.pixel_pitch_m", self.pixel_pitch_m)
 
     @property
@@ -254,6 +279,8 @@ class LightFieldCamera:
     name: str = field(default="custom")
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ParameterError(f"name must be a string, got {self.name!r}")
         positive_float("focal_length_m", self.focal_length_m)
         positive_float("lens_to_mla_m", self.lens_to_mla_m)
         positive_float("f_number", self.f_number)
@@ -447,16 +474,25 @@ class LightFieldCamera:
 
     @classmethod
     def from_dict(cls, data: dict) -> LightFieldCamera:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        """Inverse of :meth:`to_dict`.
+
+        Raises
+        ------
+        ParameterError
+            If ``data`` or its ``mla`` or ``sensor`` is not a dict, a key is missing or unknown, or
+            a value has the wrong type or an impossible value; the message names the key.
+        """
+        if not isinstance(data, dict):
+            raise ParameterError(f"camera must be a table (a JSON object) of camera parameters, got {data!r}")
         data = dict(data)
         reject_unknown_keys("camera", data, {"name", "focal_length_m", "lens_to_mla_m", "f_number", "mla", "sensor"})
         require_keys("camera", data, {"focal_length_m", "lens_to_mla_m", "f_number", "mla", "sensor"})
-        mla = dict(data.pop("mla"))
+        mla, sensor = data.pop("mla"), data.pop("sensor")
+        for key, table in (("mla", mla), ("sensor", sensor)):
+            if not isinstance(table, dict):
+                raise ParameterError(f"camera.{key} must be a table (a JSON object), got {table!r}")
         reject_unknown_keys("camera.mla", mla, {"grid", "pitch_m", "focal_length_m", "rotation_rad", "offset_m"})
         require_keys("camera.mla", mla, {"grid", "pitch_m", "focal_length_m"})
-        sensor = dict(data.pop("sensor"))
         reject_unknown_keys("camera.sensor", sensor, {"width_px", "height_px", "pixel_pitch_m"})
         require_keys("camera.sensor", sensor, {"width_px", "height_px", "pixel_pitch_m"})
-        if "offset_m" in mla:
-            mla["offset_m"] = tuple(mla["offset_m"])
         return cls(mla=MicrolensArray(**mla), sensor=SensorGeometry(**sensor), **data)

@@ -2,11 +2,13 @@
 
     lfrefract describe (PRESET | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
-    lfrefract naive RAW.exr --out OUT.exr [--kind central|full]
+                    [--camera PRESET|FILE] [--port PORT.json] [--mla MLA.json] [--nonfinite refuse|mask]
+    lfrefract naive RAW.exr --out OUT.exr [--kind central|full] [--camera PRESET|FILE] [--nonfinite refuse|mask]
     lfrefract views RAW.exr --out DIR [--grid 9] [--spacing-px S] [--format png|exr] [--overwrite]
-    lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square]
-    lfrefract calibrate port BOARD.exr... --squares C R --square-size-m S --out PORT.json
-    lfrefract calibrate approx BOARD.exr... --squares C R --square-size-m S --out APPROX.json
+                    [--camera PRESET|FILE] [--nonfinite refuse|mask]
+    lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square] [--camera PRESET|FILE]
+    lfrefract calibrate port BOARD.exr... --squares C R --square-size-m S --out PORT.json [--camera PRESET|FILE]
+    lfrefract calibrate approx BOARD.exr... --squares C R --square-size-m S --out APPROX.json [--camera PRESET|FILE]
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
@@ -23,6 +25,15 @@ refractive indices are known, from the options or the first capture's ``meta.jso
 in the Refractive COLMAP / calibmar flat-port layout (``PORT.txt``); ``approx`` the approximation
 baseline (a pinhole with distortion from views at one depth). ``synth --port PORT.json
 --mla MLA.json`` uses the estimates instead of the capture's ``meta.json``.
+
+Every command reads its captures with :func:`lfrefract.capture.read_capture`: the raw image and the
+``meta.json`` beside it, whose ``camera``, ``port``, ``ideal`` and ``pose`` are checked (a missing or
+malformed key is an error naming the file and the key). A bare raw image without ``meta.json``
+works too, given ``--camera`` (a preset, or a JSON file with a ``camera`` table such as
+``lfrefract describe PRESET --json`` prints) and, for ``synth``, ``--port``. Raw images holding NaN,
+infinite or negative values are refused with their count; ``--nonfinite mask`` treats those pixels
+as unrecorded instead (no weight in the output; the output says how many). Sizes whose estimated
+memory exceeds the memory available are refused before anything is allocated.
 """
 
 from __future__ import annotations
@@ -41,25 +52,43 @@ from lfrefract import (
     FlatPort,
     LightFieldCamera,
     ParameterError,
-    PinholeCamera,
     camera_preset,
     virtual_camera_for,
 )
-from lfrefract.calibration import MlaCalibration, calibrate_approx, calibrate_mla, calibrate_port
+from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
+from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
+from lfrefract.capture import (
+    NONFINITE_POLICIES,
+    Capture,
+    CaptureParameters,
+    camera_from_option,
+    capture_parameters,
+    mask_warp_map,
+    mla_from_file,
+    port_from_file,
+    read_capture,
+    read_sidecar,
+)
 from lfrefract.io import (
+    SCHEMA_VERSION,
     VIEW_STACK_FORMATS,
     FileFormatError,
-    read_exr,
-    read_json,
     write_exr,
     write_flat_port,
     write_json,
     write_view_stack,
 )
 from lfrefract.methods import ConventionalView
-from lfrefract.synthesis import SEARCH_METHODS, SynthesisOptions, WarpMap, build_warp_map, warp_map_key
-from lfrefract.views import naive_view, subaperture_stack
+from lfrefract.synthesis import (
+    BLOCK_PIXELS,
+    SEARCH_METHODS,
+    SynthesisOptions,
+    WarpMap,
+    build_warp_map,
+    warp_map_key,
+)
+from lfrefract.views import naive_view, subaperture_stack, view_stack_bytes
 
 __all__ = [
     "calibrate_approx_command",
@@ -94,29 +123,58 @@ def describe(camera: LightFieldCamera, port: FlatPort | None = None) -> dict:
     return out
 
 
-def _capture(raw_path: Path) -> tuple[np.ndarray, dict]:
-    """A raw image and the sidecar beside it (``meta.json`` of a render directory)."""
-    raw = read_exr(raw_path)
-    meta = read_json(raw_path.parent / "meta.json")
-    return raw, meta
+def _given_camera(args: argparse.Namespace) -> LightFieldCamera | None:
+    """The camera of ``--camera``, if given."""
+    return camera_from_option(args.camera) if args.camera is not None else None
+
+
+def _masked_note(capture: Capture) -> str:
+    """What the printed line says about masked raw values (nothing when none were)."""
+    if capture.recorded is None:
+        return ""
+    return f"; masked {capture.unrecorded.describe()} as unrecorded"
 
 
 def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
-    raw, meta = _capture(Path(args.raw))
-    camera = LightFieldCamera.from_dict(meta["camera"])
+    capture = read_capture(
+        args.raw,
+        camera=_given_camera(args),
+        port=port_from_file(args.port) if args.port is not None else None,
+        nonfinite=args.nonfinite,
+    )
+    camera = capture.camera
     if args.mla:
-        camera = MlaCalibration.from_dict(read_json(Path(args.mla))["mla"]).calibrated_camera(camera)
-    if args.port:
-        port = FlatPort.from_dict(read_json(Path(args.port))["port"])
-    elif meta.get("port"):
-        port = FlatPort.from_dict(meta["port"])
-    else:
-        raise ParameterError(f"{args.raw!r}: its meta.json has no port and no --port was given; nothing to remove")
+        camera = mla_from_file(args.mla).calibrated_camera(camera)
+    port = capture.port
+    if port is None:
+        where = (
+            f"its sidecar {str(capture.sidecar_path)!r} has no port" if capture.sidecar_path else "it has no meta.json"
+        )
+        raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
-    output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
+    output = capture.output
     key = warp_map_key(camera, port, output, options)
     cached = Path(args.map_cache) / f"{key}.npz" if args.map_cache else None
+    building = cached is None or not cached.is_file()
+    require_memory(
+        f"synth: the warp map of a {output.width_px} x {output.height_px} px refraction-free image "
+        f"(supersample {options.supersample}, k {options.k})",
+        warp_map_bytes(
+            output_pixels=output.width_px * output.height_px,
+            raw_pixels=camera.sensor.width_px * camera.sensor.height_px,
+            channels=capture.channels,
+            supersample=options.supersample,
+            k=options.k,
+            kdtree=building
+            and (
+                options.search == "kdtree"
+                or (options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m)
+            ),
+            workers=available_cpus() if building else 0,
+            block_pixels=BLOCK_PIXELS,
+        ),
+    )
     start = time.perf_counter()
     if cached is not None and cached.is_file():
         warp = WarpMap.load(cached, expected_key=key)
@@ -129,7 +187,8 @@ def synth(args: argparse.Namespace) -> int:
             how += f", cached as {cached}"
     map_seconds = time.perf_counter() - start
     start = time.perf_counter()
-    image = warp.apply(raw)
+    warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
+    image = warp.apply(capture.raw)
     apply_seconds = time.perf_counter() - start
     out = Path(args.out)
     stats = {
@@ -148,10 +207,11 @@ def synth(args: argparse.Namespace) -> int:
             "K": warp.output.K.tolist(),
             "width_px": warp.output.width_px,
             "height_px": warp.output.height_px,
-            "pose": meta.get("pose"),
+            "pose": None if capture.pose is None else capture.pose.to_dict(),
             "camera": camera.to_dict(),
             "port": port.to_dict(),
             "options": options.to_dict(),
+            "unrecorded_raw": capture.masked_summary(),
             "map_key": warp.key,
             "coverage": stats,
             "seconds": {"map": map_seconds, "apply": apply_seconds},
@@ -161,7 +221,7 @@ def synth(args: argparse.Namespace) -> int:
     _figure(out.with_suffix(".png"), image, warp)
     print(
         f"{how} warp map ({map_seconds:.2f} s), applied in {apply_seconds * 1e3:.1f} ms; exact coverage "
-        f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}; wrote {out}"
+        f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
     )
     return 0
 
@@ -185,44 +245,52 @@ def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
 
 def naive(args: argparse.Namespace) -> int:
     """``lfrefract naive``: conventional view with no refraction handling."""
-    raw, meta = _capture(Path(args.raw))
-    camera = LightFieldCamera.from_dict(meta["camera"])
-    output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
-    image = naive_view(camera, raw, output=output, kind=args.kind)
+    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
+    image = naive_view(capture.camera, capture.raw, output=capture.output, kind=args.kind, recorded=capture.recorded)
     write_exr(Path(args.out), image, role=f"naive_{args.kind}")
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}{_masked_note(capture)}")
     return 0
 
 
 def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
-    raw, meta = _capture(Path(args.raw))
-    camera = LightFieldCamera.from_dict(meta["camera"])
-    output = PinholeCamera.from_dict(meta["ideal"]) if meta.get("ideal") else virtual_camera_for(camera)
-    stack = subaperture_stack(camera, raw, grid=args.grid, spacing_px=args.spacing_px, output=output)
+    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
+    camera, output = capture.camera, capture.output
+    if isinstance(args.grid, int) and args.grid >= 3 and args.grid % 2:  # else subaperture_stack names the grid
+        require_memory(
+            f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
+            f"with {capture.channels} channel(s), and its export",
+            view_stack_bytes(camera, output, grid=args.grid, channels=capture.channels, exported=True),
+        )
+    stack = subaperture_stack(
+        camera, capture.raw, grid=args.grid, spacing_px=args.spacing_px, output=output, recorded=capture.recorded
+    )
     out = write_view_stack(
         Path(args.out),
         stack,
         overwrite=args.overwrite,
         image_format=args.format,
-        metadata={"source": str(args.raw), "pose": meta.get("pose")},
+        metadata={
+            "source": str(args.raw),
+            "pose": None if capture.pose is None else capture.pose.to_dict(),
+            "unrecorded_raw": capture.masked_summary(),
+        },
     )
     print(
         f"{stack.grid} x {stack.grid} views of {output.width_px} x {output.height_px} px, spacing "
         f"{stack.spacing_px:.4g} px, baseline {stack.baseline_m * 1e3:.4g} mm, disparity "
-        f"{output.focal_px * stack.baseline_m:.4g} px m / depth; wrote {out}"
+        f"{output.focal_px * stack.baseline_m:.4g} px m / depth{_masked_note(capture)}; wrote {out}"
     )
     return 0
 
 
 def calibrate_mla_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate mla``."""
-    white = read_exr(Path(args.white))
-    result = calibrate_mla(white, grid=args.grid)
+    capture = read_capture(args.white, camera=_given_camera(args), camera_required=False)
+    result = calibrate_mla(capture.raw, grid=args.grid)
     data = {"kind": "lfrefract.calibrate.mla", "source": str(args.white), "mla": result.to_dict()}
-    meta_path = Path(args.white).parent / "meta.json"
-    if meta_path.is_file():
-        data["camera"] = result.calibrated_camera(LightFieldCamera.from_dict(read_json(meta_path)["camera"])).to_dict()
+    if capture.camera is not None:  # from --camera or the meta.json beside the white image
+        data["camera"] = result.calibrated_camera(capture.camera).to_dict()
     write_json(Path(args.out), data)
     counts = result.status_counts()
     print(
@@ -232,34 +300,41 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _board_captures(args: argparse.Namespace) -> tuple[LightFieldCamera, dict, PinholeCamera]:
-    """The camera of the board captures (one, from the first capture's meta.json), that meta, and
-    the geometry of their conventional views."""
+def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
+    """The parameters of the first board capture, after every capture's sidecar is checked (before
+    any raw image is read) and found to have the same camera (or ``--camera`` is given)."""
     if min(args.squares) < 2:
         raise ParameterError(f"--squares must be at least 2 x 2, got {args.squares!r}")
-    metas = [read_json(Path(path).parent / "meta.json") for path in args.boards]
-    meta = metas[0]
-    for path, other in zip(args.boards, metas, strict=True):
-        if other["camera"] != meta["camera"]:
+    given = _given_camera(args)
+    found = [capture_parameters(path, camera=given) for path in args.boards]
+    for path, other in zip(args.boards, found, strict=True):
+        if other.camera != found[0].camera:
             raise ParameterError(f"{path!r} was taken with another camera than {args.boards[0]!r}")
-    camera = LightFieldCamera.from_dict(meta["camera"])
-    return camera, meta, virtual_camera_for(camera)
+    return found[0]
+
+
+def _board_raw(path: str, camera: LightFieldCamera) -> np.ndarray:
+    """One board capture's raw image, checked (read one at a time: an Illum raw image is 0.5 GB)."""
+    return read_capture(path, camera=camera).raw
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate port``: corners located in each capture's light field (or in its
     sub-aperture views), then :func:`calibrate_port`."""
-    camera, meta, view = _board_captures(args)
-    known = meta.get("port") or {}
-    try:
-        n_air = known.get("n_air", 1.0)
-        thickness = args.thickness_m if args.thickness_m is not None else known["thickness_m"]
-        n_glass = args.n_glass if args.n_glass is not None else known["n_glass"]
-        n_water = args.n_water if args.n_water is not None else known["n_water"]
-    except KeyError as exc:
+    first = _board_parameters(args)
+    camera, known = first.camera, first.port  # known: the first capture's port, if its meta.json has one
+    view = virtual_camera_for(camera)
+    given = {"thickness_m": args.thickness_m, "n_glass": args.n_glass, "n_water": args.n_water}
+    missing = [name for name, value in given.items() if value is None and known is None]
+    if missing:
         raise ParameterError(
-            f"--{exc.args[0].replace('_', '-')} is needed (the capture's meta.json has no port)"
-        ) from None
+            f"{' and '.join('--' + name.replace('_', '-') for name in missing)} needed: the first capture "
+            f"({args.boards[0]!r}) has no port in a meta.json to take them from"
+        )
+    n_air = known.n_air if known is not None else 1.0
+    thickness = args.thickness_m if args.thickness_m is not None else known.thickness_m
+    n_glass = args.n_glass if args.n_glass is not None else known.n_glass
+    n_water = args.n_water if args.n_water is not None else known.n_water
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     step = args.subaperture_offset_px
     if step != 0 and args.corners != "views":
@@ -269,7 +344,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     for path in args.boards:
         board_view = board_view_from_light_field(
             camera,
-            read_exr(Path(path)),
+            _board_raw(path, camera),
             pattern=pattern,
             square_size_m=args.square_size_m,
             view=view,
@@ -297,14 +372,36 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 
 def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
-    camera, _, view = _board_captures(args)
-    conventional = ConventionalView(camera=camera, view=view)
-    images = [conventional.apply(read_exr(Path(path))) for path in args.boards]
+    camera = _board_parameters(args).camera
+    conventional = ConventionalView(camera=camera, view=virtual_camera_for(camera))
+    images = [conventional.apply(_board_raw(path, camera)) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
     result.save(Path(args.out))
     print(f"pinhole + distortion from {len(images)} views, {result.rms_px:.3f} px RMS; wrote {args.out}")
     return 0
+
+
+def _camera_option(
+    parser: argparse.ArgumentParser, default: str = "(default: the meta.json beside each raw image)"
+) -> None:
+    parser.add_argument(
+        "--camera",
+        metavar="PRESET|FILE",
+        help=f"the camera: a preset ({', '.join(sorted(PRESETS))}) or a JSON file with a camera table, e.g. "
+        f"`lfrefract describe PRESET --json` output or a render's meta.json {default}",
+    )
+
+
+def _capture_options(parser: argparse.ArgumentParser) -> None:
+    _camera_option(parser, "(default: the meta.json beside the raw image)")
+    parser.add_argument(
+        "--nonfinite",
+        choices=NONFINITE_POLICIES,
+        default="refuse",
+        help="raw images with NaN, infinite or negative values: refuse them (default), or mask those pixels "
+        "as unrecorded (no weight in the output; the output says how many)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -323,7 +420,9 @@ def main(argv: list[str] | None = None) -> int:
     syn.add_argument("--search", choices=SEARCH_METHODS, default="auto", help="candidate search (default: auto)")
     syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     syn.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
-    syn.add_argument("--port", help="port from `lfrefract calibrate port` (default: the capture's meta.json)")
+    syn.add_argument(
+        "--port", help="JSON file with a port (`lfrefract calibrate port` output; default: the capture's meta.json)"
+    )
     syn.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
     cal = sub.add_parser("calibrate", help="estimate the MLA, the port or the approximation baseline")
     cal_sub = cal.add_subparsers(dest="target", required=True)
@@ -331,6 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     cal_mla.add_argument("white", help="white image (EXR)")
     cal_mla.add_argument("--out", required=True, help="output JSON")
     cal_mla.add_argument("--grid", choices=["hex", "square"], help="lattice type (default: detected)")
+    _camera_option(cal_mla, "(default: the meta.json beside the white image, if any: its calibrated camera is written)")
     for target, what in (("port", "port normal and distance"), ("approx", "pinhole + distortion at one depth")):
         board = cal_sub.add_parser(target, help=f"{what} from underwater chessboard captures")
         board.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
@@ -339,6 +439,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         board.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
         board.add_argument("--out", required=True, help="output JSON")
+        _camera_option(board)
     cal_port = cal_sub.choices["port"]
     cal_port.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
     cal_port.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
@@ -359,6 +460,7 @@ def main(argv: list[str] | None = None) -> int:
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")
     nv.add_argument("--kind", choices=["central", "full"], default="central")
+    _capture_options(nv)
     vw = sub.add_parser("views", help="grid of sub-aperture views in the HCI 4D light field benchmark layout")
     vw.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     vw.add_argument("--out", required=True, help="output directory")
@@ -368,6 +470,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     vw.add_argument("--format", choices=VIEW_STACK_FORMATS, default="png", help="view images (default: png)")
     vw.add_argument("--overwrite", action="store_true", help="replace an earlier view stack in --out")
+    _capture_options(vw)
+    _capture_options(syn)
     args = parser.parse_args(argv)
     try:
         if args.command == "synth":
@@ -383,14 +487,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.source in PRESETS:
             info = describe(camera_preset(args.source))
         else:
-            meta = read_json(Path(args.source))
-            port = FlatPort.from_dict(meta["port"]) if meta.get("port") else None
-            info = describe(LightFieldCamera.from_dict(meta["camera"]), port)
-    except (ParameterError, FileFormatError, FileExistsError, KeyError) as exc:
+            sidecar = read_sidecar(args.source)
+            info = describe(sidecar.camera, sidecar.port)
+    except (ParameterError, FileFormatError, FileExistsError) as exc:
         print(f"lfrefract: error: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(info, indent=2))
+        # A camera file: `lfrefract describe PRESET --json > CAMERA.json` is a --camera of the other commands.
+        print(json.dumps({"schema_version": SCHEMA_VERSION, "kind": "lfrefract.describe", **info}, indent=2))
     else:
         for key, value in info.items():
             if isinstance(value, dict):

@@ -192,14 +192,39 @@ def write_text_atomically(path: str | os.PathLike, text: str) -> Path:
 
 
 def read_json(path: str | os.PathLike) -> dict:
-    """Read a sidecar written by :func:`write_json`, checking its schema version."""
+    """Read a sidecar written by :func:`write_json`, checking its schema version.
+
+    Parameters
+    ----------
+    path : path-like
+        A JSON file, UTF-8 (RFC 8259), whose top level is an object with ``schema_version``
+        :data:`SCHEMA_VERSION`.
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, not UTF-8 text (e.g. UTF-16), not JSON (or nested too deeply to
+        parse), or not of this schema version; the message names the file.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"no such file: {str(path)!r}")
     try:
-        data = json.loads(path.read_text())
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{str(path)!r} is not UTF-8 text (JSON files must be UTF-8; byte {exc.start}: {exc.reason})"
+        ) from None
+    try:
+        data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise FileFormatError(f"{str(path)!r} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise FileFormatError(f"{str(path)!r} is nested too deeply to be an lfrefract JSON file") from None
     version = data.get("schema_version") if isinstance(data, dict) else None
     if version != SCHEMA_VERSION:
         raise FileFormatError(f"{str(path)!r} has schema_version {version!r}, this lfrefract reads {SCHEMA_VERSION}")

@@ -7,10 +7,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfrefract._validate import ParameterError, as_points, finite_float, positive_float, positive_int, require_keys
-from lfrefract.camera import LightFieldCamera
+from lfrefract._validate import (
+    ParameterError,
+    as_points,
+    finite_float,
+    positive_float,
+    reject_unknown_keys,
+    require_keys,
+)
+from lfrefract.camera import MAX_IMAGE_SIDE_PX, LightFieldCamera, image_side_px
 
-__all__ = ["DEFAULT_PIXELS_PER_LENS", "PinholeCamera", "virtual_camera_for"]
+__all__ = ["DEFAULT_PIXELS_PER_LENS", "MAX_IMAGE_SIDE_PX", "PinholeCamera", "virtual_camera_for"]
 
 #: Output pixels per microlens pitch of the default refraction-free image. Two, because the
 #: paper's super-sampling (s = 2) selects sub-lens rays: objects away from the plane conjugate to
@@ -29,7 +36,13 @@ class PinholeCamera:
     cx_px, cy_px : float
         Principal point, pixels; pixel centres are at integers.
     width_px, height_px : int
-        Image size.
+        Image size, each at most :data:`MAX_IMAGE_SIDE_PX` (65536) pixels.
+
+    Raises
+    ------
+    ParameterError
+        If a value is not finite, the focal length not positive, or a size not an integer in
+        [1, :data:`MAX_IMAGE_SIDE_PX`].
     """
 
     focal_px: float
@@ -42,8 +55,8 @@ class PinholeCamera:
         positive_float("focal_px", self.focal_px)
         finite_float("cx_px", self.cx_px)
         finite_float("cy_px", self.cy_px)
-        positive_int("width_px", self.width_px)
-        positive_int("height_px", self.height_px)
+        image_side_px("width_px", self.width_px)
+        image_side_px("height_px", self.height_px)
 
     @property
     def K(self) -> np.ndarray:  # noqa: N802 - the conventional name
@@ -52,8 +65,11 @@ class PinholeCamera:
 
     @classmethod
     def from_K(cls, K: np.ndarray, width_px: int, height_px: int) -> PinholeCamera:  # noqa: N802, N803
-        """Build from an OpenCV intrinsic matrix with square pixels and no skew."""
-        k = np.asarray(K, dtype=np.float64)
+        """Build from an OpenCV intrinsic matrix (3, 3) with square pixels and no skew."""
+        try:
+            k = np.asarray(K, dtype=np.float64)
+        except (TypeError, ValueError):  # strings, ragged rows, tables: not a matrix of numbers
+            raise ParameterError(f"K must be a 3 x 3 matrix of numbers, got {K!r}") from None
         if k.shape != (3, 3) or not np.allclose(k[[1, 2, 2, 2], [0, 0, 1, 2]], [0, 0, 0, 1]) or k[0, 1] != 0:
             raise ParameterError(f"K must be an upper-triangular OpenCV intrinsic matrix, got {k.tolist()}")
         if not math.isclose(k[0, 0], k[1, 1], rel_tol=1e-9):
@@ -68,9 +84,19 @@ class PinholeCamera:
 
     @classmethod
     def from_dict(cls, data: dict) -> PinholeCamera:
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict`; unknown keys are an error.
+
+        Raises
+        ------
+        ParameterError
+            If ``data`` is not a dict, a key is missing or unknown, or a value is of the wrong type
+            or impossible; the message names the key.
+        """
+        if not isinstance(data, dict):
+            raise ParameterError(f"pinhole must be a table (a JSON object) with K, width_px, height_px, got {data!r}")
+        reject_unknown_keys("pinhole", data, {"K", "width_px", "height_px"})
         require_keys("pinhole", data, {"K", "width_px", "height_px"})
-        return cls.from_K(np.asarray(data["K"]), data["width_px"], data["height_px"])
+        return cls.from_K(data["K"], data["width_px"], data["height_px"])
 
     def project(self, points_cam: np.ndarray) -> np.ndarray:
         """Project camera-frame points (N, 3) to pixels (N, 2); points with z <= 0 give NaN."""

@@ -343,6 +343,8 @@ class FlatPort:
         Accepts the output of :meth:`to_dict`: its derived ``normal`` and ``total_tilt_deg`` must
         then agree with the tilt angles.
         """
+        if not isinstance(data, dict):
+            raise ParameterError(f"port must be a table (a JSON object) of port parameters, got {data!r}")
         data = dict(data)
         derived = {k: data.pop(k) for k in ("normal", "total_tilt_deg") if k in data}
         require_keys("port", data, {"distance_m"})

@@ -45,7 +45,10 @@ class Pose:
     position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        rows = np.asarray(self.rotation, dtype=np.float64)
+        try:
+            rows = np.asarray(self.rotation, dtype=np.float64)
+        except (TypeError, ValueError):  # strings or ragged rows: not a matrix of numbers
+            raise ParameterError(f"pose.rotation must be a finite 3x3 matrix, got {self.rotation!r}") from None
         if rows.shape != (3, 3) or not np.all(np.isfinite(rows)):
             raise ParameterError(f"pose.rotation must be a finite 3x3 matrix, got {self.rotation!r}")
         if not np.allclose(rows @ rows.T, np.eye(3), atol=1e-9) or np.linalg.det(rows) < 0:
@@ -62,9 +65,11 @@ class Pose:
     @classmethod
     def from_dict(cls, data: dict) -> Pose:
         """Build from ``{"rotation_xyz_deg": [...], "position_m": [...]}`` or ``{"rotation": ...}``."""
+        if not isinstance(data, dict):
+            raise ParameterError(f"pose must be a table (a JSON object), got {data!r}")
         if "rotation" in data:
             reject_unknown_keys("pose", data, {"rotation", "position_m"})
-            return cls(**{k: (tuple(map(tuple, v)) if k == "rotation" else tuple(v)) for k, v in data.items()})
+            return cls(**data)  # __post_init__ checks and converts both
         reject_unknown_keys("pose", data, {"rotation_xyz_deg", "position_m"})
         return cls.from_euler_xyz_deg(**data)
 

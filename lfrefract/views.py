@@ -19,6 +19,17 @@ offsets ``((column - h) s, (row - h) s)`` with ``h = (grid - 1) / 2``: its centr
 form a regular grid on the main-lens plane, ``baseline = s * pixel_pitch * f' / f_mla`` apart, and
 every view has the same K and orientation, so it is the input that light-field depth-estimation
 methods expect (``lfrefract.io.write_view_stack`` writes it in the HCI benchmark layout).
+
+Unrecorded raw pixels (NaN, inf or negative values a capture was told to mask,
+:func:`lfrefract.capture.read_capture`) are excluded with ``recorded``, an (H, W) bool mask of the
+raw image: every sample then averages the recorded pixels only, with its weights renormalised over
+them, and a sample with no recorded pixel has no value (NaN), which the resampling onto the pinhole
+image skips in turn (its barycentric weights renormalised over the lenses that have a value).
+Without ``recorded`` every raw value is used as it is.
+
+Every function that allocates an image first checks its estimated peak memory against the memory
+available (:func:`naive_view_bytes`, :func:`view_stack_bytes`), so that a size typed wrong is
+refused at once, naming the estimate.
 """
 
 from __future__ import annotations
@@ -31,6 +42,7 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.spatial import Delaunay
 
+from lfrefract._memory import require_memory
 from lfrefract._validate import ParameterError, finite_vector, one_of, positive_float
 from lfrefract.camera import LightFieldCamera
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
@@ -41,15 +53,26 @@ __all__ = [
     "apply_resampling",
     "micro_image_samples",
     "naive_view",
+    "naive_view_bytes",
     "raw_channels",
+    "recorded_mask",
     "resampling_matrix",
     "subaperture_centre_m",
     "subaperture_limit_px",
     "subaperture_stack",
     "subaperture_view",
+    "view_stack_bytes",
 ]
 
 VIEW_KINDS = ("central", "full")
+
+#: Bytes per output pixel that resampling per-lens values onto a pinhole image allocates besides the
+#: image: the Delaunay interpolation weights, their candidates and the sparse matrix (measured with
+#: tracemalloc on the tiny camera: 480 B at 920 x 690 px, 710 B at 92 x 69 px, where fixed costs weigh more).
+RESAMPLING_BYTES_PER_PIXEL = 600
+
+#: Bytes per raw pixel of the full-aperture view's per-pixel captured rays (measured: 270 B).
+FULL_VIEW_BYTES_PER_RAW_PIXEL = 300
 
 
 def _row_of(table: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -65,38 +88,77 @@ def _row_of(table: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
 
 def micro_image_samples(
-    camera: LightFieldCamera, raw: np.ndarray, idx: np.ndarray, offset_px: tuple[float, float] = (0.0, 0.0)
+    camera: LightFieldCamera,
+    raw: np.ndarray,
+    idx: np.ndarray,
+    offset_px: tuple[float, float] = (0.0, 0.0),
+    *,
+    recorded: np.ndarray | None = None,
 ) -> np.ndarray:
     """Bilinear samples (M, C) of ``raw`` (H, W, C) at the micro-image centres of lenses ``idx``
-    (M, 2) plus ``offset_px`` (sensor pixels)."""
+    (M, 2) plus ``offset_px`` (sensor pixels).
+
+    With ``recorded`` ((H, W) bool, :func:`recorded_mask`) only recorded pixels count: the bilinear
+    weights are renormalised over them, and a sample with none is NaN.
+    """
     points = camera.micro_image_centres_px(idx) + np.asarray(offset_px)
-    return np.stack(
-        [
-            ndimage.map_coordinates(raw[..., c], [points[:, 1], points[:, 0]], order=1, mode="nearest")
-            for c in range(raw.shape[2])
-        ],
+    planes = [raw[..., c] for c in range(raw.shape[2])]
+    return _bilinear(planes, points, None if recorded is None else _weight_plane(recorded))
+
+
+def _weight_plane(recorded: np.ndarray) -> np.ndarray:
+    """``recorded`` (H, W) bool as float32 1 / 0, the weight plane of :func:`_bilinear`."""
+    return np.ascontiguousarray(recorded, dtype=np.float32)
+
+
+def _bilinear(planes: list[np.ndarray], points: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
+    """Bilinear samples (M, C) of the channel ``planes`` (each (H, W)) at pixel ``points`` (M, 2).
+
+    ``weight`` ((H, W), 1 where recorded, 0 where not) renormalises the bilinear weights over the
+    recorded pixels: ``sum w_i r_i v_i / sum w_i r_i``, NaN where that sum is 0.
+    """
+    coords = [points[:, 1], points[:, 0]]
+    if weight is None:
+        return np.stack([ndimage.map_coordinates(p, coords, order=1, mode="nearest") for p in planes], axis=1)
+    total = ndimage.map_coordinates(weight, coords, order=1, mode="nearest")
+    values = np.stack(
+        [ndimage.map_coordinates(np.where(weight > 0, p, 0.0), coords, order=1, mode="nearest") for p in planes],
         axis=1,
     )
+    has = total > 0
+    out = np.full(values.shape, np.nan, dtype=values.dtype)
+    out[has] = values[has] / total[has, None]
+    return out
 
 
-def _per_lens_values(camera: LightFieldCamera, raw: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+def _per_lens_values(
+    camera: LightFieldCamera, raw: np.ndarray, kind: str, recorded: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
     idx = camera.lens_indices_on_sensor()
     if kind == "central":
-        return idx, micro_image_samples(camera, raw, idx, (0.0, 0.0))
+        return idx, micro_image_samples(camera, raw, idx, (0.0, 0.0), recorded=recorded)
     rays = camera.captured_rays()
     lens_of_pixel = _row_of(idx, rays.lens_indices)
     use = rays.in_aperture & (lens_of_pixel >= 0)
+    keep = np.bincount(lens_of_pixel[use], minlength=len(idx)) > 0  # lenses with a pixel in the aperture
+    if recorded is not None:
+        use &= recorded.ravel()
     counts = np.bincount(lens_of_pixel[use], minlength=len(idx))
     flat = raw.reshape(-1, raw.shape[2])
     sums = np.stack(
         [np.bincount(lens_of_pixel[use], weights=flat[use, c], minlength=len(idx)) for c in range(raw.shape[2])], axis=1
     )
-    keep = counts > 0
-    return idx[keep], sums[keep] / counts[keep, None]
+    with np.errstate(invalid="ignore", divide="ignore"):  # a lens with no recorded pixel: NaN, no value
+        return idx[keep], sums[keep] / counts[keep, None]
 
 
 def naive_view(
-    camera: LightFieldCamera, raw: np.ndarray, *, output: PinholeCamera | None = None, kind: str = "central"
+    camera: LightFieldCamera,
+    raw: np.ndarray,
+    *,
+    output: PinholeCamera | None = None,
+    kind: str = "central",
+    recorded: np.ndarray | None = None,
 ) -> np.ndarray:
     """Resample a conventional view of ``raw`` onto a pinhole image, ignoring any port.
 
@@ -109,16 +171,66 @@ def naive_view(
         Output geometry; default :func:`virtual_camera_for` ``(camera)``.
     kind : {"central", "full"}
         Central sub-aperture or full-aperture view.
+    recorded : ndarray of bool, shape (H, W), optional
+        Raw pixels that hold a recorded value; the others are not used (see the module docstring).
+        Default: all.
 
     Returns
     -------
     ndarray, float32, shape (height, width) or (height, width, C)
-        NaN outside the lenses' hull.
+        NaN outside the lenses' hull, and where no recorded pixel contributes.
+
+    Raises
+    ------
+    ParameterError
+        For a raw image of another size, an unknown ``kind``, or an output whose estimated memory
+        (:func:`naive_view_bytes`) exceeds the memory available.
     """
     one_of("kind", kind, VIEW_KINDS)
+    output = output if output is not None else virtual_camera_for(camera)
+    if not isinstance(output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
     image = raw_channels(camera, raw)
-    idx, values = _per_lens_values(camera, image, kind)
-    return _resample(camera, idx, values, output, (0.0, 0.0), grey=np.ndim(raw) == 2)
+    recorded = recorded_mask(camera, recorded)
+    require_memory(
+        f"a {kind} view of {output.width_px} x {output.height_px} px",
+        naive_view_bytes(camera, output, kind=kind, channels=image.shape[2]),
+    )
+    idx, values = _per_lens_values(camera, image, kind, recorded)
+    return _resample(camera, idx, values, output, (0.0, 0.0), grey=np.ndim(raw) == 2, masked=recorded is not None)
+
+
+def naive_view_bytes(camera: LightFieldCamera, output: PinholeCamera, *, kind: str, channels: int) -> int:
+    """Estimated peak memory of :func:`naive_view`, bytes (see :mod:`lfrefract._memory`).
+
+    The float32 raw copy, per output pixel the resampling (:data:`RESAMPLING_BYTES_PER_PIXEL`) and
+    the image (float64 product and float32 result, 12 bytes per channel), and for ``kind="full"``
+    the captured rays of every raw pixel (:data:`FULL_VIEW_BYTES_PER_RAW_PIXEL`).
+    """
+    raw_pixels = camera.sensor.width_px * camera.sensor.height_px
+    pixels = output.width_px * output.height_px
+    total = 4 * channels * raw_pixels + pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
+    if kind == "full":
+        total += FULL_VIEW_BYTES_PER_RAW_PIXEL * raw_pixels
+    return int(total)
+
+
+def view_stack_bytes(
+    camera: LightFieldCamera, output: PinholeCamera, *, grid: int, channels: int, exported: bool = False
+) -> int:
+    """Estimated peak memory of :func:`subaperture_stack`, bytes (see :mod:`lfrefract._memory`).
+
+    The views, ``grid^2`` float32 images of ``channels`` channels; the contiguous channel planes of
+    the raw image; one resampling (:data:`RESAMPLING_BYTES_PER_PIXEL` per output pixel) and one
+    view's product. ``exported`` adds what ``lfrefract.io.write_view_stack`` allocates over the
+    whole stack: one byte per value (its mask of finite values).
+    """
+    raw_pixels = camera.sensor.width_px * camera.sensor.height_px
+    pixels = output.width_px * output.height_px
+    values = grid * grid * pixels * channels
+    total = (5 if exported else 4) * values + 8 * channels * raw_pixels
+    total += pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
+    return int(total)
 
 
 def raw_channels(camera: LightFieldCamera, raw: np.ndarray) -> np.ndarray:
@@ -131,6 +243,25 @@ def raw_channels(camera: LightFieldCamera, raw: np.ndarray) -> np.ndarray:
     return arr[..., None] if arr.ndim == 2 else arr
 
 
+def recorded_mask(camera: LightFieldCamera, recorded: np.ndarray | None) -> np.ndarray | None:
+    """``recorded`` as a bool (H, W) array of the camera's sensor size, or None (every pixel recorded).
+
+    Raises
+    ------
+    ParameterError
+        If it is not a bool array of the sensor's shape.
+    """
+    if recorded is None:
+        return None
+    arr = np.asarray(recorded)
+    if arr.dtype != np.bool_ or arr.shape != (camera.sensor.height_px, camera.sensor.width_px):
+        raise ParameterError(
+            f"recorded must be a bool array of shape ({camera.sensor.height_px}, {camera.sensor.width_px}), "
+            f"got {arr.dtype} {arr.shape}"
+        )
+    return arr
+
+
 def _resample(
     camera: LightFieldCamera,
     idx: np.ndarray,
@@ -139,10 +270,14 @@ def _resample(
     slope_shift: tuple[float, float],
     *,
     grey: bool,
+    masked: bool = False,
 ) -> np.ndarray:
-    """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``."""
+    """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``;
+    ``masked``: lenses without a value (NaN) are skipped (:func:`_apply_resampling_masked`)."""
     output = output if output is not None else virtual_camera_for(camera)
     _, matrix, inside = resampling_matrix(camera, output, slope_shift=slope_shift, lenses=idx)
+    if masked:
+        return _apply_resampling_masked(matrix, inside, values, output, grey=grey)
     return apply_resampling(matrix, inside, values, output, grey=grey)
 
 
@@ -153,6 +288,22 @@ def apply_resampling(
     NaN outside the lenses' hull; ``grey`` drops the channel axis."""
     out = np.asarray(matrix @ values.astype(np.float64), dtype=np.float32)
     out[~inside] = np.nan
+    out = out.reshape(output.height_px, output.width_px, -1)
+    return out[..., 0] if grey else out
+
+
+def _apply_resampling_masked(
+    matrix: sparse.csr_matrix, inside: np.ndarray, values: np.ndarray, output: PinholeCamera, *, grey: bool
+) -> np.ndarray:
+    """:func:`apply_resampling` for per-lens values (M, C) of which some have no value (NaN in any
+    channel): each pixel's barycentric weights are renormalised over its lenses that have one, and a
+    pixel with none is NaN, like the pixels outside the hull."""
+    has = np.all(np.isfinite(values), axis=1)
+    total = matrix @ has.astype(np.float64)
+    summed = matrix @ np.where(has[:, None], values, 0.0).astype(np.float64)
+    ok = inside & (total > 0)
+    out = np.full(summed.shape, np.nan, dtype=np.float32)
+    out[ok] = summed[ok] / total[ok, None]
     out = out.reshape(output.height_px, output.width_px, -1)
     return out[..., 0] if grey else out
 
@@ -241,6 +392,7 @@ def subaperture_view(
     offset_px: tuple[float, float],
     *,
     output: PinholeCamera | None = None,
+    recorded: np.ndarray | None = None,
 ) -> np.ndarray:
     """The sub-aperture view at ``offset_px`` from the micro-image centres, as a pinhole image.
 
@@ -257,11 +409,13 @@ def subaperture_view(
         (:func:`subaperture_limit_px`), so that the sample point stays a pixel inside the rim.
     output : PinholeCamera, optional
         Output geometry; default :func:`virtual_camera_for` ``(camera)``.
+    recorded : ndarray of bool, shape (H, W), optional
+        Raw pixels that hold a recorded value; the others are not used (see the module docstring).
 
     Returns
     -------
     ndarray, float32, shape (height, width) or (height, width, C)
-        NaN outside the lenses' hull.
+        NaN outside the lenses' hull, and where no recorded pixel contributes.
     """
     du, dv = finite_vector("offset_px", offset_px, 2)
     limit = subaperture_limit_px(camera)
@@ -269,10 +423,20 @@ def subaperture_view(
         raise ParameterError(
             f"offset_px={offset_px!r} reaches the micro-image rim (at most {limit:.3g} px from its centre)"
         )
+    output = output if output is not None else virtual_camera_for(camera)
+    if not isinstance(output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
     image = raw_channels(camera, raw)
+    recorded = recorded_mask(camera, recorded)
+    require_memory(
+        f"a sub-aperture view of {output.width_px} x {output.height_px} px",
+        naive_view_bytes(camera, output, kind="central", channels=image.shape[2]),
+    )
     idx = camera.lens_indices_on_sensor()
-    values = micro_image_samples(camera, image, idx, (du, dv))
-    return _resample(camera, idx, values, output, _slope_shift(camera, du, dv), grey=np.ndim(raw) == 2)
+    values = micro_image_samples(camera, image, idx, (du, dv), recorded=recorded)
+    return _resample(
+        camera, idx, values, output, _slope_shift(camera, du, dv), grey=np.ndim(raw) == 2, masked=recorded is not None
+    )
 
 
 def subaperture_limit_px(camera: LightFieldCamera) -> float:
@@ -475,6 +639,7 @@ def subaperture_stack(
     grid: int = 9,
     spacing_px: float | None = None,
     output: PinholeCamera | None = None,
+    recorded: np.ndarray | None = None,
 ) -> ViewStack:
     """A regular ``grid x grid`` set of sub-aperture views of ``raw`` (a light-field view stack).
 
@@ -501,19 +666,25 @@ def subaperture_stack(
         largest such spacing, ``subaperture_limit_px(camera) / (sqrt(2) h)``.
     output : PinholeCamera, optional
         Geometry of every view; default :func:`virtual_camera_for` ``(camera)``.
+    recorded : ndarray of bool, shape (H_raw, W_raw), optional
+        Raw pixels that hold a recorded value; the others are not used (see the module docstring).
+        Default: all.
 
     Returns
     -------
     ViewStack
         ``views`` float32, shape (grid, grid, height, width) for a 2-D ``raw``, else
-        (grid, grid, height, width, C); NaN outside the lenses' hull.
+        (grid, grid, height, width, C); NaN outside the lenses' hull, and where no recorded pixel
+        contributes.
 
     Raises
     ------
     ParameterError
         If ``grid`` is not an odd integer >= 3, ``spacing_px`` is not positive and finite or puts
         the corner views beyond the limit, the camera's micro-images leave no room for any view
-        but the central one, or ``raw`` does not match the sensor.
+        but the central one, ``raw`` or ``recorded`` does not match the sensor, or the stack's
+        estimated memory (:func:`view_stack_bytes`) exceeds the memory available (checked before
+        any view is allocated).
     """
     if not isinstance(camera, LightFieldCamera):
         raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
@@ -543,13 +714,21 @@ def subaperture_stack(
                 f"the micro-image centres, beyond the limit of {limit:.4g} px (micro-image radius less one pixel); "
                 f"at most {largest:.4g} px for grid={grid}"
             )
+    channels = 1 if np.ndim(raw) == 2 else int(np.shape(raw)[2]) if np.ndim(raw) == 3 else 0
+    if channels:  # else raw_channels names the wrong shape
+        require_memory(
+            f"a {grid} x {grid} stack of {output.width_px} x {output.height_px} px views with {channels} channel(s)",
+            view_stack_bytes(camera, output, grid=grid, channels=channels),
+        )
     image = raw_channels(camera, raw)
+    recorded = recorded_mask(camera, recorded)
     grey = np.ndim(raw) == 2
     idx = camera.lens_indices_on_sensor()
     # micro_image_samples per view, with its invariant parts hoisted: the centres, and the channels
     # as contiguous planes (map_coordinates copies a strided channel on every call otherwise).
     centres_px = camera.micro_image_centres_px(idx)
     planes = [np.ascontiguousarray(image[..., c]) for c in range(image.shape[2])]
+    weight = None if recorded is None else _weight_plane(recorded)
     steps = (np.arange(grid, dtype=np.float64) - half) * spacing
     offsets = np.stack(np.broadcast_arrays(steps[None, :], steps[:, None]), axis=-1)  # [r, c] = (du_c, dv_r)
     shape = (grid, grid, output.height_px, output.width_px) + (() if grey else (image.shape[2],))
@@ -567,11 +746,10 @@ def subaperture_stack(
                 cached = None  # release the previous matrix before building the next
                 cached = resampling_matrix(camera, output, slope_shift=shift, lenses=idx)[1:]
                 cached_shift = shift
-            points = centres_px + np.asarray((du, dv))
-            values = np.stack(
-                [ndimage.map_coordinates(p, [points[:, 1], points[:, 0]], order=1, mode="nearest") for p in planes],
-                axis=1,
-            )
-            views[r, c] = apply_resampling(*cached, values, output, grey=grey)
+            values = _bilinear(planes, centres_px + np.asarray((du, dv)), weight)
+            if weight is None:
+                views[r, c] = apply_resampling(*cached, values, output, grey=grey)
+            else:
+                views[r, c] = _apply_resampling_masked(*cached, values, output, grey=grey)
             centres[r, c] = subaperture_centre_m(camera, (du, dv))
     return ViewStack(views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera)

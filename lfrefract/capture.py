@@ -1,0 +1,548 @@
+"""A capture: a raw lenslet image and the parameters it was taken with, read and checked in one place.
+
+A capture folder holds ``raw.exr`` (the raw lenslet image, float, (H, W) or (H, W, 3)) and its
+sidecar ``meta.json`` (:func:`lfrefract.io.write_json`) beside it; the core reads these keys of the
+sidecar, and ignores the others:
+
+* ``camera`` (required unless a camera is given): a table, :meth:`LightFieldCamera.from_dict`;
+* ``port`` (optional, may be null): a table, :meth:`FlatPort.from_dict`;
+* ``ideal`` (optional, may be null): the refraction-free image geometry, a table,
+  :meth:`PinholeCamera.from_dict` (default :func:`virtual_camera_for` of the camera);
+* ``pose`` (optional, may be null): the camera's pose in the world, a table, :meth:`Pose.from_dict`.
+
+A bare raw image (no ``meta.json`` beside it) is a capture too when its camera (and, for a
+refraction-free image, its port) is given: a preset name or a JSON file holding a ``camera`` table
+(:func:`camera_from_option`), and a JSON file holding a ``port`` table (:func:`port_from_file`).
+A given camera or port replaces the sidecar's.
+
+Raw values that are NaN, infinite or negative record no radiance. :func:`read_capture` refuses a
+raw image holding any (``nonfinite="refuse"``, the default), with their count, or, with
+``nonfinite="mask"``, marks their pixels as unrecorded (:attr:`Capture.recorded`): the commands
+then give them no weight (:func:`mask_warp_map`; ``recorded`` of :mod:`lfrefract.views`) and
+report how many were masked.
+
+Every problem is a :class:`lfrefract.io.FileFormatError` naming the file and the key (a missing
+key, a value of the wrong type or an impossible value), never a KeyError or a traceback.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lfrefract._validate import ParameterError, one_of
+from lfrefract.camera import LightFieldCamera
+from lfrefract.io import FileFormatError, read_exr, read_json
+from lfrefract.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.port import FlatPort
+from lfrefract.pose import Pose
+from lfrefract.presets import PRESETS, camera_preset
+
+__all__ = [
+    "NONFINITE_POLICIES",
+    "SIDECAR_NAME",
+    "Capture",
+    "CaptureParameters",
+    "CaptureSidecar",
+    "UnrecordedValues",
+    "camera_from_option",
+    "capture_parameters",
+    "mask_warp_map",
+    "mla_from_file",
+    "port_from_file",
+    "read_capture",
+    "read_sidecar",
+]
+
+#: Name of a capture's sidecar, beside its raw image.
+SIDECAR_NAME = "meta.json"
+
+#: What :func:`read_capture` does with NaN, infinite and negative raw values.
+NONFINITE_POLICIES = ("refuse", "mask")
+
+
+def _table(path: Path, data: dict, key: str, *, required: bool) -> dict | None:
+    """``data[key]`` if it is a table; None if it is absent or null and not ``required``."""
+    if key not in data or (data[key] is None and not required):
+        if required:
+            raise FileFormatError(f"{str(path)!r} has no key {key!r}")
+        return None
+    value = data[key]
+    if not isinstance(value, dict):
+        raise FileFormatError(f"{str(path)!r}: key {key!r} must be a table (a JSON object), got {value!r}")
+    return value
+
+
+def _parse(path: Path, key: str, value: dict, parser):
+    """``parser(value)``, its ParameterError a FileFormatError naming the file and key."""
+    try:
+        return parser(value)
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r}: key {key!r}: {exc}") from None
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class CaptureSidecar:
+    """The parameters a capture's sidecar (``meta.json``) gives, checked (:func:`read_sidecar`).
+
+    Attributes
+    ----------
+    path : Path
+        The sidecar file.
+    data : dict
+        Its whole content, as read (not to be modified).
+    camera : LightFieldCamera or None
+        None only when the sidecar has no ``camera`` and none was required.
+    port : FlatPort or None
+    ideal : PinholeCamera or None
+    pose : Pose or None
+    """
+
+    path: Path
+    data: dict
+    camera: LightFieldCamera | None
+    port: FlatPort | None
+    ideal: PinholeCamera | None
+    pose: Pose | None
+
+
+def read_sidecar(path: str | os.PathLike, *, camera_required: bool = True) -> CaptureSidecar:
+    """Read and check a capture's sidecar: every key the core uses, with its type and values.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``meta.json`` (schema version 1).
+    camera_required : bool
+        Whether a missing ``camera`` is an error (it is not when the caller gives the camera).
+
+    Returns
+    -------
+    CaptureSidecar
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, not UTF-8 JSON of this schema, lacks ``camera`` (when required), or
+        a key the core reads (``camera``, ``port``, ``ideal``, ``pose``) is not a table or holds an
+        invalid value: the message names the file and the key.
+    """
+    path = Path(path)
+    data = read_json(path)
+    camera_data = _table(path, data, "camera", required=camera_required)
+    port_data = _table(path, data, "port", required=False)
+    ideal_data = _table(path, data, "ideal", required=False)
+    pose_data = _table(path, data, "pose", required=False)
+    return CaptureSidecar(
+        path=path,
+        data=data,
+        camera=None if camera_data is None else _parse(path, "camera", camera_data, LightFieldCamera.from_dict),
+        port=None if port_data is None else _parse(path, "port", port_data, FlatPort.from_dict),
+        ideal=None if ideal_data is None else _parse(path, "ideal", ideal_data, PinholeCamera.from_dict),
+        pose=None if pose_data is None else _parse(path, "pose", pose_data, Pose.from_dict),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class UnrecordedValues:
+    """Counts of the raw values that record no radiance, and of the pixels holding any.
+
+    Attributes
+    ----------
+    nan, posinf, neginf, negative : int
+        Values that are NaN, +inf, -inf, and finite and below zero.
+    pixels : int
+        Pixels with at least one such value (in any channel).
+    """
+
+    nan: int = 0
+    posinf: int = 0
+    neginf: int = 0
+    negative: int = 0
+    pixels: int = 0
+
+    @classmethod
+    def of(cls, raw: np.ndarray) -> UnrecordedValues:
+        """Count them in ``raw`` ((H, W) or (H, W, C) float), and the pixels that hold any."""
+        nan = np.isnan(raw)
+        posinf = np.isposinf(raw)
+        neginf = np.isneginf(raw)
+        negative = raw < 0  # False for NaN, True for -inf
+        bad = nan | posinf | negative
+        return cls(
+            nan=int(nan.sum()),
+            posinf=int(posinf.sum()),
+            neginf=int(neginf.sum()),
+            negative=int(negative.sum()) - int(neginf.sum()),
+            pixels=int((bad.any(axis=2) if bad.ndim == 3 else bad).sum()),
+        )
+
+    @property
+    def values(self) -> int:
+        """All unrecorded values."""
+        return self.nan + self.posinf + self.neginf + self.negative
+
+    def describe(self) -> str:
+        """E.g. ``"1234 NaN, 5 +inf and 17 negative pixel values (in 1240 pixels)"``."""
+        parts = [
+            f"{n} {what}"
+            for n, what in (
+                (self.nan, "NaN"),
+                (self.posinf, "+inf"),
+                (self.neginf, "-inf"),
+                (self.negative, "negative"),
+            )
+            if n
+        ]
+        listed = ", ".join(parts[:-1]) + f" and {parts[-1]}" if len(parts) > 1 else (parts[0] if parts else "no bad")
+        return f"{listed} pixel values (in {self.pixels} pixels)"
+
+    def to_dict(self) -> dict:
+        """Plain data for sidecars."""
+        return {**dataclasses.asdict(self), "values": self.values}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Capture:
+    """A raw lenslet image with the parameters it was taken with, checked (:func:`read_capture`).
+
+    Parameters
+    ----------
+    raw_path : Path
+        The raw image file (named in every message).
+    raw : ndarray, float32, shape (H, W) or (H, W, C)
+        The raw image as read, made read-only. Unrecorded values (see ``nonfinite``) are kept as
+        they are: use :attr:`recorded`.
+    camera : LightFieldCamera or None
+        The camera; its sensor must be (W, H). None only for commands that need none.
+    port : FlatPort or None
+    ideal : PinholeCamera or None
+        The refraction-free image geometry the sidecar gives (:attr:`output` has the default).
+    pose : Pose or None
+    sidecar_path : Path or None
+        The sidecar read, if any.
+    sidecar : dict or None
+        Its content, as read (not to be modified).
+    camera_source : str
+        Where the camera comes from, for messages (the sidecar, a file, a preset).
+    nonfinite : {"refuse", "mask"}
+        What to do with NaN, infinite and negative raw values.
+
+    Attributes
+    ----------
+    unrecorded : UnrecordedValues
+        Their counts.
+    recorded : ndarray of bool, shape (H, W), or None
+        With ``nonfinite="mask"`` and any unrecorded value: False at the pixels holding one.
+        None when every pixel is recorded.
+
+    Raises
+    ------
+    FileFormatError
+        If the raw image does not match the camera's sensor, or holds unrecorded values and
+        ``nonfinite`` is ``"refuse"`` (the message gives their counts).
+    ParameterError
+        If a value has the wrong type.
+    """
+
+    raw_path: Path
+    raw: np.ndarray
+    camera: LightFieldCamera | None
+    port: FlatPort | None = None
+    ideal: PinholeCamera | None = None
+    pose: Pose | None = None
+    sidecar_path: Path | None = None
+    sidecar: dict | None = None
+    camera_source: str = "the camera given"
+    nonfinite: str = "refuse"
+    unrecorded: UnrecordedValues = field(init=False)
+    recorded: np.ndarray | None = field(init=False)
+
+    def __post_init__(self) -> None:
+        one_of("nonfinite", self.nonfinite, NONFINITE_POLICIES)
+        for name, value, kind in (
+            ("camera", self.camera, LightFieldCamera),
+            ("port", self.port, FlatPort),
+            ("ideal", self.ideal, PinholeCamera),
+            ("pose", self.pose, Pose),
+        ):
+            if value is not None and not isinstance(value, kind):
+                raise ParameterError(f"{name} must be a {kind.__name__} or None, got {value!r}")
+        raw = np.asarray(self.raw)
+        if raw.ndim not in (2, 3) or not np.issubdtype(raw.dtype, np.floating):
+            raise ParameterError(f"raw must be a float (H, W) or (H, W, C) image, got {raw.dtype} {raw.shape}")
+        raw = raw.view()
+        raw.setflags(write=False)
+        name = str(self.raw_path)
+        if self.camera is not None:
+            sensor = (self.camera.sensor.height_px, self.camera.sensor.width_px)
+            if raw.shape[:2] != sensor:
+                raise FileFormatError(
+                    f"{name!r} is {raw.shape[1]} x {raw.shape[0]} px, but the camera ({self.camera_source}) has a "
+                    f"{sensor[1]} x {sensor[0]} px sensor"
+                )
+        counts = UnrecordedValues.of(raw)
+        recorded = None
+        if counts.values:
+            if self.nonfinite == "refuse":
+                raise FileFormatError(
+                    f"{name!r} has {counts.describe()}; pass --nonfinite mask (nonfinite='mask') to treat those "
+                    "pixels as unrecorded"
+                )
+            recorded = np.all(np.isfinite(raw) & (raw >= 0), axis=2) if raw.ndim == 3 else np.isfinite(raw) & (raw >= 0)
+            recorded.setflags(write=False)
+        object.__setattr__(self, "raw", raw)
+        object.__setattr__(self, "raw_path", Path(self.raw_path))
+        object.__setattr__(self, "unrecorded", counts)
+        object.__setattr__(self, "recorded", recorded)
+
+    @property
+    def output(self) -> PinholeCamera:
+        """The refraction-free (and conventional) image geometry: :attr:`ideal`, else
+        :func:`virtual_camera_for` of the camera."""
+        if self.ideal is not None:
+            return self.ideal
+        if self.camera is None:
+            raise ParameterError(f"{str(self.raw_path)!r}: no camera, so no default image geometry")
+        return virtual_camera_for(self.camera)
+
+    @property
+    def channels(self) -> int:
+        """Channels of the raw image (1 for a 2-D one)."""
+        return 1 if self.raw.ndim == 2 else int(self.raw.shape[2])
+
+    def masked_summary(self) -> dict | None:
+        """What was masked, for sidecars (None when nothing was): the counts and the policy."""
+        if self.recorded is None:
+            return None
+        return {"policy": "masked as unrecorded (--nonfinite mask)", **self.unrecorded.to_dict()}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class CaptureParameters:
+    """What a capture was taken with, from its sidecar and the options, before its raw image is
+    read (:func:`capture_parameters`); the fields of :class:`Capture` of the same names."""
+
+    raw_path: Path
+    camera: LightFieldCamera | None
+    port: FlatPort | None
+    ideal: PinholeCamera | None
+    pose: Pose | None
+    sidecar_path: Path | None
+    sidecar: dict | None
+    camera_source: str
+
+
+def capture_parameters(
+    raw_path: str | os.PathLike,
+    *,
+    camera: LightFieldCamera | None = None,
+    port: FlatPort | None = None,
+    camera_required: bool = True,
+) -> CaptureParameters:
+    """The parameters of the capture of ``raw_path``, checked, without reading the raw image.
+
+    Its sidecar is the ``meta.json`` beside it, if there is one (:func:`read_sidecar`); a given
+    ``camera`` or ``port`` replaces the sidecar's. See :func:`read_capture` for the parameters.
+
+    Raises
+    ------
+    FileFormatError
+        If the sidecar is unreadable or a key of it is invalid, or no camera is given or found
+        (when ``camera_required``); the message names the file and the key.
+    ParameterError
+        For an option of the wrong type.
+    """
+    if camera is not None and not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    if port is not None and not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort, got {port!r}")
+    raw_path = Path(raw_path)
+    sidecar_path = raw_path.parent / SIDECAR_NAME
+    if sidecar_path.exists() and not sidecar_path.is_file():
+        raise FileFormatError(f"{str(sidecar_path)!r} (the sidecar beside {str(raw_path)!r}) is not a file")
+    sidecar = read_sidecar(sidecar_path, camera_required=False) if sidecar_path.exists() else None
+    if camera is None and camera_required:
+        if sidecar is not None and sidecar.camera is None:
+            raise FileFormatError(
+                f"{str(sidecar_path)!r} has no key 'camera' (the camera {str(raw_path)!r} was taken with), and no "
+                "camera was given (--camera PRESET|FILE)"
+            )
+        if sidecar is None:
+            if not raw_path.is_file():
+                raise FileFormatError(f"no such file: {str(raw_path)!r}")
+            raise FileFormatError(
+                f"{str(raw_path)!r} has no {SIDECAR_NAME} beside it ({str(sidecar_path)!r}) and no camera was given "
+                "(--camera PRESET|FILE)"
+            )
+    if camera is not None:
+        source = "the camera given"
+    elif sidecar is not None and sidecar.camera is not None:
+        source = f"{str(sidecar.path)!r}"
+    else:
+        source = "none"
+    return CaptureParameters(
+        raw_path=raw_path,
+        camera=camera if camera is not None else (None if sidecar is None else sidecar.camera),
+        port=port if port is not None else (None if sidecar is None else sidecar.port),
+        ideal=None if sidecar is None else sidecar.ideal,
+        pose=None if sidecar is None else sidecar.pose,
+        sidecar_path=None if sidecar is None else sidecar.path,
+        sidecar=None if sidecar is None else sidecar.data,
+        camera_source=source,
+    )
+
+
+def read_capture(
+    raw_path: str | os.PathLike,
+    *,
+    camera: LightFieldCamera | None = None,
+    port: FlatPort | None = None,
+    nonfinite: str = "refuse",
+    camera_required: bool = True,
+) -> Capture:
+    """Read a capture: the raw image and the sidecar ``meta.json`` beside it, or a bare raw image.
+
+    Parameters
+    ----------
+    raw_path : path-like
+        The raw lenslet image (OpenEXR, float, (H, W) or (H, W, 3)).
+    camera : LightFieldCamera, optional
+        The camera, replacing the sidecar's (needed when there is no sidecar, or it has no camera).
+    port : FlatPort, optional
+        The port, replacing the sidecar's.
+    nonfinite : {"refuse", "mask"}
+        NaN, infinite and negative raw values: refuse the image (default), or mark their pixels as
+        unrecorded (:attr:`Capture.recorded`).
+    camera_required : bool
+        Whether a capture without a camera is an error (``lfrefract calibrate mla`` needs none).
+
+    Returns
+    -------
+    Capture
+
+    Raises
+    ------
+    FileFormatError
+        If a file is missing or unreadable, a key of the sidecar is missing or invalid (the message
+        names the file and the key), the raw image does not match the camera, or it holds
+        unrecorded values and ``nonfinite="refuse"``.
+    ParameterError
+        For an invalid option.
+    """
+    one_of("nonfinite", nonfinite, NONFINITE_POLICIES)
+    parameters = capture_parameters(raw_path, camera=camera, port=port, camera_required=camera_required)
+    raw = read_exr(parameters.raw_path)
+    fields = {f.name: getattr(parameters, f.name) for f in dataclasses.fields(CaptureParameters)}
+    return Capture(raw=raw, nonfinite=nonfinite, **fields)
+
+
+def _json_key(path: Path, key: str, what: str) -> dict:
+    """The table ``key`` of the lfrefract JSON file ``path`` (``what`` names the option)."""
+    data = read_json(path)
+    if key not in data:
+        raise FileFormatError(f"{str(path)!r} has no key {key!r}: it is not {what}")
+    value = data[key]
+    if not isinstance(value, dict):
+        raise FileFormatError(f"{str(path)!r}: key {key!r} must be a table (a JSON object), got {value!r}")
+    return value
+
+
+def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
+    """The camera a ``--camera`` option names: an existing JSON file whose ``camera`` table is read
+    (a render's ``meta.json``, ``lfrefract describe PRESET --json`` output, ``lfrefract calibrate mla``
+    output), else a preset name.
+
+    Raises
+    ------
+    FileFormatError
+        If the file is not lfrefract JSON or its ``camera`` is missing or invalid.
+    ParameterError
+        If ``value`` is neither a file nor a preset.
+    """
+    path = Path(value)
+    if path.is_file():
+        return _parse(path, "camera", _json_key(path, "camera", "a camera file"), LightFieldCamera.from_dict)
+    if str(value) in PRESETS:
+        return camera_preset(str(value))
+    raise ParameterError(f"--camera must be a preset ({', '.join(sorted(PRESETS))}) or a JSON file, got {str(value)!r}")
+
+
+def port_from_file(path: str | os.PathLike) -> FlatPort:
+    """The port of a JSON file with a ``port`` table (``lfrefract calibrate port`` output, a render's
+    ``meta.json``).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, not lfrefract JSON, or its ``port`` is missing, null or invalid.
+    """
+    path = Path(path)
+    return _parse(path, "port", _json_key(path, "port", "a port file"), FlatPort.from_dict)
+
+
+def mla_from_file(path: str | os.PathLike):
+    """The MLA calibration of a ``lfrefract calibrate mla`` output (its ``mla`` table).
+
+    Returns
+    -------
+    lfrefract.calibration.MlaCalibration
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, not lfrefract JSON, or its ``mla`` is missing or invalid.
+    """
+    from lfrefract.calibration import MlaCalibration
+
+    path = Path(path)
+    return _parse(path, "mla", _json_key(path, "mla", "an MLA calibration"), MlaCalibration.from_dict)
+
+
+def mask_warp_map(warp, recorded: np.ndarray | None):
+    """A warp map that gives unrecorded raw pixels no weight.
+
+    Every entry on an unrecorded raw pixel is dropped and each row's remaining weights are
+    renormalised to sum to 1, so an output pixel is the weighted mean of the recorded rays among
+    those it selected. A row left with none is empty: the pixel is not filled (its value is 0 and
+    :attr:`WarpMap.filled` False) and its coverage is set to 0 (the camera recorded none of its rays).
+
+    Parameters
+    ----------
+    warp : lfrefract.synthesis.WarpMap
+    recorded : ndarray of bool, shape (H_raw, W_raw), or None
+        :attr:`Capture.recorded`; None returns ``warp`` itself.
+
+    Returns
+    -------
+    lfrefract.synthesis.WarpMap
+        Same output, key and meta (plus ``meta["unrecorded_raw_pixels"]``); not to be cached under
+        that key.
+    """
+    if recorded is None:
+        return warp
+    recorded = np.asarray(recorded)
+    if recorded.dtype != np.bool_ or recorded.shape != tuple(warp.raw_shape):
+        raise ParameterError(
+            f"recorded must be a bool array of shape {tuple(warp.raw_shape)}, got {recorded.dtype} {recorded.shape}"
+        )
+    n = len(warp.indptr) - 1
+    counts = np.diff(warp.indptr)
+    rows = np.repeat(np.arange(n), counts)
+    keep = recorded.ravel()[warp.indices]
+    kept_rows = rows[keep]
+    total = np.bincount(kept_rows, weights=warp.weights[keep], minlength=n)
+    kept_counts = np.bincount(kept_rows, minlength=n)
+    indptr = np.zeros(n + 1, dtype=warp.indptr.dtype)
+    np.cumsum(kept_counts, out=indptr[1:])
+    weights = (warp.weights[keep] / total[kept_rows]).astype(warp.weights.dtype)
+    emptied = ((counts > 0) & (kept_counts == 0)).reshape(warp.coverage.shape)
+    coverage = np.where(emptied, 0.0, warp.coverage).astype(warp.coverage.dtype)
+    meta = {**warp.meta, "unrecorded_raw_pixels": int(recorded.size - np.count_nonzero(recorded))}
+    return dataclasses.replace(
+        warp, indptr=indptr, indices=warp.indices[keep], weights=weights, coverage=coverage, meta=meta
+    )
