@@ -35,17 +35,23 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from lfrefract._validate import ParameterError, non_negative_float, positive_float, positive_int
+from lfrefract._validate import ParameterError, non_negative_float, positive_float, positive_int, regular_file
+from lfrefract.io import FileFormatError
 from lfrefract.outputs import atomic_file
 
 __all__ = [
     "BLACK",
+    "MAX_MESH_FILE_BYTES",
+    "TEXTURE_OCTAVES",
     "WHITE",
     "bowl_cap_geometry",
     "bowl_mesh",
+    "check_mesh_content",
+    "check_mesh_file",
     "chessboard_inner_corners",
     "chessboard_size_m",
     "chessboard_texture",
+    "chessboard_texture_shape",
     "figurine_mesh",
     "random_texture",
     "vertex_normals",
@@ -59,6 +65,10 @@ WHITE = 0.9
 
 _TEXTURE_LOW = 0.05
 _TEXTURE_HIGH = 0.95
+
+#: Default number of noise scales of :func:`random_texture` (features of 2 to 64 texels); a
+#: texture needs at least ``2 ** TEXTURE_OCTAVES`` texels a side.
+TEXTURE_OCTAVES = 6
 
 
 # --------------------------------------------------------------------------------------------
@@ -124,7 +134,7 @@ def _faces(value: Any, n_vertices: int) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def random_texture(*, size_px: int, seed: int, octaves: int = 6) -> np.ndarray:
+def random_texture(*, size_px: int, seed: int, octaves: int = TEXTURE_OCTAVES) -> np.ndarray:
     """A colour noise texture with detail at several scales, for stereo matching.
 
     The texture is a sum of ``octaves`` band-limited Gaussian noise fields whose feature sizes
@@ -144,7 +154,7 @@ def random_texture(*, size_px: int, seed: int, octaves: int = 6) -> np.ndarray:
     seed : int
         Non-negative seed of the random generator; the same seed gives the same texture.
     octaves : int, optional
-        Number of noise scales (default 6). Octave ``k`` (0-based) has features of about
+        Number of noise scales (default :data:`TEXTURE_OCTAVES`, 6). Octave ``k`` (0-based) has features of about
         ``2 ** (k + 1)`` texels (Gaussian standard deviation ``2 ** k`` texels).
 
     Returns
@@ -194,6 +204,11 @@ def random_texture(*, size_px: int, seed: int, octaves: int = 6) -> np.ndarray:
 
 def _margin_texels(margin_squares: float, texels_per_square: int) -> int:
     margin = margin_squares * texels_per_square
+    if not math.isfinite(margin):
+        raise ParameterError(
+            f"margin_squares * texels_per_square must be finite, got margin_squares={margin_squares!r} with "
+            f"texels_per_square={texels_per_square}"
+        )
     rounded = round(margin)
     if abs(margin - rounded) > 1e-9 * max(1.0, margin):
         raise ParameterError(
@@ -233,18 +248,46 @@ def chessboard_texture(*, squares: tuple[int, int], texels_per_square: int, marg
     ParameterError
         If a parameter is out of range, or the margin is not a whole number of texels.
     """
+    height, width = chessboard_texture_shape(
+        squares=squares, texels_per_square=texels_per_square, margin_squares=margin_squares
+    )
     cols, rows = _squares(squares)
-    tps = positive_int("texels_per_square", texels_per_square)
-    margin = non_negative_float("margin_squares", margin_squares)
-    m_tex = _margin_texels(margin, tps)
-    height = rows * tps + 2 * m_tex
-    width = cols * tps + 2 * m_tex
+    tps = int(texels_per_square)
+    m_tex = (width - cols * tps) // 2
     r = np.arange(height) - m_tex
     c = np.arange(width) - m_tex
     inside = ((r >= 0) & (r < rows * tps))[:, None] & ((c >= 0) & (c < cols * tps))[None, :]
     parity = ((r // tps)[:, None] + (c // tps)[None, :]) % 2 == 0
     grey = np.where(inside & parity, np.float32(BLACK), np.float32(WHITE)).astype(np.float32)
     return np.repeat(grey[:, :, None], 3, axis=2)
+
+
+def chessboard_texture_shape(
+    *, squares: tuple[int, int], texels_per_square: int, margin_squares: float = 1.0
+) -> tuple[int, int]:
+    """``(H, W)`` of :func:`chessboard_texture`, without building it, with the same checks.
+
+    Parameters
+    ----------
+    squares, texels_per_square, margin_squares
+        As for :func:`chessboard_texture`.
+
+    Returns
+    -------
+    tuple of int
+        ``(H, W)`` = ``((rows + 2 * margin_squares) * texels_per_square,
+        (columns + 2 * margin_squares) * texels_per_square)``.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`chessboard_texture`.
+    """
+    cols, rows = _squares(squares)
+    tps = positive_int("texels_per_square", texels_per_square)
+    margin = non_negative_float("margin_squares", margin_squares)
+    m_tex = _margin_texels(margin, tps)
+    return rows * tps + 2 * m_tex, cols * tps + 2 * m_tex
 
 
 def chessboard_size_m(
@@ -606,6 +649,338 @@ def figurine_mesh(*, height_m: float, seed: int = 0, resolution: int = 64) -> tu
     verts = (verts - 0.5 * (lo + hi)) * (height / (hi[1] - lo[1]))
     faces = _closed_grid_faces(n_lat - 1, n_lon)
     return verts, faces, vertex_normals(verts, faces)
+
+
+# --------------------------------------------------------------------------------------------
+# user mesh files (OBJ, PLY): cheap checks before Mitsuba reads them
+# --------------------------------------------------------------------------------------------
+
+#: Largest user mesh file, bytes (512 MiB). An OBJ spends about 30 bytes on a vertex line and 20
+#: on a face line, so 512 MiB is some 10 million triangles, far more detail than a preset
+#: camera resolves (the Illum's refraction-free image has 0.23 Mpx); Mitsuba needs several
+#: times the file's size in memory to load it and about a minute per GiB. A larger file is a
+#: mistake (a sparse or wrong file), refused from its size alone before anything reads it.
+MAX_MESH_FILE_BYTES = 512 * 2**20
+
+#: Longest OBJ line: Mitsuba's OBJ reader copies each line into a 1025-byte buffer.
+_OBJ_MAX_LINE = 1023
+#: OBJ content is checked in blocks of this many bytes (bounded memory whatever the file).
+_OBJ_BLOCK = 8 * 2**20
+#: A PLY header must end within this many bytes.
+_PLY_MAX_HEADER = 64 * 2**10
+_PLY_TYPES = {
+    "char": 1, "uchar": 1, "int8": 1, "uint8": 1,
+    "short": 2, "ushort": 2, "int16": 2, "uint16": 2, "half": 2,
+    "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+    "long": 8, "ulong": 8, "double": 8, "float64": 8,
+}  # fmt: skip
+
+
+def check_mesh_file(path: str | os.PathLike[str]) -> int:
+    """Size of a user mesh file, checked from its metadata alone: a regular file of at most
+    :data:`MAX_MESH_FILE_BYTES`.
+
+    Raises
+    ------
+    ParameterError
+        If ``path`` does not exist, is not a regular file (a directory, a FIFO: the message says
+        which) or is larger than :data:`MAX_MESH_FILE_BYTES`; the message names the path.
+    """
+    return regular_file("mesh path", path, max_bytes=MAX_MESH_FILE_BYTES)
+
+
+def check_mesh_content(path: str | os.PathLike[str]) -> None:
+    """Check that a user mesh file (``.obj`` or ``.ply``) holds a triangle mesh Mitsuba can read.
+
+    Cheap checks, so that a wrong file gets a message naming the file and the problem rather
+    than Mitsuba's internal one (an empty or garbage OBJ gives "Storing new normals in a Mesh
+    that didn't have normals at construction time"). First :func:`check_mesh_file` (kind, size).
+
+    OBJ (ASCII text, read in blocks, vectorised: about 0.1 s per 10 MiB): every line is blank,
+    a ``#`` comment, or a statement Mitsuba reads (``v``, ``vn``, ``vt``, ``f``) or skips
+    (``o``, ``g``, ``s``, ``l``, ``p``, ``mg``, ``vp``, ``usemtl``, ``mtllib``); no line is longer
+    than 1023 characters (Mitsuba's limit); ``v`` and ``vn`` lines hold at least 3 numbers and
+    ``vt`` lines at least 2 (only the characters of numbers); ``f`` lines hold at least 3 vertex
+    references of unsigned indices (``i``, ``i/j``, ``i//k``, ``i/j/k``: Mitsuba does not read
+    negative, relative, indices); and there is at least one ``v`` and one ``f`` line. The syntax
+    of each number and the range of each index are left to Mitsuba, whose messages name the line.
+
+    PLY (the header only, and the file's size): ``ply`` then ``format ascii|binary_little_endian|
+    binary_big_endian 1.0``, ``element``, ``property`` (of a known type), ``comment`` and
+    ``obj_info`` lines up to ``end_header`` within 64 KiB; a ``vertex`` element of at least one
+    vertex with ``x``, ``y`` and ``z``; a ``face`` element of at least one face with a list
+    property ``vertex_indices`` (or ``vertex_index``). A binary file must be at least as long as
+    its elements with triangular faces (Mitsuba reads triangles only).
+
+    Parameters
+    ----------
+    path : path-like
+        The mesh file; its suffix (``.obj`` or ``.ply``, any case) selects the format.
+
+    Raises
+    ------
+    ParameterError
+        From :func:`check_mesh_file`, or for a suffix other than ``.obj`` and ``.ply``.
+    FileFormatError
+        If the content is not what the format needs; the message starts with the quoted path
+        and says what is wrong (and, for an OBJ, on which line).
+    """
+    p = Path(path)
+    size = check_mesh_file(p)
+    suffix = p.suffix.lower()
+    if suffix not in (".obj", ".ply"):
+        raise ParameterError(f"mesh path must end in .obj or .ply, got {str(p)!r}")
+    if size == 0:
+        raise FileFormatError(f"{str(p)!r}: the file is empty")
+    if suffix == ".obj":
+        _check_obj(p)
+    else:
+        _check_ply(p, size)
+
+
+def _check_obj(path: Path) -> None:
+    counts = {"v": 0, "f": 0}
+    line0 = 0  # lines before the current block
+    carry = b""
+    with path.open("rb") as fh:
+        while True:
+            block = fh.read(_OBJ_BLOCK)
+            data = carry + block
+            if not block:
+                if data:
+                    _check_obj_lines(path, data + b"\n", line0, counts)
+                break
+            cut = data.rfind(b"\n") + 1
+            if cut == 0:
+                _obj_error(path, line0 + 1, data[:40], f"is longer than {_OBJ_MAX_LINE} characters (Mitsuba's limit)")
+            line0 += _check_obj_lines(path, data[:cut], line0, counts)
+            carry = data[cut:]
+    if counts["v"] == 0:
+        raise FileFormatError(f"{str(path)!r}: no vertex ('v') lines: not an OBJ mesh")
+    if counts["f"] == 0:
+        raise FileFormatError(f"{str(path)!r}: no face ('f') lines: Mitsuba renders triangles, not points")
+
+
+def _obj_error(path: Path, line: int, text: bytes, problem: str) -> None:
+    shown = text.decode("ascii", errors="backslashreplace").rstrip("\r\n")
+    if len(shown) > 60:
+        shown = shown[:60] + "..."
+    raise FileFormatError(f"{str(path)!r}: line {line} ({shown!r}) {problem}")
+
+
+# Byte classes of OBJ text (bytes.translate maps a block to them at C speed); 0: not text.
+_DIGIT, _SIGN, _POINT, _MARK, _BLANK, _NEWLINE, _SLASH, _OTHER = range(1, 9)
+
+
+def _obj_classes() -> bytes:
+    table = bytearray(256)
+    for byte in range(0x20, 0x7F):
+        table[byte] = _OTHER
+    for chars, code in (
+        (b"0123456789", _DIGIT),
+        (b"+-", _SIGN),
+        (b".", _POINT),
+        (b"eE", _MARK),
+        (b" \t\r", _BLANK),
+        (b"\n", _NEWLINE),
+        (b"/", _SLASH),
+    ):
+        for byte in chars:
+            table[byte] = code
+    return bytes(table)
+
+
+_OBJ_CLASSES = _obj_classes()
+_OBJ_NAMES = (b"o", b"g", b"s", b"l", b"p", b"mg", b"vp", b"usemtl", b"mtllib")
+
+
+def _check_obj_lines(path: Path, data: bytes, line0: int, counts: dict[str, int]) -> int:
+    """Check the complete lines ``data`` (ending in a newline) that follow line ``line0``;
+    add their ``v`` and ``f`` statements to ``counts``; return their number.
+
+    Vectorised over the block: the bytes are mapped to classes, the lines found from the
+    newlines, and every check is either a reduction per line or a look at the few positions of
+    signs, points and exponent marks."""
+    n = len(data)
+    c = np.frombuffer(bytearray(data.translate(_OBJ_CLASSES) + b"\n\n\n".translate(_OBJ_CLASSES)), dtype=np.uint8)
+    a = np.frombuffer(data + b"\n\n\n", dtype=np.uint8)  # padded: keywords are read 2 bytes ahead
+    ends = np.flatnonzero(c[:n] == _NEWLINE)
+    starts = np.concatenate(([0], ends[:-1] + 1))
+
+    def line_of(pos: np.ndarray) -> np.ndarray:
+        return np.searchsorted(ends, pos)
+
+    def fail(i: int, problem: str) -> None:
+        _obj_error(path, line0 + int(i) + 1, data[starts[i] : ends[i]], problem)
+
+    if (c[:n] == 0).any():
+        pos = int(np.argmax(c[:n] == 0))
+        fail(line_of(pos), f"holds the byte 0x{data[pos]:02x}: an OBJ file is ASCII text")
+    long_lines = np.flatnonzero(ends - starts > _OBJ_MAX_LINE)
+    if len(long_lines):
+        fail(long_lines[0], f"is longer than {_OBJ_MAX_LINE} characters (Mitsuba's limit)")
+    # First non-blank character of every line (Mitsuba skips spaces, tabs and carriage returns).
+    k = starts.copy()
+    indented = np.flatnonzero(c[k] == _BLANK)
+    while len(indented):
+        k[indented] += 1
+        indented = indented[c[k[indented]] == _BLANK]
+    c0, c1 = a[k], a[k + 1]
+    after1, after2 = c[k + 1] == _BLANK, c[k + 2] == _BLANK  # a space, a tab (or a carriage return)
+    empty = (k >= ends) | (c0 == ord("#"))
+    is_v = (c0 == ord("v")) & after1
+    is_vn = (c0 == ord("v")) & (c1 == ord("n")) & after2
+    is_vt = (c0 == ord("v")) & (c1 == ord("t")) & after2
+    is_f = (c0 == ord("f")) & after1
+    numeric = is_v | is_vn | is_vt
+    for i in np.flatnonzero(~(empty | numeric | is_f)):
+        word = data[k[i] : ends[i]].split(None, 1)[0] if k[i] < ends[i] else b""
+        if word not in _OBJ_NAMES:
+            fail(i, "is not an OBJ statement that Mitsuba reads (v, vn, vt, f) or skips (o, g, s, usemtl, ...)")
+    # Blank out the keywords, so that what is left of a statement line is its arguments.
+    c[k[numeric | is_f]] = _BLANK
+    c[k[is_vn | is_vt] + 1] = _BLANK
+    b = c[:n]
+    blank = (b == _BLANK) | (b == _NEWLINE)
+    starts_token = np.empty(n, dtype=bool)
+    starts_token[0] = not blank[0]
+    np.greater(blank[:-1], blank[1:], out=starts_token[1:])  # blank, then not blank
+    tokens = np.add.reduceat(starts_token, starts, dtype=np.int32)
+    # A numeric argument holds digits, signs, points and exponent marks; a face index digits and slashes.
+    not_number = np.logical_or.reduceat((b - np.uint8(1)) > np.uint8(_NEWLINE - 1), starts)
+    not_face = np.logical_or.reduceat(~(blank | (b == _DIGIT) | (b == _SLASH)), starts)
+    token_first = np.flatnonzero(starts_token)
+    bad_face_start = token_first[c[token_first] != _DIGIT]  # a reference starts with its vertex index
+    not_face[line_of(bad_face_start)] = True
+    misplaced = _misplaced_in_number(c, b, token_first)
+    not_number[line_of(misplaced)] = True
+    for mask, need, what in (
+        (is_v, 3, "a vertex ('v') needs 3 numbers"),
+        (is_vn, 3, "a normal ('vn') needs 3 numbers"),
+        (is_vt, 2, "a texture coordinate ('vt') needs 2 numbers"),
+    ):
+        wrong = mask & (not_number | (tokens < need))
+        if wrong.any():
+            fail(np.argmax(wrong), f"does not parse: {what}, and nothing else")
+    wrong = is_f & (not_face | (tokens < 3))
+    if wrong.any():
+        i = int(np.argmax(wrong))
+        negative = b"-" in data[k[i] : ends[i]]
+        fail(
+            i,
+            "uses negative (relative) vertex indices, which Mitsuba does not read"
+            if negative
+            else "does not parse: a face ('f') needs 3 or more vertex references of unsigned indices "
+            "(i, i/j, i//k, i/j/k)",
+        )
+    counts["v"] += int(is_v.sum())
+    counts["f"] += int(is_f.sum())
+    return len(ends)
+
+
+def _misplaced_in_number(c: np.ndarray, b: np.ndarray, token_first: np.ndarray) -> np.ndarray:
+    """Positions of the bytes that break the syntax of a decimal number
+    (``[+-]digits[.digits][(e|E)[+-]digits]``, either side of the point may be empty but not
+    both) within their blank-separated token: a sign elsewhere than first or after the exponent
+    mark, or not followed by the mantissa; a lone point; a mark without a mantissa before it or
+    an exponent after it; a second point, a point in the exponent, a second mark.
+
+    ``c`` holds the byte classes of the block (padded by 3 bytes past ``b``, its first ``n``);
+    ``token_first`` the positions where tokens start. Positions in lines that are not numeric
+    statements are harmless: only the lines' verdicts for numeric statements are used."""
+    bad = []
+    signs = np.flatnonzero(b == _SIGN)
+    before = c[signs - 1]  # at position 0, the padding's newline
+    ok_before = (before == _BLANK) | (before == _NEWLINE) | (before == _MARK)
+    after = c[signs + 1]
+    bad.append(signs[~ok_before | ~((after == _DIGIT) | (after == _POINT))])
+    points = np.flatnonzero(b == _POINT)
+    bad.append(points[(c[points - 1] != _DIGIT) & (c[points + 1] != _DIGIT)])
+    marks = np.flatnonzero(b == _MARK)
+    before, after, after2 = c[marks - 1], c[marks + 1], c[marks + 2]
+    ok = ((before == _DIGIT) | (before == _POINT)) & ((after == _DIGIT) | ((after == _SIGN) & (after2 == _DIGIT)))
+    bad.append(marks[~ok])
+    # Within one token, a point may follow neither a point nor a mark, and a mark no mark.
+    both = np.concatenate((points, marks))
+    order = np.argsort(both, kind="stable")
+    pos = both[order]
+    is_mark = order >= len(points)
+    token = np.searchsorted(token_first, pos, side="right")
+    again = (token[1:] == token[:-1]) & (~is_mark[1:] | is_mark[:-1])
+    bad.append(pos[1:][again])
+    return np.concatenate(bad)
+
+
+def _check_ply(path: Path, size: int) -> None:
+    with path.open("rb") as fh:
+        head = fh.read(_PLY_MAX_HEADER)
+
+    def fail(problem: str) -> None:
+        raise FileFormatError(f"{str(path)!r}: {problem}")
+
+    first = head.split(b"\n", 1)[0].rstrip(b"\r")
+    if first != b"ply":
+        fail("does not start with the line 'ply': not a PLY file")
+    end = -1
+    for marker in (b"\nend_header\n", b"\nend_header\r\n"):
+        at = head.find(marker)
+        if at >= 0 and (end < 0 or at < end):
+            end, header_bytes = at, at + len(marker)
+    if end < 0:
+        fail(f"no 'end_header' line within the first {_PLY_MAX_HEADER // 1024} KiB: not a PLY header")
+    try:
+        lines = head[:end].decode("ascii").splitlines()
+    except UnicodeDecodeError:
+        fail("the header is not ASCII text")
+    fmt = None
+    elements: list[dict] = []
+    for number, line in enumerate(lines[1:], start=2):
+        words = line.split()
+        where = f"header line {number} ({line[:60]!r})"
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        if words[0] == "format":
+            if fmt is not None or len(words) != 3 or words[2] != "1.0":
+                fail(f"{where}: needs one 'format <ascii|binary_little_endian|binary_big_endian> 1.0' line")
+            if words[1] not in ("ascii", "binary_little_endian", "binary_big_endian"):
+                fail(f"{where}: unknown format {words[1]!r}")
+            fmt = words[1]
+        elif words[0] == "element":
+            if len(words) != 3 or not words[2].isdigit():
+                fail(f"{where}: needs 'element <name> <count>' with a non-negative integer count")
+            elements.append({"name": words[1], "count": int(words[2]), "bytes": 0, "props": {}})
+        elif words[0] == "property":
+            if not elements:
+                fail(f"{where}: a property before any element")
+            types = words[2:4] if words[1:2] == ["list"] else words[1:2]
+            if len(words) != (5 if words[1:2] == ["list"] else 3) or any(t not in _PLY_TYPES for t in types):
+                fail(
+                    f"{where}: needs 'property <type> <name>' or 'property list <type> <type> <name>' "
+                    f"of the types {sorted(_PLY_TYPES)}"
+                )
+            el = elements[-1]
+            el["props"][words[-1]] = types
+            # A list is read as a triangle: its count and 3 indices.
+            el["bytes"] += _PLY_TYPES[types[0]] + (3 * _PLY_TYPES[types[1]] if len(types) == 2 else 0)
+        else:
+            fail(f"{where}: not a PLY header statement (format, element, property, comment)")
+    if fmt is None:
+        fail("no 'format' line in the header")
+    by_name = {el["name"]: el for el in elements}
+    vertex, face = by_name.get("vertex"), by_name.get("face")
+    if vertex is None or vertex["count"] == 0 or not {"x", "y", "z"} <= set(vertex["props"]):
+        fail("needs a 'vertex' element of at least one vertex with properties x, y and z")
+    lists = [name for name, types in (face or {"props": {}})["props"].items() if len(types) == 2]
+    if face is None or face["count"] == 0 or not {"vertex_indices", "vertex_index"} & set(lists):
+        fail("needs a 'face' element of at least one face with a list property 'vertex_indices'")
+    if fmt != "ascii":
+        need = sum(el["count"] * el["bytes"] for el in elements)
+        have = size - header_bytes
+        if have < need:
+            fail(
+                f"holds {have} bytes after its header, but its elements need at least {need} "
+                "(with triangular faces): the file is truncated"
+            )
 
 
 # --------------------------------------------------------------------------------------------

@@ -36,12 +36,68 @@ port's ``n_water`` (a ``[port]`` table that also states ``n_water`` must agree t
 :data:`N_WATER_TOLERANCE`); its absorption and scattering coefficients fill the water with a
 homogeneous participating medium (:func:`simulator.scene.water_medium`). Without a ``[water]``
 table, or with both coefficients zero, the scene renders exactly as clear water.
+
+Types and ranges
+----------------
+A value of the wrong TOML type (a list where a number belongs, a string for a table, a float
+for an integer) is an error naming the key, the type it needs and the value. Every number has a
+range; Mitsuba computes in float32 (largest 3.4e38, 7 significant digits), so the bounds also
+keep every product it forms (position plus size, scale times a mesh's coordinates, intensity
+over squared distance, radiance times samples) far inside float32. The bounds and their reasons:
+
+- Positions, ``position_m`` of objects and point lights and ``camera.pose.position_m``: each
+  coordinate within +-100 m (:data:`MAX_COORDINATE_M`). Beyond any underwater visibility (tens
+  of metres in the clearest ocean); float32 steps are 7.6 um at 100 m, and Mitsuba moves ray
+  origins off surfaces by 8.9e-5 of their distance from the origin (9 mm at 100 m), so larger
+  scenes lose the millimetre detail of the objects near the camera.
+- Rotations, ``rotation_xyz_deg`` of objects: each angle within +-360 deg
+  (:data:`MAX_ANGLE_DEG`). A whole turn either way; larger angles repeat the same rotations,
+  and one of 1e20 deg has no fraction of a turn left in float64.
+- Sizes, ``size_m``, ``square_size_m`` (and the whole board with its margin), ``radius_m``,
+  ``depth_m``, a bowl's ``thickness_m``, ``height_m``: 1e-5 m to 100 m (:data:`MIN_SIZE_M`,
+  :data:`MAX_SIZE_M`). No preset camera resolves 10 um (a quarter of the Illum's
+  refraction-free pixel at 2 cm), and float32 steps at 100 m are 7.6 um; 100 m as for positions.
+  A bowl is at most a hemisphere (``depth_m <= radius_m``) with ``thickness_m < depth_m``.
+- A mesh's ``scale``: 1e-6 to 1000 (:data:`MIN_MESH_SCALE`, :data:`MAX_MESH_SCALE`), a file in
+  micrometres to one in kilometres; once loaded, its vertices in the world must lie within the
+  bound of positions. Its ``path`` must be a regular file (not a directory or FIFO) of at most
+  512 MiB (:data:`simulator.assets.MAX_MESH_FILE_BYTES`, where the reason is given), whose
+  content is checked before Mitsuba reads it (:func:`simulator.assets.check_mesh_content`).
+- ``intensity_w_sr`` of a point light: 0 to 1e6 W/sr per channel (:data:`MAX_INTENSITY_W_SR`).
+  A 10 kW lamp radiates under 1e3 W/sr; the headroom is for exposure, and 1e6 W/sr at 1 mm,
+  summed over every sample of a pixel, is still far inside float32.
+- ``radiance`` of a constant light or a luminous disc: 0 to 1e8 W/(m^2 sr) per channel
+  (:data:`MAX_RADIANCE`), above the Sun's (about 2e7).
+- ``reflectance``: 0 to 1 per channel.
+- ``render.spp``: 1 to 65536 (:data:`MAX_SPP`). Mitsuba takes spp as a 32-bit unsigned integer
+  (it fails on 4294967297); 65536 samples of every pixel take about 13 minutes for the tiny
+  camera and 50 hours for the Illum at the 15 Msample/s measured here: more is a typo.
+- Seeds, ``render.seed``, ``texture_seed``, a figurine's ``seed``: integers in [0, 2**31)
+  (:data:`SEED_LIMIT`), inside Mitsuba's 32-bit sampler seed (from which each band's seed is
+  derived) and numpy's generators, and a non-negative int32 for any reader.
+- ``texture_px``: 64 to 8192 (:data:`MIN_TEXTURE_PX`, :data:`MAX_TEXTURE_PX`). The random
+  texture's 6 octaves need 64 texels; 8192 texels a side are 0.8 GB and a minute to make.
+- A chessboard's ``squares`` (at least 2 each), ``texels_per_square`` (at least 1) and
+  ``margin_squares`` (at least 0, a whole number of texels): its texture at most 8192 texels a
+  side, as above.
+- ``water.absorption_per_m`` and ``water.scattering_per_m``: 0 to 1000 per metre per channel
+  (:data:`MAX_WATER_COEFFICIENT_PER_M`). The murkiest harbour water is some tens per metre; at
+  1000 (a mean free path of 1 mm) nothing beyond the port can be seen.
+- ``water.phase_g``: -0.99 to 0.99 (:data:`MAX_ABS_PHASE_G`). Sea water's asymmetry is about
+  0.92; float32 rounds g within 3e-8 of 1 to 1, where the Henyey-Greenstein function is 0/0.
+- ``water.salinity_psu``, ``water.temperature_c``, ``water.wavelength_nm``: 0-35 psu, 0-30 C,
+  400-700 nm, the range of the index equation (:func:`lfrefract.seawater_index`).
+
+The camera's and the port's own parameters are checked by :class:`lfrefract.LightFieldCamera`
+and :class:`lfrefract.FlatPort`. Scene files are UTF-8 text (as TOML requires) of at most
+:data:`MAX_TOML_BYTES`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,21 +108,41 @@ import numpy as np
 from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset, seawater_index
 from lfrefract._validate import (
     ParameterError,
+    as_table,
+    bounded_float,
+    bounded_int,
     finite_float,
     finite_vector,
-    non_negative_float,
     one_of,
-    positive_float,
-    positive_int,
+    path_of,
+    regular_file,
     reject_unknown_keys,
+    shown,
+    text,
 )
 from lfrefract.pose import rotation_from_euler_xyz
 from lfrefract.water import SODIUM_D_NM
+from simulator import assets
 
 __all__ = [
+    "MAX_ABS_PHASE_G",
+    "MAX_ANGLE_DEG",
+    "MAX_COORDINATE_M",
+    "MAX_INTENSITY_W_SR",
+    "MAX_MESH_SCALE",
+    "MAX_RADIANCE",
+    "MAX_SIZE_M",
+    "MAX_SPP",
+    "MAX_TEXTURE_PX",
+    "MAX_TOML_BYTES",
+    "MAX_WATER_COEFFICIENT_PER_M",
+    "MIN_MESH_SCALE",
+    "MIN_SIZE_M",
+    "MIN_TEXTURE_PX",
     "N_WATER_TOLERANCE",
     "OBJECT_TYPES",
     "PORT_MODELS",
+    "SEED_LIMIT",
     "Bowl",
     "Chessboard",
     "ConstantLight",
@@ -84,35 +160,81 @@ __all__ = [
     "embedded_scenes",
     "load_scene",
     "parse_scene",
+    "read_toml",
 ]
 
 
-def _rgb(name: str, value: Any) -> tuple[float, float, float]:
-    """A colour given as one number or three; every entry finite and >= 0."""
+# The ranges of the scene's numbers; the module docstring gives each one's reason.
+
+#: Largest absolute coordinate of a position (objects, point lights, the camera), metres.
+MAX_COORDINATE_M = 100.0
+#: Smallest and largest size of an object (lengths, radii, thicknesses, heights), metres.
+MIN_SIZE_M, MAX_SIZE_M = 1e-5, 100.0
+#: Largest absolute Euler angle of an object's rotation, degrees.
+MAX_ANGLE_DEG = 360.0
+#: Range of a user mesh's ``scale`` (file units to metres).
+MIN_MESH_SCALE, MAX_MESH_SCALE = 1e-6, 1e3
+#: Largest radiant intensity of a point light, W/sr per channel.
+MAX_INTENSITY_W_SR = 1e6
+#: Largest emitted radiance (constant light, luminous disc), W/(m^2 sr) per channel.
+MAX_RADIANCE = 1e8
+#: Largest samples per pixel (Mitsuba's limit is 2**32 - 1).
+MAX_SPP = 2**16
+#: Seeds are integers in [0, SEED_LIMIT).
+SEED_LIMIT = 2**31
+#: Smallest random-texture side: the texture's octaves need ``2 ** octaves`` texels.
+MIN_TEXTURE_PX = 2**assets.TEXTURE_OCTAVES
+#: Largest texture side (random texture, chessboard): 8192^2 RGB float32 texels are 0.8 GB, and
+#: generating a random one takes about a minute; anything larger is a typo, not a scene.
+MAX_TEXTURE_PX = 8192
+#: Largest absorption or scattering coefficient of the water, 1/m per channel.
+MAX_WATER_COEFFICIENT_PER_M = 1e3
+#: Largest magnitude of the water's Henyey-Greenstein asymmetry ``phase_g``.
+MAX_ABS_PHASE_G = 0.99
+#: Largest scene, rig or sweep TOML file: such files are a few KiB; 16 MiB refuses a wrong file
+#: (an image, a mesh, a huge sparse file) from its size before reading it.
+MAX_TOML_BYTES = 16 * 2**20
+
+
+def _rgb(name: str, value: Any, high: float) -> tuple[float, float, float]:
+    """A colour given as one number or three; every entry finite and in [0, high]."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         value = (value, value, value)
+    elif isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
+        raise ParameterError(f"{name} must be one number or a list of 3 numbers (RGB), got {shown(value)}")
     rgb = finite_vector(name, value, 3)
-    for i, c in enumerate(rgb):
-        non_negative_float(f"{name}[{i}]", c)
-    return rgb
-
-
-#: Largest random-texture side: 8192^2 RGB float32 texels are 0.8 GB, and generating them takes
-#: about a minute; anything larger is a typo, not a scene.
-MAX_TEXTURE_PX = 8192
+    return tuple(bounded_float(f"{name}[{i}]", c, 0.0, high) for i, c in enumerate(rgb))
 
 
 def _seed(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**31:
-        raise ParameterError(f"{name} must be an integer in [0, 2**31), got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < SEED_LIMIT:
+        raise ParameterError(f"{name} must be an integer in [0, 2**31), got {shown(value)}")
     return value
 
 
 def _albedo(name: str, value: Any) -> tuple[float, float, float]:
-    rgb = _rgb(name, value)
-    if max(rgb) > 1.0:
-        raise ParameterError(f"{name} is a reflectance and must lie in [0, 1], got {value!r}")
-    return rgb
+    """A reflectance: one number or three, each in [0, 1]."""
+    return _rgb(name, value, 1.0)
+
+
+def _size(name: str, value: Any) -> float:
+    """A size of an object, metres: in [MIN_SIZE_M, MAX_SIZE_M] (below 0 "must be positive")."""
+    out = finite_float(name, value)
+    if out <= 0.0:
+        raise ParameterError(f"{name} must be positive, got {shown(value)}")
+    return bounded_float(name, out, MIN_SIZE_M, MAX_SIZE_M, unit="m")
+
+
+def _position(name: str, value: Any) -> tuple[float, float, float]:
+    """A position in the world, metres: 3 coordinates within +-MAX_COORDINATE_M."""
+    xyz = finite_vector(name, value, 3)
+    return tuple(
+        bounded_float(f"{name}[{i}]", c, -MAX_COORDINATE_M, MAX_COORDINATE_M, unit="m") for i, c in enumerate(xyz)
+    )
+
+
+def _texture_px(name: str, value: Any) -> int:
+    return bounded_int(name, value, MIN_TEXTURE_PX, MAX_TEXTURE_PX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -123,8 +245,11 @@ class Placement:
     rotation_xyz_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position_m", finite_vector("position_m", self.position_m, 3))
-        object.__setattr__(self, "rotation_xyz_deg", finite_vector("rotation_xyz_deg", self.rotation_xyz_deg, 3))
+        object.__setattr__(self, "position_m", _position("position_m", self.position_m))
+        angles = finite_vector("rotation_xyz_deg", self.rotation_xyz_deg, 3)
+        for i, angle in enumerate(angles):
+            bounded_float(f"rotation_xyz_deg[{i}]", angle, -MAX_ANGLE_DEG, MAX_ANGLE_DEG, unit="deg")
+        object.__setattr__(self, "rotation_xyz_deg", angles)
 
     @property
     def matrix(self) -> np.ndarray:
@@ -151,11 +276,8 @@ class TexturedPlane:
 
     def __post_init__(self) -> None:
         size = finite_vector("size_m", self.size_m, 2)
-        for i, s in enumerate(size):
-            positive_float(f"size_m[{i}]", s)
-        object.__setattr__(self, "size_m", size)
-        if positive_int("texture_px", self.texture_px) > MAX_TEXTURE_PX:
-            raise ParameterError(f"texture_px must be at most {MAX_TEXTURE_PX}, got {self.texture_px!r}")
+        object.__setattr__(self, "size_m", tuple(_size(f"size_m[{i}]", s) for i, s in enumerate(size)))
+        _texture_px("texture_px", self.texture_px)
         _seed("texture_seed", self.texture_seed)
 
 
@@ -170,15 +292,29 @@ class Chessboard:
     texels_per_square: int = 16
 
     def __post_init__(self) -> None:
-        if len(tuple(self.squares)) != 2:
-            raise ParameterError(f"squares must be (columns, rows), got {self.squares!r}")
-        for i, n in enumerate(self.squares):
-            if positive_int(f"squares[{i}]", n) < 2:
-                raise ParameterError(f"squares[{i}] must be at least 2, got {n!r}")
+        if isinstance(self.squares, (str, bytes, dict)) or not hasattr(self.squares, "__len__"):
+            raise ParameterError(f"squares must be (columns, rows), a list of 2 integers, got {shown(self.squares)}")
+        # The counts, the margin and the texels (a whole number of them in the margin) as the
+        # texture needs them; the texture and the board within their bounds.
+        # A margin wider than the largest texture cannot fit (each margin square is a texel or more).
+        bounded_float("margin_squares", self.margin_squares, 0.0, MAX_TEXTURE_PX)
+        kw = {"squares": tuple(self.squares), "margin_squares": self.margin_squares}
+        height, width = assets.chessboard_texture_shape(texels_per_square=self.texels_per_square, **kw)
+        if max(height, width) > MAX_TEXTURE_PX:
+            raise ParameterError(
+                f"the chessboard's texture (squares={list(self.squares)} with margin_squares={self.margin_squares!r}, "
+                f"texels_per_square={self.texels_per_square!r}) would be {width} x {height} texels; at most "
+                f"{MAX_TEXTURE_PX} a side"
+            )
         object.__setattr__(self, "squares", tuple(int(n) for n in self.squares))
-        positive_float("square_size_m", self.square_size_m)
-        non_negative_float("margin_squares", self.margin_squares)
-        positive_int("texels_per_square", self.texels_per_square)
+        _size("square_size_m", self.square_size_m)
+        board = assets.chessboard_size_m(square_size_m=self.square_size_m, **kw)
+        if max(board) > MAX_SIZE_M:
+            raise ParameterError(
+                f"the chessboard (squares={list(self.squares)}, margin_squares={self.margin_squares!r}, "
+                f"square_size_m={self.square_size_m!r}) would be {board[0]:g} x {board[1]:g} m; at most "
+                f"{MAX_SIZE_M:g} m a side"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -194,9 +330,9 @@ class Disc:
     radiance: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        positive_float("radius_m", self.radius_m)
+        _size("radius_m", self.radius_m)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
-        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
+        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance, MAX_RADIANCE))
 
 
 def _mesh_texture(obj) -> None:
@@ -205,8 +341,7 @@ def _mesh_texture(obj) -> None:
     ``textured_plane`` (for stereo), wrapped around the mesh's axis."""
     if obj.texture_seed is not None:
         _seed("texture_seed", obj.texture_seed)
-    if positive_int("texture_px", obj.texture_px) > MAX_TEXTURE_PX:
-        raise ParameterError(f"texture_px must be at most {MAX_TEXTURE_PX}, got {obj.texture_px!r}")
+    _texture_px("texture_px", obj.texture_px)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -223,9 +358,10 @@ class Bowl:
     texture_px: int = 512
 
     def __post_init__(self) -> None:
-        positive_float("radius_m", self.radius_m)
-        positive_float("depth_m", self.depth_m)
-        positive_float("thickness_m", self.thickness_m)
+        for name in ("radius_m", "depth_m", "thickness_m"):
+            _size(name, getattr(self, name))
+        # At most a hemisphere, a wall thinner than the depth: as the mesh needs them.
+        assets.bowl_cap_geometry(radius_m=self.radius_m, depth_m=self.depth_m, thickness_m=self.thickness_m)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
         _mesh_texture(self)
 
@@ -243,7 +379,7 @@ class Figurine:
     texture_px: int = 512
 
     def __post_init__(self) -> None:
-        positive_float("height_m", self.height_m)
+        _size("height_m", self.height_m)
         _seed("seed", self.seed)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
         _mesh_texture(self)
@@ -251,7 +387,13 @@ class Figurine:
 
 @dataclass(frozen=True, kw_only=True)
 class MeshFile:
-    """A user mesh from an OBJ or PLY file, scaled uniformly then placed."""
+    """A user mesh from an OBJ or PLY file, scaled uniformly then placed.
+
+    The file's kind and size are checked here, from its metadata
+    (:func:`simulator.assets.check_mesh_file`: a regular file of at most
+    :data:`simulator.assets.MAX_MESH_FILE_BYTES`); its content when the scene is built
+    (:func:`simulator.assets.check_mesh_content`), before Mitsuba reads it.
+    """
 
     placement: Placement
     path: Path
@@ -259,13 +401,12 @@ class MeshFile:
     reflectance: tuple[float, float, float] = (0.7, 0.7, 0.7)
 
     def __post_init__(self) -> None:
-        path = Path(self.path)
+        path = path_of("path", self.path)
         if path.suffix.lower() not in (".obj", ".ply"):
             raise ParameterError(f"mesh path must end in .obj or .ply, got {str(path)!r}")
-        if not path.is_file():
-            raise ParameterError(f"mesh path {str(path)!r} does not exist")
+        assets.check_mesh_file(path)
         object.__setattr__(self, "path", path)
-        positive_float("scale", self.scale)
+        bounded_float("scale", self.scale, MIN_MESH_SCALE, MAX_MESH_SCALE)
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
 
 
@@ -277,8 +418,8 @@ class PointLight:
     intensity_w_sr: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position_m", finite_vector("position_m", self.position_m, 3))
-        object.__setattr__(self, "intensity_w_sr", _rgb("intensity_w_sr", self.intensity_w_sr))
+        object.__setattr__(self, "position_m", _position("position_m", self.position_m))
+        object.__setattr__(self, "intensity_w_sr", _rgb("intensity_w_sr", self.intensity_w_sr, MAX_INTENSITY_W_SR))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -292,7 +433,7 @@ class ConstantLight:
     radiance: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance))
+        object.__setattr__(self, "radiance", _rgb("radiance", self.radiance, MAX_RADIANCE))
 
 
 #: How the port is rendered. ``sensor``: the plenoptic sensor refracts its rays through the port's
@@ -311,7 +452,7 @@ class RenderSettings:
     port_model: str = "sensor"
 
     def __post_init__(self) -> None:
-        positive_int("render.spp", self.spp)
+        bounded_int("render.spp", self.spp, 1, MAX_SPP)
         one_of("render.port_model", self.port_model, PORT_MODELS)
         _seed("render.seed", self.seed)
 
@@ -340,11 +481,13 @@ class Water:
         temperature (default then 589.3, the sodium D line).
     absorption_per_m, scattering_per_m : float or sequence of 3 floats
         Absorption and scattering coefficients sigma_a and sigma_s of the water, per metre
-        (>= 0; one number for all three colour channels, or RGB; their sum, the extinction, is
-        either 0 in every channel or positive in every channel). Default 0: clear water.
+        (0 to :data:`MAX_WATER_COEFFICIENT_PER_M`; one number for all three colour channels, or
+        RGB; their sum, the extinction, is either 0 in every channel or positive in every
+        channel). Default 0: clear water.
     phase_g : float
-        Asymmetry g of the Henyey-Greenstein phase function of the scattering, in (-1, 1):
-        0 isotropic, towards 1 forward (typical of sea water: about 0.9). Default 0.
+        Asymmetry g of the Henyey-Greenstein phase function of the scattering, within
+        +-:data:`MAX_ABS_PHASE_G` (0.99): 0 isotropic, towards 1 forward (typical of sea water:
+        about 0.9). Default 0.
 
     Attributes
     ----------
@@ -357,7 +500,7 @@ class Water:
         For one of salinity and temperature without the other, a wavelength without them, a value
         outside the index equation's ranges, a negative or non-finite coefficient, an extinction
         ``absorption_per_m + scattering_per_m`` that is 0 in some channel but positive in another
-        (Mitsuba's ``volpath`` renders such a medium as NaN), or ``phase_g`` outside (-1, 1); the
+        (Mitsuba's ``volpath`` renders such a medium as NaN), or a value out of its range; the
         message names the key (``water.<key>``) and the value.
     """
 
@@ -393,8 +536,9 @@ class Water:
                 object.__setattr__(self, name, float(value))
             object.__setattr__(self, "wavelength_nm", float(wavelength))
             object.__setattr__(self, "n_water", n)
-        object.__setattr__(self, "absorption_per_m", _rgb("water.absorption_per_m", self.absorption_per_m))
-        object.__setattr__(self, "scattering_per_m", _rgb("water.scattering_per_m", self.scattering_per_m))
+        for name in ("absorption_per_m", "scattering_per_m"):
+            value = _rgb(f"water.{name}", getattr(self, name), MAX_WATER_COEFFICIENT_PER_M)
+            object.__setattr__(self, name, value)
         empty = [i for i, t in enumerate(self.extinction_per_m) if t == 0.0]
         if self.has_medium and empty:
             # Mitsuba's volpath divides by every channel's extinction at each medium interaction:
@@ -408,14 +552,14 @@ class Water:
             )
         g = finite_float("water.phase_g", self.phase_g)
         if not -1.0 < g < 1.0:
-            raise ParameterError(f"water.phase_g must lie in (-1, 1), got {self.phase_g!r}")
+            raise ParameterError(f"water.phase_g must lie in (-1, 1), got {shown(self.phase_g)}")
+        bounded_float("water.phase_g", g, -MAX_ABS_PHASE_G, MAX_ABS_PHASE_G)
         object.__setattr__(self, "phase_g", g)
 
     @classmethod
     def from_dict(cls, table: Any) -> Water:
         """Build from a ``[water]`` table; unknown keys are an error, lists become tuples."""
-        if not isinstance(table, dict):
-            raise ParameterError(f"[water] must be a table, got {table!r}")
+        table = as_table("[water]", table)
         keys = {f.name for f in dataclasses.fields(cls) if f.init}
         reject_unknown_keys("water", table, keys)
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})
@@ -472,7 +616,7 @@ def apply_water_index(table: dict, water: Water | None, *, where: str) -> dict:
         If the table states an ``n_water`` that differs from the water's computed index (times
         ``n_air``) by more than :data:`N_WATER_TOLERANCE`: neither is picked silently.
     """
-    out = dict(table)
+    out = as_table(f"[{where}]", table)
     if water is None or water.n_water is None:
         return out
     n_air = finite_float(f"{where}.n_air", out.get("n_air", 1.0))
@@ -528,6 +672,7 @@ class SceneConfig:
             )
         if not self.lights:
             raise ParameterError("the scene has no [[light]]: it would render black")
+        _position("camera.pose.position_m", self.pose.position_m)
         water = self.water
         if water is not None and not isinstance(water, Water):
             raise ParameterError(f"water must be a Water or None, got {water!r}")
@@ -582,10 +727,11 @@ class SceneConfig:
         }
 
 
-def _build(cls: type, table: dict, where: str, base_dir: Path) -> Any:
+def _build(cls: type, table: Any, where: str, base_dir: Path) -> Any:
     """Instantiate a config dataclass from a TOML table, with placement and path handling."""
-    table = dict(table)
-    names = {f.name for f in dataclasses.fields(cls)}
+    table = as_table(where, table)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    names = set(fields)
     kwargs: dict[str, Any] = {}
     if "placement" in names:
         place = {k: table.pop(k) for k in ("position_m", "rotation_xyz_deg") if k in table}
@@ -597,44 +743,50 @@ def _build(cls: type, table: dict, where: str, base_dir: Path) -> Any:
             raise ParameterError(f"{where}: {exc}") from None
         names.discard("placement")
     reject_unknown_keys(where, table, names)
-    for key, value in table.items():
-        if key == "path":
-            value = (base_dir / value).resolve()
-        elif isinstance(value, list):
-            value = tuple(value)
-        kwargs[key] = value
+    missing = sorted(
+        name
+        for name in names
+        if name not in table
+        and fields[name].default is dataclasses.MISSING
+        and fields[name].default_factory is dataclasses.MISSING
+    )
+    if missing:
+        raise ParameterError(f"{where}: missing key(s) {missing}")
     try:
+        for key, value in table.items():
+            if key == "path":
+                path = path_of("path", value)
+                if "\0" in str(path):
+                    raise ParameterError(f"path {shown(str(path))} contains a NUL character")
+                try:
+                    value = (base_dir / path).resolve()
+                except (OSError, RuntimeError) as exc:  # RuntimeError: a symbolic link loop
+                    raise ParameterError(f"path {str(path)!r} cannot be resolved: {exc}") from None
+            elif isinstance(value, list):
+                value = tuple(value)
+            kwargs[key] = value
         return cls(**kwargs)
     except ParameterError as exc:
         raise ParameterError(f"{where}: {exc}") from None
-    except TypeError as exc:  # a required key is missing
-        missing = sorted(
-            f.name
-            for f in dataclasses.fields(cls)
-            if f.name not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-        )
-        raise ParameterError(f"{where}: missing key(s) {missing}") from exc
 
 
 def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path) -> tuple:
     if not isinstance(data, list):
-        raise ParameterError(f"[[{where}]] must be an array of tables, got {data!r}")
+        raise ParameterError(f"[[{where}]] must be an array of tables, got {shown(data)}")
     out = []
     for i, table in enumerate(data):
         label = f"{where}[{i}]"
-        if not isinstance(table, dict) or "type" not in table:
+        table = as_table(label, table)
+        if "type" not in table:
             raise ParameterError(f"{label} needs a 'type', one of {sorted(kinds)}")
-        table = dict(table)
-        kind = table.pop("type")
-        if kind not in kinds:
-            raise ParameterError(f"{label}.type must be one of {sorted(kinds)}, got {kind!r}")
+        kind = one_of(f"{label}.type", table.pop("type"), sorted(kinds))
         out.append(_build(kinds[kind], table, f"{label} ({kind})", base_dir))
     return tuple(out)
 
 
-def _camera(table: dict) -> tuple[LightFieldCamera, Pose]:
-    table = dict(table)
-    pose = Pose.from_dict(table.pop("pose")) if "pose" in table else Pose()
+def _camera(table: Any) -> tuple[LightFieldCamera, Pose]:
+    table = as_table("[camera]", table)
+    pose = Pose.from_dict(as_table("[camera.pose]", table.pop("pose"))) if "pose" in table else Pose()
     if "preset" in table:
         reject_unknown_keys("camera", table, {"preset"})
         return camera_preset(table["preset"]), pose
@@ -656,10 +808,13 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     Raises
     ------
     ParameterError
-        For unknown keys or types, missing keys, and invalid values; the message names them. With a
-        ``[water]`` index, also for a ``[port]`` ``n_water`` that disagrees with it.
+        For unknown keys, values of the wrong type, missing keys, and values out of their range
+        (see the module docstring); the message names the key, and for a type the type it
+        needs and the value. With a ``[water]`` index, also for a ``[port]`` ``n_water`` that
+        disagrees with it.
     """
     base = Path(base_dir)
+    data = as_table("scene", data)
     reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water"})
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
@@ -669,7 +824,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     render = _build(RenderSettings, data.get("render", {}), "render", base)
     return SceneConfig(
         water=water,
-        name=str(data.get("name", Path(source).stem)),
+        name=text("name", data["name"]) if "name" in data else Path(source).stem,
         source=source,
         camera=camera,
         pose=pose,
@@ -694,22 +849,65 @@ def load_scene(path: str | Path | None = None) -> SceneConfig:
     return parse_scene(read_toml(p, "scene"), base_dir=p.parent, source=str(p))
 
 
-def read_toml(path: Path, what: str) -> dict:
+def read_toml(path: str | Path, what: str) -> dict:
     """The TOML document at ``path`` as a dict; ``what`` names it in errors ("scene", "rig").
+
+    The file must be a regular file of at most :data:`MAX_TOML_BYTES`, checked before it is
+    read (a FIFO would block, a huge file take minutes), and UTF-8 text, as TOML requires.
 
     Raises
     ------
     FileNotFoundError
-        If ``path`` is not a file.
+        If nothing exists at ``path``.
     ParameterError
-        If it is not valid TOML.
+        If ``path`` is not a regular file (a directory, a FIFO), is larger than
+        :data:`MAX_TOML_BYTES`, cannot be read, is not UTF-8 text (a UTF-16 file, one with a
+        byte-order mark, or any other encoding: the message says which byte on which line), or
+        is not valid TOML; the message names the file.
     """
-    if not path.is_file():
-        raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
+    path = Path(path)
+    label = f"{what} file"
+    if not os.path.lexists(path):
+        raise FileNotFoundError(f"{label} {str(path)!r} does not exist")
+    regular_file(label, path, max_bytes=MAX_TOML_BYTES)
     try:
-        return tomllib.loads(path.read_text())
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParameterError(f"{label} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
+    return parse_toml(data, f"{label} {str(path)!r}")
+
+
+def parse_toml(data: bytes, where: str) -> dict:
+    """Decode ``data`` as UTF-8 and parse it as TOML; ``where`` names it in errors.
+
+    Raises
+    ------
+    ParameterError
+        If ``data`` is not UTF-8 text or not valid TOML.
+    """
+    boms = {
+        b"\xef\xbb\xbf": "a UTF-8 byte-order mark",
+        b"\xff\xfe": "a UTF-16 byte-order mark",
+        b"\xfe\xff": "a UTF-16 byte-order mark",
+    }
+    for bom, name in boms.items():
+        if data.startswith(bom):
+            raise ParameterError(
+                f"{where} starts with {name}: TOML must be UTF-8 text without one; save it as UTF-8 (no BOM)"
+            )
+    try:
+        document = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        hint = " (it looks like UTF-16: NUL bytes between characters)" if b"\0" in data[:200] else ""
+        raise ParameterError(
+            f"{where} is not UTF-8 text{hint}: byte 0x{data[exc.start]:02x} on line {line} cannot be decoded; "
+            "TOML must be UTF-8, save it as UTF-8"
+        ) from None
+    try:
+        return tomllib.loads(document)
     except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"{what} file {str(path)!r} is not valid TOML: {exc}") from None
+        raise ParameterError(f"{where} is not valid TOML: {exc}") from None
 
 
 def scenes_dir() -> Path:

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from lfrefract import FlatPort, ParameterError, Pose
-from lfrefract._validate import finite_vector, positive_float, reject_unknown_keys, require_keys
+from lfrefract._validate import as_table, finite_vector, positive_float, reject_unknown_keys, require_keys, text
 from lfrefract.io import write_json
 from lfrefract.outputs import staged_directory
 from simulator.config import SceneConfig, Water, apply_water_index, parse_scene, read_toml, scenes_dir
@@ -148,7 +148,7 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
     reject_unknown_keys("rig", data, {"name", "wall", "camera", "render", "light", "object", "water"})
     require_keys("rig", data, {"wall", "camera"})
     water = Water.from_dict(data["water"]) if "water" in data else None
-    wall_table = dict(data["wall"])
+    wall_table = as_table("[wall]", data["wall"])
     reject_unknown_keys("wall", wall_table, _WALL_KEYS)
     require_keys("wall", wall_table, {"normal", "distance_m", "thickness_m"})
     wall = Wall(**apply_water_index(wall_table, water, where="wall"))
@@ -157,12 +157,12 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
         raise ParameterError(f"a rig needs at least two [[camera]] tables, got {tables!r}")
     cameras, names = [], set()
     for i, table in enumerate(tables):
-        table = dict(table)
+        table = as_table(f"camera[{i}]", table)
         reject_unknown_keys(f"camera[{i}]", table, {"name", "preset", "optics", "position_m", "rotation_xyz_deg"})
         require_keys(f"camera[{i}]", table, {"name"})
         if ("preset" in table) == ("optics" in table):
             raise ParameterError(f"camera[{i}] needs either preset or optics (a camera table), not both or neither")
-        name = str(table["name"])
+        name = text(f"camera[{i}].name", table["name"])
         if not name or not name.replace("-", "").replace("_", "").isalnum() or name in names:
             raise ParameterError(f"camera[{i}].name must be a unique plain name (letters, digits, - _), got {name!r}")
         names.add(name)
@@ -176,7 +176,11 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
         scene_data = {
             "name": f"{data.get('name', Path(source).stem)}-{name}",
             "camera": {
-                **({"preset": table["preset"]} if "preset" in table else table["optics"]),
+                **(
+                    {"preset": table["preset"]}
+                    if "preset" in table
+                    else as_table(f"camera[{i}].optics", table["optics"])
+                ),
                 "pose": pose.to_dict(),
             },
             "port": port.to_dict(),
@@ -210,7 +214,7 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
     if path is None or (not Path(path).exists() and str(path) in embedded_rigs()):
         path = embedded_rigs()["default" if path is None else str(path)]
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():  # a directory or FIFO is refused by read_toml, by its kind
         raise FileNotFoundError(f"rig file {str(p)!r} does not exist (embedded rigs: {sorted(embedded_rigs())})")
     return parse_rig(read_toml(p, "rig"), base_dir=p.parent, source=str(p))
 

@@ -28,8 +28,10 @@ from types import ModuleType
 import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError
+from lfrefract.io import FileFormatError
 from simulator import assets
 from simulator.config import (
+    MAX_COORDINATE_M,
     Bowl,
     Chessboard,
     ConstantLight,
@@ -245,10 +247,30 @@ def _object_shape(mi: ModuleType, config: SceneConfig, index: int, media: dict):
 
 def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict):
     """Load a user OBJ/PLY mesh (with ``media`` on its sides) and check every vertex against the
-    port (its extent is only known once loaded)."""
+    bound of positions and the port (its extent is only known once loaded).
+
+    The file's kind, size and content are checked first (:func:`simulator.assets.check_mesh_content`),
+    so that a wrong file is named with its problem rather than with Mitsuba's internal message.
+
+    Raises
+    ------
+    ParameterError
+        If the path is no longer a regular file of an accepted size, or a vertex lies beyond
+        :data:`simulator.config.MAX_COORDINATE_M` or on the camera side of the port.
+    FileFormatError
+        If the file's content is not a triangle mesh (the message names the file and the
+        problem), or Mitsuba cannot load it.
+    """
     import drjit as dr
 
     obj = config.objects[index]
+    where = f"object[{index}] (mesh)"
+    try:
+        assets.check_mesh_content(obj.path)
+    except FileFormatError as exc:
+        raise FileFormatError(f"{where}: cannot load {exc}") from None
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
     m = obj.placement.matrix @ np.diag([obj.scale, obj.scale, obj.scale, 1.0])
     spec = {
         "type": obj.path.suffix.lower()[1:],
@@ -260,8 +282,16 @@ def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict
     try:
         shape = mi.load_dict(spec)
     except RuntimeError as exc:
-        raise ParameterError(f"object[{index}] (mesh): cannot load {str(obj.path)!r}: {exc}") from None
+        raise FileFormatError(f"{where}: cannot load {str(obj.path)!r}: {exc}") from None
     vertices = np.asarray(dr.unravel(mi.Point3f, mi.traverse(shape)["vertex_positions"]), dtype=np.float64).T
+    outside = ~np.all(np.isfinite(vertices) & (np.abs(vertices) <= MAX_COORDINATE_M), axis=1)
+    if outside.any():
+        p = vertices[outside][0]
+        raise ParameterError(
+            f"object[{index}] (mesh {obj.path.name}): with scale={obj.scale!r} and position_m="
+            f"{list(obj.placement.position_m)}, a vertex lies at {p.tolist()} m in the world, beyond the "
+            f"scene's bound of +-{MAX_COORDINATE_M:g} m per coordinate (simulator.config.MAX_COORDINATE_M)"
+        )
     _require_water_side(config, vertices, f"object[{index}] (mesh {obj.path.name})")
     return shape
 
