@@ -79,12 +79,15 @@ MAX_THICKNESS_M = 1.0
 #: reaching it. The hit distance ``h / cos`` (``h`` the gap to the face) is computed from a cosine
 #: that carries an absolute round-off of a few 1e-16 (a dot product of unit vectors), i.e. a
 #: relative error of about ``1e-16 / cos`` in the hit distance and in the hit point's position
-#: along the face: at 1e-6 that is ~1e-10, so every valid ray's points are good to about 1e-10 of
-#: their distance, while rays closer to grazing are not (at cos = 1e-10 the old trace gave
-#: infinite exit points: the refracted cosine rounded to 0). Physically such rays carry nothing
-#: (the Fresnel transmittance vanishes linearly in cos: below 1e-5 at cos = 1e-6) and would cross
-#: a 5 cm gap 50 km from where they started. Rays refracted into the glass within
+#: along the face: at 1e-6 that is ~1e-10 of the distance travelled, while closer to grazing it
+#: grows without bound (at cos = 1e-10 the old trace gave infinite exit points: the refracted
+#: cosine rounded to 0). Physically such rays carry next to nothing (at an interface of different
+#: media the Fresnel transmittance vanishes linearly in cos: 6e-6 from air into glass at 1e-6)
+#: and would cross a 5 cm gap 50 km from where they started. Rays refracted into the glass within
 #: ``GRAZING_COS_MIN**2 / 2`` (5e-13) of the critical sine are caught by it at the second face.
+#: (Refraction near the critical angle is ill-conditioned in itself: a refracted cosine ``c_t``
+#: inherits a relative error of about ``1e-16 (n1 / n2)^2 / c_t^2`` from the rounding of the
+#: incoming direction, whatever the algorithm; such rays are valid and finite, not exact.)
 GRAZING_COS_MIN = 1e-6
 
 
