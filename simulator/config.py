@@ -874,16 +874,17 @@ def read_toml(path: str | Path, what: str) -> dict:
         data = path.read_bytes()
     except OSError as exc:
         raise ParameterError(f"{label} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
-    return parse_toml(data, f"{label} {str(path)!r}")
+    return _parse_toml(data, f"{label} {str(path)!r}")
 
 
-def parse_toml(data: bytes, where: str) -> dict:
+def _parse_toml(data: bytes, where: str) -> dict:
     """Decode ``data`` as UTF-8 and parse it as TOML; ``where`` names it in errors.
 
     Raises
     ------
     ParameterError
-        If ``data`` is not UTF-8 text or not valid TOML.
+        If ``data`` is not UTF-8 text (a byte-order mark, NUL bytes, bytes that do not decode)
+        or not valid TOML (including integers too long to convert and nesting too deep to parse).
     """
     boms = {
         b"\xef\xbb\xbf": "a UTF-8 byte-order mark",
@@ -895,19 +896,27 @@ def parse_toml(data: bytes, where: str) -> dict:
             raise ParameterError(
                 f"{where} starts with {name}: TOML must be UTF-8 text without one; save it as UTF-8 (no BOM)"
             )
+    nul = data.find(b"\0")
+    if nul >= 0:  # valid UTF-8, but never in TOML: UTF-16 text (of ASCII characters) or a binary file
+        line = data.count(b"\n", 0, nul) + 1
+        raise ParameterError(
+            f"{where} is not UTF-8 text: it holds NUL bytes (from line {line}), as UTF-16 text or a binary "
+            "file does; TOML must be UTF-8, save it as UTF-8"
+        )
     try:
         document = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
-        hint = " (it looks like UTF-16: NUL bytes between characters)" if b"\0" in data[:200] else ""
         raise ParameterError(
-            f"{where} is not UTF-8 text{hint}: byte 0x{data[exc.start]:02x} on line {line} cannot be decoded; "
-            "TOML must be UTF-8, save it as UTF-8"
+            f"{where} is not UTF-8 text: byte 0x{data[exc.start]:02x} on line {line} cannot be decoded (another "
+            "encoding, such as Latin-1 or UTF-16?); TOML must be UTF-8, save it as UTF-8"
         ) from None
     try:
         return tomllib.loads(document)
-    except tomllib.TOMLDecodeError as exc:
+    except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
         raise ParameterError(f"{where} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ParameterError(f"{where} nests arrays or tables too deeply to be read") from None
 
 
 def scenes_dir() -> Path:

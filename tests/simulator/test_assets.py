@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
+import time
 
 import cv2
 import numpy as np
@@ -522,3 +524,148 @@ def test_vertex_normals_of_a_tetrahedron():
 def test_assets_does_not_import_mitsuba():
     code = "import sys, simulator.assets; sys.exit(int(any(m in sys.modules for m in ('mitsuba', 'drjit'))))"
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+# ------------------------------------------------------------------------------------------
+# user mesh files: kind, size and content checked before Mitsuba reads them (issue 12)
+# ------------------------------------------------------------------------------------------
+
+TRIANGLE_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+
+
+def _refusal(path):
+    """The message of check_mesh_content's refusal of ``path`` (FileFormatError or ParameterError)."""
+    from lfrefract.io import FileFormatError
+    from simulator import assets
+
+    with pytest.raises((FileFormatError, ParameterError)) as err:
+        assets.check_mesh_content(path)
+    return err.type, str(err.value)
+
+
+def test_mesh_path_of_the_wrong_kind_or_size_is_refused_from_its_metadata(tmp_path):
+    from simulator import assets
+    from tests.tolerances import FILE_SIZE_REFUSAL_SECONDS
+
+    folder = tmp_path / "folder.obj"
+    folder.mkdir()
+    fifo = tmp_path / "pipe.obj"
+    os.mkfifo(fifo)
+    sparse = tmp_path / "huge.obj"
+    with sparse.open("wb") as fh:
+        fh.truncate(5 * 2**30)  # 5 GiB, sparse: created instantly, no disk used
+    cases = [
+        (folder, "is a directory, not a regular file"),
+        (fifo, "is a named pipe (FIFO), not a regular file"),
+        (sparse, "holds 5368709120 bytes (5120 MiB), more than the 536870912 bytes (512 MiB) accepted"),
+        (tmp_path / "missing.obj", "does not exist"),
+    ]
+    for path, message in cases:
+        start = time.perf_counter()
+        kind, text = _refusal(path)
+        assert time.perf_counter() - start < FILE_SIZE_REFUSAL_SECONDS
+        assert kind is ParameterError
+        assert f"mesh path {str(path)!r} {message}" == text
+    assert assets.MAX_MESH_FILE_BYTES == 512 * 2**20
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"", "the file is empty"),
+        (b"hello world\nthis is not a mesh\n", "line 1 ('hello world') is not an OBJ statement"),
+        (bytes(range(256)) * 8, "holds the byte 0x00: an OBJ file is ASCII text"),
+        (b"# only a comment\n\n", "no vertex ('v') lines"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no face ('f') lines"),
+        (b"v 1 2\nf 1 2 9\n", "line 1 ('v 1 2') does not parse: a vertex ('v') needs 3 numbers"),
+        (b"v 0 0 0\nv 1.2.3 0 0\nv 0 1 0\nf 1 2 3\n", "line 2 ('v 1.2.3 0 0') does not parse"),
+        (b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2 ('v nan 0 0') does not parse"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0\nf 1 2 3\n", "line 4 ('vn 0 0') does not parse"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0\nf 1 2 3\n", "line 4 ('vt 0') does not parse"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n", "line 4 ('f -3 -2 -1') uses negative (relative) vertex"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "line 4 ('f 1 2') does not parse: a face ('f') needs 3"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "line 4 ('f 1 2 x') does not parse"),
+        (TRIANGLE_OBJ.encode() + b"#" * 1100 + b"\n", "line 5 ('####"),
+    ],
+    ids=[
+        "empty", "garbage", "binary", "comment-only", "no-faces", "short-vertex", "two-points", "nan",
+        "short-normal", "short-texcoord", "negative-index", "short-face", "face-letter", "long-line",
+    ],
+)  # fmt: skip
+def test_bad_obj_content_is_named_with_its_file_and_line(tmp_path, content, message):
+    from lfrefract.io import FileFormatError
+
+    path = tmp_path / "thing.obj"
+    path.write_bytes(content)
+    kind, text = _refusal(path)
+    assert kind is FileFormatError
+    assert text.startswith(f"{str(path)!r}: ")
+    assert message in text
+
+
+def test_obj_lines_are_counted_across_blocks(tmp_path, monkeypatch):
+    from simulator import assets
+
+    monkeypatch.setattr(assets, "_OBJ_BLOCK", 16)  # many blocks, lines cut at their edges
+    path = tmp_path / "thing.obj"
+    path.write_text(TRIANGLE_OBJ * 5 + "v 1 2 x\n" + TRIANGLE_OBJ)
+    assert "line 21 ('v 1 2 x') does not parse" in _refusal(path)[1]
+    path.write_text(TRIANGLE_OBJ * 5)  # and a good one passes whatever the block size
+    assets.check_mesh_content(path)
+
+
+def test_good_meshes_pass_the_content_check(tmp_path):
+    from simulator import assets
+
+    obj = tmp_path / "good.obj"
+    obj.write_text(
+        "# a comment\nmtllib thing.mtl\no thing\ng group\ns off\nusemtl stone\n"
+        "  v 0 0 0\n\tv 1.5 -2.25e-3 +3.\r\nv .5 5. -.5E+2 0.2 0.3 0.4\nvn 0 0 1\nvt 0 1\n"
+        "f 1/1/1 2//1 3/1\nf 1 2 3 1\n"
+    )  # indentation, CRLF, exponents, vertex colours, all reference forms, a quad
+    assets.check_mesh_content(obj)
+    ply = write_ply(tmp_path / "bowl.ply", *bowl_mesh(radius_m=0.05, depth_m=0.03, thickness_m=0.004))
+    assets.check_mesh_content(ply)
+    ascii_ply = tmp_path / "ascii.ply"
+    ascii_ply.write_text(
+        "ply\nformat ascii 1.0\ncomment by hand\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    )
+    assets.check_mesh_content(ascii_ply)
+
+
+def _ply_header(*lines: str) -> bytes:
+    return ("\n".join(lines) + "\n").encode()
+
+
+PLY_OK = (
+    "ply", "format binary_little_endian 1.0", "element vertex 3", "property float x", "property float y",
+    "property float z", "element face 1", "property list uchar int vertex_indices", "end_header",
+)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"hello\n", "does not start with the line 'ply': not a PLY file"),
+        (_ply_header("ply", "format binary_little_endian 1.0") + b"\0" * 70_000, "no 'end_header' line within"),
+        (_ply_header(*PLY_OK), "holds 0 bytes after its header, but its elements need at least 49"),
+        (_ply_header(*PLY_OK) + b"\0" * 48, "holds 48 bytes after its header"),
+        (_ply_header(*PLY_OK[:3], "property float x", "property float y", *PLY_OK[6:]), "with properties x, y and z"),
+        (_ply_header(*PLY_OK[:6], "end_header"), "needs a 'face' element"),
+        (_ply_header("ply", "format binary_little_endian 2.0", *PLY_OK[2:]), "header line 2"),
+        (_ply_header(*PLY_OK[:3], "property quad x", *PLY_OK[4:]), "header line 4 ('property quad x')"),
+        (_ply_header(*PLY_OK[:2], "vertices 3", *PLY_OK[3:]), "not a PLY header statement"),
+    ],
+    ids=["magic", "no-end", "empty-body", "truncated", "no-z", "no-face", "version", "type", "statement"],
+)
+def test_bad_ply_headers_are_named_with_their_file(tmp_path, content, message):
+    from lfrefract.io import FileFormatError
+
+    path = tmp_path / "thing.ply"
+    path.write_bytes(content)
+    kind, text = _refusal(path)
+    assert kind is FileFormatError
+    assert text.startswith(f"{str(path)!r}: ")
+    assert message in text

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import read_exr, read_json
+from lfrefract.io import FileFormatError, read_exr, read_json
 from simulator import cli
 from simulator.config import RenderSettings, embedded_scenes, load_scene, parse_scene
 from simulator.job import render_job, render_raw
@@ -207,7 +207,7 @@ def test_user_mesh_reaching_through_the_glass_is_refused(tmp_path):
 @pytest.mark.render
 def test_corrupt_user_mesh_is_a_clear_error(tmp_path):
     config = _mesh_scene(tmp_path, "v 1 2\nf 1 2 9\n", [0.0, 0.0, 0.4])
-    with pytest.raises(ParameterError, match=r"object\[0\] \(mesh\): cannot load '.*thing\.obj'"):
+    with pytest.raises(FileFormatError, match=r"object\[0\] \(mesh\): cannot load '.*thing\.obj'"):
         render_job(config, tmp_path / "out", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["meshes"]
 
