@@ -677,6 +677,35 @@ PORT_TIR_BAND = 1e-11
 # are asserted.
 PORT_REVERSAL_CONDITION = 1e-10
 
+# ----------------------------------------------------------------------------- dataset memory
+# Bytes; growth of the tracemalloc peak of building and checking every sample of a sweep one at a
+# time (iter_samples) between 52 and 200 samples of the default scene, after a warm-up run. Only
+# the sample being built is alive, so the peak is that of one sample (about 1.1 MB with the base
+# scene's meshes) whatever the count; what varies is allocator noise and blocks parked on Python's
+# free lists, measured at 35 kB between 100 and 400 samples (without the warm-up, free lists filling
+# up added 340 kB). Holding every sample, as the earlier expansion did, costs about 12 kB per
+# sample: 1.8 MB for the 148 extra samples.
+DATASET_STREAM_PEAK_GROWTH_BYTES = 256 * 1024
+
+# Bytes per sample; growth of the tracemalloc peak of a run's plan (one small record per sample:
+# id, index, seed, swept values, hash, input paths) between 52 and 200 samples: measured 1.9 kB with
+# two swept floats (the record's dicts, strings and the list holding them). 4 kB leaves room for
+# longer swept values; the full samples that were held before cost about 12 kB each.
+DATASET_PLAN_BYTES_PER_SAMPLE_MAX = 4 * 1024
+
+# ----------------------------------------------------------------------------- hostile captures (issue 12)
+# Fraction of output pixels; sub-aperture and naive views of a capture whose raw image has NaN in 3 %
+# of its pixels, masked as unrecorded (--nonfinite mask): a view pixel has no value only where every
+# raw pixel of its bilinear samples (up to 4 per lens, 3 lenses per pixel) is masked. Measured 0 on
+# the tiny camera (0.06 % with half the pixels masked); spreading the NaN, as before, left 29-31 % of
+# the central and sub-aperture views' pixels NaN and 99.5 % of the full-aperture view's.
+MASKED_VIEW_EXTRA_NAN_FRACTION = 1e-3
+
+# Seconds; refusing an image size beyond the limit or beyond the memory available is a few
+# multiplications after reading the tiny camera's 0.7 MB raw image and its sidecar (measured
+# 20-60 ms on a busy 2-core machine); before issue 12 these ran for minutes or allocated 71 GiB.
+OVERSIZE_REFUSAL_SECONDS = 1.0
+
 # Seconds; refusing a scene's mesh file (or a scene file) from its metadata alone: a 5 GiB sparse
 # .obj is refused by os.stat before anything reads it (measured well under 10 ms, even with a busy
 # 2-core machine); before issue 12 a 4 GB sparse OBJ was read by Mitsuba for 76 s before failing.

@@ -189,9 +189,11 @@ def append_record(path: Path, record: dict) -> None:
             while view:
                 view = view[os.write(fd, view) :]
             os.fsync(fd)
-        except OSError:
+        except OSError as exc:
             with contextlib.suppress(OSError):  # the write's error is the one to report
                 os.ftruncate(fd, end)
+            if exc.filename is None:  # os.write and os.fsync do not name the file
+                exc.filename = str(path)
             raise
     finally:
         os.close(fd)

@@ -59,6 +59,7 @@ import hashlib
 import json
 import math
 import re
+import sys
 import time
 import tomllib
 import zlib
@@ -839,7 +840,8 @@ def iter_samples(
                 if whole > _ESTIMATE_MIN_S:
                     bar.write(
                         f"checking {total} samples before any work: about {_duration(whole)} "
-                        f"({elapsed / bar.n * 1e3:.1f} ms per sample)"
+                        f"({elapsed / bar.n * 1e3:.1f} ms per sample)",
+                        file=sys.stderr,
                     )
 
 
@@ -860,25 +862,28 @@ def _grid_point(spec: SweepSpec, p: int) -> tuple:
     return tuple(reversed(values))
 
 
+#: Values that hold no file path (skipped while looking for one).
+_NO_PATHS = (bool, int, float, complex, str, bytes, type(None), np.ndarray, np.generic)
+
+
 def _input_files(config: SceneConfig) -> list[tuple[str, Path]]:
     """Every file path in ``config`` (where in the config, path): the files its render reads."""
     found: list[tuple[str, Path]] = []
-
-    def walk(value: Any, where: str) -> None:
+    stack: list[tuple[str, Any]] = [("", config)]  # (a recursive closure would be a reference cycle)
+    while stack:
+        where, value = stack.pop()
         if isinstance(value, Path):
             found.append((where, value))
         elif dataclasses.is_dataclass(value) and not isinstance(value, type):
             for f in dataclasses.fields(value):
-                walk(getattr(value, f.name), f"{where}.{f.name}" if where else f.name)
+                v = getattr(value, f.name)
+                if not isinstance(v, _NO_PATHS):
+                    stack.append((f"{where}.{f.name}" if where else f.name, v))
         elif isinstance(value, (list, tuple)):
-            for i, v in enumerate(value):
-                walk(v, f"{where}[{i}]")
+            stack.extend((f"{where}[{i}]", v) for i, v in enumerate(value) if not isinstance(v, _NO_PATHS))
         elif isinstance(value, Mapping):
-            for k, v in value.items():
-                walk(v, f"{where}.{k}")
-
-    walk(config, "")
-    return found
+            stack.extend((f"{where}.{k}", v) for k, v in value.items() if not isinstance(v, _NO_PATHS))
+    return sorted(found)
 
 
 def _build_sample(
