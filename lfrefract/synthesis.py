@@ -46,7 +46,7 @@ from lfrefract import __version__
 from lfrefract._kernels import gather, merge_rows, select_candidates
 from lfrefract._raytree import LazyRayTree
 from lfrefract._validate import ParameterError, non_negative_float, one_of, positive_int
-from lfrefract.camera import LightFieldCamera
+from lfrefract.camera import LightFieldCamera, image_side_px
 from lfrefract.io import FileFormatError
 from lfrefract.outputs import atomic_file
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
@@ -228,6 +228,19 @@ class WarpMap:
         :func:`warp_map_key` of its inputs.
     meta : dict
         Camera, port, output and options as plain data.
+
+    Raises
+    ------
+    ParameterError
+        If the arrays break the map's invariants (checked on construction, so that no kernel
+        ever sees them): ``raw_shape`` two integers in [1, MAX_IMAGE_SIDE_PX]; ``indptr`` a
+        native integer array of shape (width * height + 1,) starting at 0, non-decreasing and
+        ending at ``len(indices)``; ``indices`` a native integer array of raw flat indices in
+        [0, height * width of the raw); ``weights`` native float32/float64 of the same length,
+        finite, non-negative, each non-empty row summing to 1 (within :data:`ROW_SUM_TOLERANCE`);
+        ``gain`` native float32/float64 of shape (width * height,), finite and non-negative;
+        ``coverage`` native float32/float64 of shape (height, width), in [0, 1]. An index outside
+        the raw would make :meth:`apply` read outside the raw image (a crash of the process).
     """
 
     output: PinholeCamera
@@ -239,6 +252,9 @@ class WarpMap:
     coverage: np.ndarray
     key: str
     meta: dict
+
+    def __post_init__(self) -> None:
+        _check_warp_map(self)
 
     @property
     def filled(self) -> np.ndarray:
@@ -302,33 +318,165 @@ class WarpMap:
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, expected_key: str | None = None) -> WarpMap:
-        """Read a map written by :meth:`save`; with ``expected_key`` a stale map is an error."""
+        """Read a map written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : path-like
+            The ``.npz`` file.
+        expected_key : str, optional
+            The :func:`warp_map_key` the map must have; another key is a stale map.
+
+        Returns
+        -------
+        WarpMap
+
+        Raises
+        ------
+        FileFormatError
+            Naming the file and what is wrong: missing, empty, truncated or not an ``.npz``
+            archive, an array missing, or arrays that break the map's invariants (see
+            :class:`WarpMap`), or a stale key.
+        """
         path = Path(path)
+        name = str(path)
         if not path.is_file():
-            raise FileFormatError(f"no such file: {str(path)!r}")
+            raise FileFormatError(f"no such file: {name!r}")
+        problem = None
         try:
-            with path.open("rb") as fh, np.load(fh, allow_pickle=False) as data:
-                key = str(data["key"])
-                meta = json.loads(str(data["meta"]))
-                names = ("raw_shape", "indptr", "indices", "weights", "gain", "coverage")
-                arrays = {name: data[name] for name in names}
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-            raise FileFormatError(f"{str(path)!r} is not a warp map: {exc}") from None
+            with path.open("rb") as fh:
+                loaded = np.load(fh, allow_pickle=False)
+                if not isinstance(loaded, np.lib.npyio.NpzFile):
+                    problem = "it holds a single array (.npy), not an .npz archive"
+                else:
+                    with loaded as data:
+                        missing = [k for k in (*_WARP_MAP_ARRAYS, "key", "meta") if k not in data.files]
+                        if missing:
+                            problem = f"it lacks the array(s) {missing}"
+                        else:
+                            arrays = {k: data[k] for k in _WARP_MAP_ARRAYS}
+                            key_array, meta_array = data["key"], data["meta"]
+        except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+            raise FileFormatError(f"{name!r} is not a warp map: {type(exc).__name__}: {exc}") from None
+        if problem is not None:
+            raise FileFormatError(f"{name!r} is not a warp map: {problem}")
+        if key_array.shape != () or key_array.dtype.kind != "U":
+            raise FileFormatError(f"{name!r} is not a warp map: 'key' is not a string")
+        key = str(key_array[()])
         if expected_key is not None and key != expected_key:
+            raise FileFormatError(f"{name!r} is a warp map for other parameters (key {key}, expected {expected_key})")
+        try:
+            meta = json.loads(str(meta_array[()])) if meta_array.shape == () and meta_array.dtype.kind == "U" else None
+        except ValueError:
+            meta = None
+        if not isinstance(meta, dict) or "output" not in meta:
+            raise FileFormatError(f"{name!r} is not a warp map: 'meta' is not a JSON object with an 'output'")
+        raw_shape = arrays.pop("raw_shape")
+        if raw_shape.shape != (2,) or raw_shape.dtype.kind not in "iu":
             raise FileFormatError(
-                f"{str(path)!r} is a warp map for other parameters (key {key}, expected {expected_key})"
+                f"{name!r} is not a valid warp map: raw_shape must be 2 integers, got {raw_shape.dtype} "
+                f"shape {raw_shape.shape}"
             )
-        return cls(
-            output=PinholeCamera.from_dict(meta["output"]),
-            raw_shape=tuple(int(x) for x in arrays["raw_shape"]),
-            indptr=arrays["indptr"],
-            indices=arrays["indices"],
-            weights=arrays["weights"],
-            gain=arrays["gain"],
-            coverage=arrays["coverage"],
-            key=key,
-            meta=meta,
+        try:
+            return cls(
+                output=PinholeCamera.from_dict(meta["output"]),
+                raw_shape=(int(raw_shape[0]), int(raw_shape[1])),
+                key=key,
+                meta=meta,
+                **arrays,
+            )
+        except ParameterError as exc:
+            raise FileFormatError(f"{name!r} is not a valid warp map: {exc}") from None
+
+
+#: Arrays of a warp-map file besides its key and meta.
+_WARP_MAP_ARRAYS = ("raw_shape", "indptr", "indices", "weights", "gain", "coverage")
+
+#: Largest distance from 1 of the sum of a non-empty row's weights. Rows are normalised in float64
+#: and stored in float32, which moves each weight by at most 2^-24 of itself and so the sum by at
+#: most 6e-8 whatever the row's length; 1e-4 accepts every map this code builds and refuses rows
+#: that were never normalised (or were scaled).
+ROW_SUM_TOLERANCE = 1e-4
+
+
+def _native(name: str, arr: object, kinds: str, ndim: int) -> np.ndarray:
+    """``arr`` if it is a native-byte-order ndarray of a dtype kind in ``kinds`` with ``ndim``
+    dimensions (float: float32/float64 only, what the gather kernel takes), else raise."""
+    what = {"iu": "an integer", "f": "a float32/float64"}[kinds]
+    if not isinstance(arr, np.ndarray):
+        raise ParameterError(f"{name} must be {what} numpy array, got {type(arr).__name__}")
+    ok = arr.dtype.kind in kinds and arr.dtype.isnative and arr.ndim == ndim
+    if kinds == "f":
+        ok = ok and arr.dtype in (np.float32, np.float64)
+    if not ok:
+        raise ParameterError(
+            f"{name} must be {what} array ({ndim}-D, native byte order), got {arr.dtype} shape {arr.shape}"
         )
+    return arr
+
+
+def _check_warp_map(warp: WarpMap) -> None:
+    """Raise ParameterError unless the map's fields meet the invariants of :class:`WarpMap`."""
+    if not isinstance(warp.output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {warp.output!r}")
+    if not isinstance(warp.raw_shape, tuple) or len(warp.raw_shape) != 2:
+        raise ParameterError(f"raw_shape must be a (height, width) tuple, got {warp.raw_shape!r}")
+    raw_h = image_side_px("raw_shape[0]", warp.raw_shape[0])
+    raw_w = image_side_px("raw_shape[1]", warp.raw_shape[1])
+    if not isinstance(warp.key, str):
+        raise ParameterError(f"key must be a string, got {warp.key!r}")
+    if not isinstance(warp.meta, dict):
+        raise ParameterError(f"meta must be a dict, got {type(warp.meta).__name__}")
+    n_pixels = warp.output.width_px * warp.output.height_px
+    indptr = _native("indptr", warp.indptr, "iu", 1)
+    indices = _native("indices", warp.indices, "iu", 1)
+    weights = _native("weights", warp.weights, "f", 1)
+    gain = _native("gain", warp.gain, "f", 1)
+    coverage = _native("coverage", warp.coverage, "f", 2)
+    if indptr.shape != (n_pixels + 1,):
+        raise ParameterError(
+            f"indptr must have one entry per output pixel plus one ({n_pixels + 1} for "
+            f"{warp.output.width_px} x {warp.output.height_px}), got {indptr.shape[0]}"
+        )
+    if weights.shape != indices.shape:
+        raise ParameterError(f"weights must match indices in length, got {weights.shape[0]} and {indices.shape[0]}")
+    if gain.shape != (n_pixels,):
+        raise ParameterError(f"gain must have one entry per output pixel ({n_pixels}), got shape {gain.shape}")
+    if coverage.shape != (warp.output.height_px, warp.output.width_px):
+        raise ParameterError(
+            f"coverage must have the output's shape {(warp.output.height_px, warp.output.width_px)}, "
+            f"got {coverage.shape}"
+        )
+    if indptr[0] != 0 or indptr[-1] != indices.shape[0]:
+        raise ParameterError(
+            f"indptr must run from 0 to len(indices) = {indices.shape[0]}, got {int(indptr[0])} to {int(indptr[-1])}"
+        )
+    steps = np.diff(indptr)
+    if np.any(steps < 0):
+        row = int(np.argmax(steps < 0))
+        raise ParameterError(
+            f"indptr must be non-decreasing, falls from {int(indptr[row])} to {int(indptr[row + 1])} at row {row}"
+        )
+    if indices.size and (int(indices.min()) < 0 or int(indices.max()) >= raw_h * raw_w):
+        bad = int(indices.min()) if int(indices.min()) < 0 else int(indices.max())
+        raise ParameterError(f"indices must lie in [0, {raw_h * raw_w}) (raw {raw_h} x {raw_w}), got {bad}")
+    for label, arr in (("weights", weights), ("gain", gain), ("coverage", coverage)):
+        finite = np.isfinite(arr)
+        if not finite.all():
+            raise ParameterError(f"{label} must be finite, got {float(arr[~finite].ravel()[0])!r}")
+        if arr.size and arr.min() < 0.0:
+            raise ParameterError(f"{label} must be non-negative, got {float(arr.min())!r}")
+    if coverage.size and coverage.max() > 1.0:
+        raise ParameterError(f"coverage must lie in [0, 1], got {float(coverage.max())!r}")
+    starts = indptr[:-1][steps > 0]
+    if starts.size:
+        sums = np.add.reduceat(weights, starts, dtype=np.float64)
+        worst = int(np.argmax(np.abs(sums - 1.0)))
+        if abs(sums[worst] - 1.0) > ROW_SUM_TOLERANCE:
+            row = int(np.flatnonzero(steps > 0)[worst])
+            raise ParameterError(
+                f"the weights of each non-empty row must sum to 1, row {row} sums to {float(sums[worst])!r}"
+            )
 
 
 def lens_plane_hits(points_cam: np.ndarray, directions_cam: np.ndarray) -> np.ndarray:

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
+import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -302,3 +306,166 @@ def test_auto_search_uses_the_tree_off_the_focal_plane():
 def test_a_rim_margin_that_leaves_no_aperture_is_refused():
     with pytest.raises(ParameterError, match=r"rim_margin_px=5\.0 leaves no usable aperture"):
         build_warp_map(TINY, PORT, options=SynthesisOptions(rim_margin_px=5.0))
+
+
+# ---------------------------------------------------------------------------- hostile map files (issue 12)
+def _map_arrays(warp) -> dict:
+    """The arrays :meth:`WarpMap.save` writes, as numpy arrays."""
+    return {
+        "indptr": warp.indptr,
+        "indices": warp.indices,
+        "weights": warp.weights,
+        "gain": warp.gain,
+        "coverage": warp.coverage,
+        "raw_shape": np.asarray(warp.raw_shape),
+        "key": np.asarray(warp.key),
+        "meta": np.asarray(json.dumps(warp.meta)),
+    }
+
+
+def _corrupt(warp, **changes) -> dict:
+    arrays = _map_arrays(warp)
+    for name, value in changes.items():
+        if value is None:
+            del arrays[name]
+        else:
+            arrays[name] = value(arrays[name]) if callable(value) else value
+    return arrays
+
+
+def _raw_pixels(warp) -> int:
+    return warp.raw_shape[0] * warp.raw_shape[1]
+
+
+def _with(arr, index, value):
+    out = arr.copy()
+    out[index] = value
+    return out
+
+
+def _non_monotone(indptr):
+    """Rows that overlap but keep the ends: one entry of indptr moved below its predecessor."""
+    out = indptr.copy()
+    row = int(np.flatnonzero(np.diff(indptr) > 1)[len(indptr) // 10])
+    out[row + 1] = out[row] - 1
+    return out
+
+
+CORRUPT_MAPS = [
+    # (id, changes, fragment of the message)
+    ("index past the raw", {"indices": lambda a: _with(a, 5, 10**9)}, "indices must lie in [0, "),
+    ("index just past the raw", {"indices": "RAW_PIXELS"}, "indices must lie in [0, "),
+    ("negative index", {"indices": lambda a: _with(a, 0, -1)}, "got -1"),
+    ("truncated indptr", {"indptr": lambda a: a[:-10]}, "indptr must have one entry per output pixel plus one"),
+    ("indptr not from 0", {"indptr": lambda a: a + 1}, "indptr must run from 0 to len(indices)"),
+    (
+        "indptr short of the end",
+        {"indptr": lambda a: _with(a, -1, a[-1] - 1)},
+        "indptr must run from 0 to len(indices)",
+    ),
+    ("indptr decreasing", {"indptr": _non_monotone}, "indptr must be non-decreasing"),
+    ("weights shorter", {"weights": lambda a: a[:-1]}, "weights must match indices in length"),
+    ("NaN weight", {"weights": lambda a: _with(a, 3, np.nan)}, "weights must be finite, got nan"),
+    ("negative weight", {"weights": lambda a: _with(a, 3, -0.5)}, "weights must be non-negative"),
+    ("rows not normalised", {"weights": lambda a: a * 2}, "must sum to 1"),
+    ("infinite gain", {"gain": lambda a: _with(a, 0, np.inf)}, "gain must be finite, got inf"),
+    ("gain of another size", {"gain": lambda a: a[:-1]}, "gain must have one entry per output pixel"),
+    ("coverage transposed", {"coverage": lambda a: a.T.copy()}, "coverage must have the output's shape"),
+    ("coverage above 1", {"coverage": lambda a: a * 2 + 0.1}, "coverage must lie in [0, 1]"),
+    ("float indices", {"indices": lambda a: a.astype(np.float64)}, "indices must be an integer array"),
+    ("integer weights", {"weights": lambda a: (a * 0 + 1).astype(np.int32)}, "weights must be a float32/float64 array"),
+    ("half-float weights", {"weights": lambda a: a.astype(np.float16)}, "weights must be a float32/float64 array"),
+    ("big-endian weights", {"weights": lambda a: a.astype(">f4")}, "native byte order"),
+    ("2-D indices", {"indices": lambda a: a.reshape(1, -1)}, "indices must be an integer array (1-D"),
+    ("raw_shape zero", {"raw_shape": lambda a: _with(a, 0, 0)}, "raw_shape[0] must be positive, got 0"),
+    ("raw_shape huge", {"raw_shape": lambda a: _with(a, 1, 10**7)}, "raw_shape[1] must be at most 65536 px"),
+    ("raw_shape of 3", {"raw_shape": np.array([1, 2, 3])}, "raw_shape must be 2 integers"),
+    ("raw_shape float", {"raw_shape": lambda a: a.astype(float)}, "raw_shape must be 2 integers"),
+    ("no indices", {"indices": None}, "lacks the array(s) ['indices']"),
+    ("no key", {"key": None}, "lacks the array(s) ['key']"),
+    ("numeric key", {"key": np.asarray(7)}, "'key' is not a string"),
+    ("meta not JSON", {"meta": np.asarray("{not json")}, "'meta' is not a JSON object with an 'output'"),
+    ("meta without output", {"meta": np.asarray("{}")}, "'meta' is not a JSON object with an 'output'"),
+    ("output of another size", {"meta": "OTHER_OUTPUT"}, "indptr must have one entry per output pixel plus one"),
+]
+
+
+@pytest.mark.parametrize(("changes", "fragment"), [c[1:] for c in CORRUPT_MAPS], ids=[c[0] for c in CORRUPT_MAPS])
+def test_corrupt_maps_are_file_format_errors_at_load(tmp_path, warp, changes, fragment):
+    """Issue 12: a map with the right key and out-of-range indices crashed the process (SIGSEGV
+    in the gather); a truncated indptr gave a reshape ValueError later. Every array is checked
+    at load, before any kernel sees it, and the error names the file."""
+    changes = dict(changes)
+    if changes.get("indices") == "RAW_PIXELS":
+        changes["indices"] = lambda a: _with(a, len(a) // 2, _raw_pixels(warp))
+    if changes.get("meta") == "OTHER_OUTPUT":
+        meta = {**warp.meta, "output": {**warp.meta["output"], "width_px": warp.output.width_px + 1}}
+        changes["meta"] = np.asarray(json.dumps(meta))
+    path = tmp_path / "map.npz"
+    np.savez(path, **_corrupt(warp, **changes))
+    with pytest.raises(FileFormatError, match=re.escape(str(path))) as info:
+        WarpMap.load(path, expected_key=warp.key if "key" not in changes else None)
+    assert fragment in str(info.value)
+
+
+def test_empty_and_foreign_files_are_file_format_errors(tmp_path, warp):
+    """An empty file gave EOFError; a lone .npy array or an archive without arrays are no maps."""
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(empty)!r} is not a warp map: EOFError")):
+        WarpMap.load(empty)
+    nothing = tmp_path / "nothing.npz"
+    np.savez(nothing)
+    with pytest.raises(FileFormatError, match=re.escape("lacks the array(s)")):
+        WarpMap.load(nothing)
+    lone = tmp_path / "lone.npz"
+    with lone.open("wb") as fh:
+        np.save(fh, warp.indices)
+    with pytest.raises(FileFormatError, match=re.escape("a single array (.npy), not an .npz archive")):
+        WarpMap.load(lone)
+    pickled = tmp_path / "pickled.npz"
+    np.save(pickled.with_suffix(""), np.array([object()], dtype=object), allow_pickle=True)
+    pickled.with_suffix(".npy").rename(pickled)
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(pickled)!r} is not a warp map")):
+        WarpMap.load(pickled)
+
+
+def test_a_map_with_an_index_past_the_raw_never_reaches_the_gather(tmp_path, warp):
+    """The SIGSEGV case end to end, in a subprocess so that a crash cannot take pytest down:
+    load refuses the file, apply is never reached, the process exits normally."""
+    path = tmp_path / "map.npz"
+    np.savez(path, **_corrupt(warp, indices=lambda a: _with(a, len(a) // 2, 2**31 - 1)))
+    script = (
+        "import sys, numpy as np\n"
+        "from lfrefract.io import FileFormatError\n"
+        "from lfrefract.synthesis import WarpMap\n"
+        "try:\n"
+        "    warp = WarpMap.load(sys.argv[1])\n"
+        "except FileFormatError as exc:\n"
+        "    print(exc)\n"
+        "    sys.exit(3)\n"
+        "warp.apply(np.zeros(warp.raw_shape, dtype=np.float32))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 3, (done.returncode, done.stderr[-2000:])
+    assert "indices must lie in [0, " in done.stdout
+
+
+def test_maps_built_in_memory_are_checked_too(warp):
+    """The checks live in the constructor: a WarpMap with bad arrays cannot be made at all."""
+    bad_index = _with(warp.indices, 0, _raw_pixels(warp))
+    with pytest.raises(ParameterError, match=re.escape("indices must lie in [0, ")):
+        dataclasses.replace(warp, indices=bad_index)
+    with pytest.raises(ParameterError, match="indptr must have one entry per output pixel plus one"):
+        dataclasses.replace(warp, indptr=warp.indptr[:-1])
+    with pytest.raises(ParameterError, match="weights must be a float32/float64 numpy array, got list"):
+        dataclasses.replace(warp, weights=warp.weights.tolist())
+    with pytest.raises(ParameterError, match="raw_shape must be a"):
+        dataclasses.replace(warp, raw_shape=[warp.raw_shape[0], warp.raw_shape[1]])
+    with pytest.raises(ParameterError, match="output must be a PinholeCamera"):
+        dataclasses.replace(warp, output=warp.output.to_dict())
+    # A smaller raw image than the map was built for puts its indices out of range.
+    with pytest.raises(ParameterError, match=re.escape("indices must lie in [0, ")):
+        dataclasses.replace(warp, raw_shape=(warp.raw_shape[0] // 2, warp.raw_shape[1]))
+    # The map as built passes, also through a file.
+    assert dataclasses.replace(warp).key == warp.key
