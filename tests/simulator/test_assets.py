@@ -669,3 +669,14 @@ def test_bad_ply_headers_are_named_with_their_file(tmp_path, content, message):
     assert kind is FileFormatError
     assert text.startswith(f"{str(path)!r}: ")
     assert message in text
+
+
+def test_a_mesh_file_changed_after_passing_is_checked_again(tmp_path):
+    from simulator import assets
+
+    path = tmp_path / "thing.obj"
+    path.write_text(TRIANGLE_OBJ)
+    assets.check_mesh_content(path)
+    assets.check_mesh_content(path)  # unchanged: remembered
+    path.write_text(TRIANGLE_OBJ + "v 1 2\n")
+    assert "line 5 ('v 1 2') does not parse" in _refusal(path)[1]
