@@ -65,13 +65,15 @@ SIDECAR_NAME = "meta.json"
 NONFINITE_POLICIES = ("refuse", "mask")
 
 
-def _table(path: Path, data: dict, key: str, *, required: bool) -> dict | None:
-    """``data[key]`` if it is a table; None if it is absent or null and not ``required``."""
-    if key not in data or (data[key] is None and not required):
+def _table(path: Path, data: dict, key: str, *, required: bool, nullable: bool) -> dict | None:
+    """``data[key]`` if it is a table; None if it is absent and not ``required``, or null and ``nullable``."""
+    if key not in data:
         if required:
             raise FileFormatError(f"{str(path)!r} has no key {key!r}")
         return None
     value = data[key]
+    if value is None and nullable:
+        return None
     if not isinstance(value, dict):
         raise FileFormatError(f"{str(path)!r}: key {key!r} must be a table (a JSON object), got {value!r}")
     return value
@@ -133,10 +135,10 @@ def read_sidecar(path: str | os.PathLike, *, camera_required: bool = True) -> Ca
     """
     path = Path(path)
     data = read_json(path)
-    camera_data = _table(path, data, "camera", required=camera_required)
-    port_data = _table(path, data, "port", required=False)
-    ideal_data = _table(path, data, "ideal", required=False)
-    pose_data = _table(path, data, "pose", required=False)
+    camera_data = _table(path, data, "camera", required=camera_required, nullable=False)
+    port_data = _table(path, data, "port", required=False, nullable=True)
+    ideal_data = _table(path, data, "ideal", required=False, nullable=True)
+    pose_data = _table(path, data, "pose", required=False, nullable=True)
     return CaptureSidecar(
         path=path,
         data=data,

@@ -203,16 +203,17 @@ def naive_view(
 def naive_view_bytes(camera: LightFieldCamera, output: PinholeCamera, *, kind: str, channels: int) -> int:
     """Estimated peak memory of :func:`naive_view`, bytes (see :mod:`lfrefract._memory`).
 
-    The float32 raw copy, per output pixel the resampling (:data:`RESAMPLING_BYTES_PER_PIXEL`) and
-    the image (float64 product and float32 result, 12 bytes per channel), and for ``kind="full"``
-    the captured rays of every raw pixel (:data:`FULL_VIEW_BYTES_PER_RAW_PIXEL`).
+    The float32 raw copy, and the larger of: per output pixel the resampling
+    (:data:`RESAMPLING_BYTES_PER_PIXEL`) and the image (float64 product and float32 result, 12
+    bytes per channel); for ``kind="full"`` the captured rays of every raw pixel
+    (:data:`FULL_VIEW_BYTES_PER_RAW_PIXEL`), freed before the resampling. Measured with tracemalloc
+    on the tiny camera at 6 000 to 630 000 output pixels: 0.75-0.88 of the estimate.
     """
     raw_pixels = camera.sensor.width_px * camera.sensor.height_px
     pixels = output.width_px * output.height_px
-    total = 4 * channels * raw_pixels + pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
-    if kind == "full":
-        total += FULL_VIEW_BYTES_PER_RAW_PIXEL * raw_pixels
-    return int(total)
+    resampling = pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
+    rays = FULL_VIEW_BYTES_PER_RAW_PIXEL * raw_pixels if kind == "full" else 0
+    return int(4 * channels * raw_pixels + max(resampling, rays))
 
 
 def view_stack_bytes(
@@ -223,7 +224,8 @@ def view_stack_bytes(
     The views, ``grid^2`` float32 images of ``channels`` channels; the contiguous channel planes of
     the raw image; one resampling (:data:`RESAMPLING_BYTES_PER_PIXEL` per output pixel) and one
     view's product. ``exported`` adds what ``lfrefract.io.write_view_stack`` allocates over the
-    whole stack: one byte per value (its mask of finite values).
+    whole stack: one byte per value (its mask of finite values). Measured with tracemalloc on the
+    tiny camera (3 x 3 and 9 x 9 views of 6 000 to 630 000 pixels): 0.80-0.91 of the estimate.
     """
     raw_pixels = camera.sensor.width_px * camera.sensor.height_px
     pixels = output.width_px * output.height_px

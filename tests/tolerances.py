@@ -706,6 +706,15 @@ MASKED_VIEW_EXTRA_NAN_FRACTION = 1e-3
 # 20-60 ms on a busy 2-core machine); before issue 12 these ran for minutes or allocated 71 GiB.
 OVERSIZE_REFUSAL_SECONDS = 1.0
 
+# Ratio of the tracemalloc peak to the estimate of lfrefract._memory (warp map) and lfrefract.views
+# (naive views, view stacks), on the tiny camera. An estimate may err high (it refuses work that would
+# have fitted, by at most 1 / 0.4 = 2.5x) more than low (the work may then fail for memory, so by at
+# most 25 %). Measured: warp maps 0.49-0.83 (analytic search) and 0.96-1.12 (k-d tree), naive views
+# 0.75-0.88, view stacks 0.80-0.91. tracemalloc counts numpy's allocations, not numba's or qhull's
+# small internal ones.
+MEMORY_ESTIMATE_RATIO_MIN = 0.4
+MEMORY_ESTIMATE_RATIO_MAX = 1.25
+
 # Seconds; refusing a scene's mesh file (or a scene file) from its metadata alone: a 5 GiB sparse
 # .obj is refused by os.stat before anything reads it (measured well under 10 ms, even with a busy
 # 2-core machine); before issue 12 a 4 GB sparse OBJ was read by Mitsuba for 76 s before failing.

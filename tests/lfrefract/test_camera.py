@@ -559,3 +559,43 @@ def test_camera_dict_round_trip_and_unknown_keys():
         LightFieldCamera.from_dict({**data, "mla": {**data["mla"], "pitch": 1}})
     with pytest.raises(ParameterError, match=r"unknown key\(s\) in camera.sensor: \['bits'\]"):
         LightFieldCamera.from_dict({**data, "sensor": {**data["sensor"], "bits": 12}})
+
+
+# =============================================================================== hostile sidecars (issue 12)
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ("tiny", "camera must be a table (a JSON object) of camera parameters, got 'tiny'"),
+        (["tiny"], "camera must be a table"),
+        (None, "camera must be a table"),
+        ({"mla": "hex"}, "camera.mla must be a table (a JSON object), got 'hex'"),
+        ({"sensor": [480, 360]}, "camera.sensor must be a table (a JSON object), got [480, 360]"),
+        ({"mla": {"offset_m": 5}}, "mla.offset_m must be a sequence of 2 numbers, got 5"),
+        ({"mla": {"offset_m": "ab"}}, "mla.offset_m"),
+        ({"mla": {"grid": ["hex"]}}, "mla.grid must be"),
+        ({"sensor": {"width_px": "480"}}, "sensor.width_px must be an integer, got '480'"),
+        ({"focal_length_m": [0.006]}, "focal_length_m must be a real number, got [0.006]"),
+        ({"name": 7}, "name must be a string, got 7"),
+    ],
+)
+def test_camera_from_dict_of_the_wrong_types_is_a_parameter_error(data, message):
+    # A meta.json's camera with values of the wrong type gave ValueError/TypeError from dict() and
+    # tuple(); every one is a ParameterError naming the key.
+    good = camera_preset("tiny").to_dict()
+    if isinstance(data, dict):
+        data = {**good, **{k: ({**good[k], **v} if isinstance(v, dict) else v) for k, v in data.items()}}
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        LightFieldCamera.from_dict(data)
+
+
+def test_sensor_sizes_are_bounded():
+    from lfrefract.camera import MAX_IMAGE_SIDE_PX
+
+    assert MAX_IMAGE_SIDE_PX == 65536
+    SensorGeometry(width_px=65536, height_px=16, pixel_pitch_m=1e-6)
+    with pytest.raises(ParameterError, match=re.escape("sensor.width_px must be at most 65536 px, got 200000")):
+        SensorGeometry(width_px=200_000, height_px=16, pixel_pitch_m=1e-6)
+    # A warp map indexes raw pixels with int32.
+    with pytest.raises(ParameterError, match=re.escape("at most 2147483647 pixels (int32 raw indices)")):
+        SensorGeometry(width_px=65536, height_px=32768, pixel_pitch_m=1e-6)
+    SensorGeometry(width_px=65536, height_px=32767, pixel_pitch_m=1e-6)

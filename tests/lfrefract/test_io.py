@@ -174,6 +174,34 @@ def test_json_missing_and_malformed(tmp_path):
         read_json(broken)
 
 
+@pytest.mark.parametrize(
+    ("encoding", "reason"),
+    [
+        ("utf-16", "not UTF-8 text"),  # with a byte-order mark: 0xFF is never UTF-8
+        ("utf-16-le", "not UTF-8 text"),  # no BOM: the 'e acute' is 0xE9 0x00
+        ("utf-32", "not UTF-8 text"),
+        ("latin-1", "not UTF-8 text"),  # the 'e acute' of the name is one byte 0xE9
+        ("utf-8-sig", "not valid JSON"),  # a UTF-8 byte-order mark: RFC 8259 forbids it
+    ],
+)
+def test_json_that_is_not_utf8_is_a_file_format_error(tmp_path, encoding, reason):
+    # Issue 12: a UTF-16 meta.json (or a calibration output re-saved by an editor) gave a
+    # UnicodeDecodeError traceback. The message names the file.
+    path = tmp_path / "meta.json"
+    path.write_bytes(
+        json.dumps({"schema_version": SCHEMA_VERSION, "name": "Ren\u00e9"}, ensure_ascii=False).encode(encoding)
+    )
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} is {reason}")):
+        read_json(path)
+
+
+def test_json_nested_too_deeply_is_a_file_format_error(tmp_path):
+    path = tmp_path / "deep.json"
+    path.write_text('{"schema_version": 1, "x": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} is nested too deeply")):
+        read_json(path)
+
+
 def test_json_unserialisable_value_writes_nothing(tmp_path):
     with pytest.raises(TypeError, match="cannot write object to JSON"):
         write_json(tmp_path / "x.json", {"thing": object()})

@@ -110,3 +110,38 @@ def test_virtual_camera_for_tiny(pixels_per_lens):
 def test_virtual_camera_rejects_bad_density():
     with pytest.raises(ParameterError, match=re.escape("pixels_per_lens must be positive, got 0.0")):
         virtual_camera_for(camera_preset("tiny"), pixels_per_lens=0.0)
+
+
+# =============================================================================== hostile sidecars (issue 12)
+def test_image_sizes_are_bounded_at_once():
+    # A meta.json whose ideal was 200000 x 200000 ran for minutes; it is refused by the dataclass.
+    from lfrefract.pinhole import MAX_IMAGE_SIDE_PX
+
+    assert MAX_IMAGE_SIDE_PX == 65536
+    PinholeCamera(focal_px=1e4, cx_px=0.0, cy_px=0.0, width_px=65536, height_px=65536)
+    for name in ("width_px", "height_px"):
+        with pytest.raises(ParameterError, match=re.escape(f"{name} must be at most 65536 px, got 200000")):
+            PinholeCamera(**{"focal_px": 1e4, "cx_px": 0.0, "cy_px": 0.0, "width_px": 8, "height_px": 8, name: 200_000})
+    with pytest.raises(ParameterError, match="must be at most 65536 px"):
+        virtual_camera_for(camera_preset("tiny"), pixels_per_lens=2000.0)
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ("92x69", "pinhole must be a table (a JSON object) with K, width_px, height_px, got '92x69'"),
+        ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], "pinhole must be a table"),
+        ({"K": "eye"}, "K must be a 3 x 3 matrix of numbers, got 'eye'"),
+        ({"K": [[1, 0, 0], [0, 1]]}, "K must be a 3 x 3 matrix of numbers"),
+        ({"K": {"fx": 1}}, "K must be a 3 x 3 matrix of numbers"),
+        ({"width_px": 92.0}, "width_px must be an integer, got 92.0"),
+        ({"height_px": None}, "height_px must be an integer, got None"),
+        ({"zoom": 2}, "unknown key(s) in pinhole: ['zoom']"),
+    ],
+)
+def test_from_dict_of_the_wrong_types_is_a_parameter_error(data, message):
+    good = virtual_camera_for(camera_preset("tiny")).to_dict()
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        PinholeCamera.from_dict({**good, **data} if isinstance(data, dict) else data)
+    with pytest.raises(ParameterError, match=re.escape("missing key(s) in pinhole: ['K']")):
+        PinholeCamera.from_dict({"width_px": 8, "height_px": 8})

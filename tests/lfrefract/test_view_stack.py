@@ -426,3 +426,41 @@ def test_view_file_names_rejects_a_bad_grid():
     for grid in (0, -3, 2.5, True):
         with pytest.raises(ParameterError, match=rf"grid must be .*got {re_value(grid)}$"):
             view_file_names(grid, "png")
+
+
+# =============================================================================== unrecorded pixels, memory (issue 12)
+def test_a_stack_with_unrecorded_pixels_is_each_view_with_them_masked():
+    raw = plane_raw(TINY, 0.1, channels=3)
+    holes = np.random.default_rng(4).random(raw.shape[:2]) < 0.03
+    raw[holes, 1] = np.nan
+    stack = subaperture_stack(TINY, raw, grid=3, recorded=~holes)
+    assert not np.isnan(stack.views).any()  # spreading the NaN left about 30 % of every view NaN
+    for r, c in ((0, 0), (1, 1), (2, 1)):
+        np.testing.assert_array_equal(
+            stack.views[r, c], subaperture_view(TINY, raw, tuple(stack.offsets_px[r, c]), recorded=~holes)
+        )
+    with pytest.raises(ParameterError, match=r"recorded must be a bool array of shape \(360, 480\)"):
+        subaperture_stack(TINY, raw, grid=3, recorded=~holes[:10])
+
+
+def test_a_stack_beyond_the_memory_is_refused_before_any_view_is_allocated(monkeypatch):
+    # Issue 12: `lfrefract views --grid 1001` tried to allocate 71 GiB (1001^2 views of 92 x 69 x 3 float32).
+    import time
+
+    import lfrefract._memory
+    from lfrefract.views import view_stack_bytes
+    from tests.tolerances import OVERSIZE_REFUSAL_SECONDS
+
+    views_bytes = 1001**2 * 92 * 69 * 3 * 4
+    assert views_bytes / 2**30 == pytest.approx(71.1, abs=0.05)
+    estimate = view_stack_bytes(TINY, virtual_camera_for(TINY), grid=1001, channels=3)
+    assert views_bytes <= estimate <= 1.01 * views_bytes  # the views dominate; the rest is a few MB
+    raw = plane_raw(TINY, 0.1, channels=3)
+    monkeypatch.setattr(lfrefract._memory, "available_memory", lambda: (16 * 2**30, "MemAvailable (test)"))
+    monkeypatch.setattr(np, "empty", lambda *a, **k: pytest.fail("allocated before the check"))
+    start = time.perf_counter()
+    with pytest.raises(
+        ParameterError, match=r"1001 x 1001 stack of 92 x 69 px views .* needs about 71\.\d GiB .* 16 GiB"
+    ):
+        subaperture_stack(TINY, raw, grid=1001)
+    assert time.perf_counter() - start < OVERSIZE_REFUSAL_SECONDS

@@ -1,0 +1,264 @@
+"""lfrefract.capture: the one reader of captures (raw image + meta.json, or a bare raw image given a
+camera and a port), its checks, the counts of unrecorded raw values, and warp maps that skip them."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+
+import numpy as np
+import pytest
+
+from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose, camera_preset, virtual_camera_for
+from lfrefract.capture import (
+    Capture,
+    UnrecordedValues,
+    camera_from_option,
+    capture_parameters,
+    mask_warp_map,
+    port_from_file,
+    read_capture,
+    read_sidecar,
+)
+from lfrefract.io import FileFormatError, write_exr, write_json
+from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from tests.tolerances import FLOAT32_WEIGHT_SUM
+
+TINY = camera_preset("tiny")
+PORT = FlatPort.from_degrees(distance_m=0.02, thickness_m=0.004, tilt_x_deg=10.0)
+SHAPE = (TINY.sensor.height_px, TINY.sensor.width_px)
+
+
+def raw_image(seed: int = 0) -> np.ndarray:
+    return (0.4 + 0.2 * np.random.default_rng(seed).random((*SHAPE, 3))).astype(np.float32)
+
+
+def write_capture(folder, raw=None, **meta):
+    data = {"kind": "lfsim.render", "camera": TINY.to_dict(), "port": PORT.to_dict(), "scene": {"any": "thing"}}
+    data.update(meta)
+    write_exr(folder / "raw.exr", raw_image() if raw is None else raw, role="raw")
+    write_json(folder / "meta.json", data)
+    return folder / "raw.exr"
+
+
+# =============================================================================== reading
+def test_a_capture_folder_gives_its_checked_parameters(tmp_path):
+    ideal = PinholeCamera(focal_px=100.0, cx_px=40.0, cy_px=30.0, width_px=81, height_px=61)
+    pose = Pose.from_euler_xyz_deg((0.0, 10.0, 0.0), (0.1, 0.0, 0.0))
+    path = write_capture(tmp_path, ideal=ideal.to_dict(), pose=pose.to_dict())
+    capture = read_capture(path)
+    assert capture.camera == TINY
+    assert capture.port == PORT
+    assert capture.ideal == ideal
+    assert capture.output == ideal
+    assert capture.pose == pose
+    assert capture.sidecar_path == tmp_path / "meta.json"
+    assert capture.sidecar["scene"] == {"any": "thing"}  # other keys are kept, not checked
+    assert capture.raw.shape == (*SHAPE, 3)
+    assert capture.channels == 3
+    assert not capture.raw.flags.writeable
+    assert capture.recorded is None
+    assert capture.unrecorded == UnrecordedValues()
+    assert capture.masked_summary() is None
+    # Without ideal and pose: the default output geometry, no pose.
+    bare = read_capture(write_capture(tmp_path / "b", ideal=None))
+    assert bare.ideal is None
+    assert bare.pose is None
+    assert bare.output == virtual_camera_for(TINY)
+
+
+def test_a_bare_raw_image_needs_a_camera_and_takes_a_given_port(tmp_path):
+    path = tmp_path / "raw.exr"
+    write_exr(path, raw_image(), role="raw")
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} has no meta.json beside it")):
+        read_capture(path)
+    capture = read_capture(path, camera=TINY, port=PORT)
+    assert capture.sidecar is None
+    assert capture.sidecar_path is None
+    assert capture.port == PORT
+    assert capture.camera_source == "the camera given"
+    # A camera is optional where the caller says so (calibrate mla).
+    assert read_capture(path, camera_required=False).camera is None
+    with pytest.raises(FileFormatError, match=re.escape(f"no such file: {str(tmp_path / 'nope.exr')!r}")):
+        read_capture(tmp_path / "nope.exr")
+
+
+def test_given_parameters_replace_the_sidecars(tmp_path):
+    other = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.0, tilt_y_deg=5.0)
+    path = write_capture(tmp_path, camera=camera_preset("tiny-2x").to_dict())
+    with pytest.raises(FileFormatError, match=re.escape("is 480 x 360 px, but the camera")):
+        read_capture(path)
+    capture = read_capture(path, camera=TINY, port=other)
+    assert capture.camera == TINY
+    assert capture.port == other
+
+
+def test_parameters_are_checked_before_the_raw_image_is_read(tmp_path):
+    path = write_capture(tmp_path, pose={"rotation": "none"})
+    path.write_bytes(b"not an exr")
+    with pytest.raises(FileFormatError, match=r"key 'pose': pose\.rotation must be a finite 3x3 matrix"):
+        capture_parameters(path)
+    write_capture(tmp_path)
+    path.write_bytes(b"not an exr")
+    assert capture_parameters(path).camera == TINY  # and only read_capture reads the image
+    with pytest.raises(FileFormatError, match="is not an OpenEXR file"):
+        read_capture(path)
+
+
+@pytest.mark.parametrize(
+    ("meta", "message"),
+    [
+        ({"camera": "tiny"}, "key 'camera' must be a table (a JSON object), got 'tiny'"),
+        ({"camera": None}, "key 'camera' must be a table (a JSON object), got None"),
+        ({"port": 0.02}, "key 'port' must be a table (a JSON object), got 0.02"),
+        ({"port": {"distance_m": -1.0}}, "key 'port': port.distance_m must be positive"),
+        ({"ideal": [92, 69]}, "key 'ideal' must be a table (a JSON object), got [92, 69]"),
+        ({"ideal": {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "width_px": 1, "height_px": 10**6}}, "key 'ideal'"),
+        ({"pose": "up"}, "key 'pose' must be a table (a JSON object), got 'up'"),
+        ({"pose": {"rotation_xyz_deg": [0, 0]}}, "key 'pose': pose.rotation_xyz_deg must have 3 entries"),
+    ],
+)
+def test_every_key_of_the_sidecar_is_checked_naming_file_and_key(tmp_path, meta, message):
+    path = write_capture(tmp_path, **meta)
+    for read in (read_capture, capture_parameters, lambda p: read_sidecar(p.parent / "meta.json")):
+        with pytest.raises(FileFormatError, match=re.escape(f"{str(tmp_path / 'meta.json')!r}: {message}")):
+            read(path)
+
+
+def test_null_port_ideal_and_pose_are_absent(tmp_path):
+    sidecar = read_sidecar(write_capture(tmp_path, port=None, ideal=None, pose=None).parent / "meta.json")
+    assert (sidecar.port, sidecar.ideal, sidecar.pose) == (None, None, None)
+    with pytest.raises(FileFormatError, match=re.escape("has no key 'camera'")):
+        read_sidecar(write_json(tmp_path / "x" / "meta.json", {"port": PORT.to_dict()}))
+    assert read_sidecar(tmp_path / "x" / "meta.json", camera_required=False).camera is None
+
+
+def test_a_sidecar_that_is_a_directory_is_refused(tmp_path):
+    write_exr(tmp_path / "raw.exr", raw_image(), role="raw")
+    (tmp_path / "meta.json").mkdir()
+    with pytest.raises(FileFormatError, match=re.escape("meta.json' (the sidecar beside")):
+        read_capture(tmp_path / "raw.exr", camera=TINY)
+
+
+def test_capture_fields_are_type_checked():
+    with pytest.raises(ParameterError, match="port must be a FlatPort or None, got 'flat'"):
+        Capture(raw_path="r.exr", raw=raw_image(), camera=TINY, port="flat")
+    with pytest.raises(ParameterError, match=r"raw must be a float \(H, W\) or \(H, W, C\) image, got int64"):
+        Capture(raw_path="r.exr", raw=np.zeros(SHAPE, dtype=np.int64), camera=TINY)
+    with pytest.raises(ParameterError, match=r"nonfinite must be one of \['refuse', 'mask'\], got 'ignore'"):
+        Capture(raw_path="r.exr", raw=raw_image(), camera=TINY, nonfinite="ignore")
+    with pytest.raises(ParameterError, match="camera must be a LightFieldCamera, got 'tiny'"):
+        read_capture("r.exr", camera="tiny")
+
+
+# =============================================================================== unrecorded values
+def test_unrecorded_values_are_counted_by_kind_and_pixel():
+    raw = np.ones((4, 5, 3), dtype=np.float32)
+    raw[0, 0] = [np.nan, np.nan, 1.0]  # one pixel, two NaN
+    raw[1, 1, 2] = np.inf
+    raw[2, 2, 0] = -np.inf
+    raw[3, 3] = [-1.0, -1e-30, -0.0]  # -0.0 is not negative
+    raw[3, 4, 1] = 0.0
+    counts = UnrecordedValues.of(raw)
+    assert counts == UnrecordedValues(nan=2, posinf=1, neginf=1, negative=2, pixels=4)
+    assert counts.values == 6
+    assert counts.describe() == "2 NaN, 1 +inf, 1 -inf and 2 negative pixel values (in 4 pixels)"
+    assert UnrecordedValues.of(raw[..., 0]).describe() == "1 NaN, 1 -inf and 1 negative pixel values (in 3 pixels)"
+    assert counts.to_dict() == {"nan": 2, "posinf": 1, "neginf": 1, "negative": 2, "pixels": 4, "values": 6}
+
+
+def test_unrecorded_values_are_refused_or_masked(tmp_path):
+    raw = raw_image()
+    raw[10, 20, 1] = np.nan
+    raw[30, 40] = -1.0
+    path = write_capture(tmp_path, raw=raw)
+    message = f"{str(path)!r} has 1 NaN and 3 negative pixel values (in 2 pixels); pass --nonfinite mask"
+    with pytest.raises(FileFormatError, match=re.escape(message)):
+        read_capture(path)
+    capture = read_capture(path, nonfinite="mask")
+    expected = np.ones(SHAPE, dtype=bool)
+    expected[10, 20] = expected[30, 40] = False
+    np.testing.assert_array_equal(capture.recorded, expected)
+    assert not capture.recorded.flags.writeable
+    assert np.isnan(capture.raw[10, 20, 1])  # the image is kept as read
+    assert capture.masked_summary()["values"] == 4
+    assert capture.masked_summary()["pixels"] == 2
+    with pytest.raises(ParameterError, match="nonfinite must be one of"):
+        read_capture(path, nonfinite="zero")
+
+
+# =============================================================================== warp maps without them
+@pytest.fixture(scope="module")
+def warp():
+    return build_warp_map(TINY, PORT, options=SynthesisOptions(k=8, supersample=2))
+
+
+def test_a_masked_warp_map_renormalises_each_row_over_its_recorded_rays(warp):
+    rng = np.random.default_rng(5)
+    recorded = rng.random(SHAPE) >= 0.03
+    masked = mask_warp_map(warp, recorded)
+    assert not np.isin(masked.indices, np.flatnonzero(~recorded)).any()
+    assert recorded.ravel()[warp.indices].sum() == len(masked.indices)  # every recorded entry is kept
+    n = len(warp.indptr) - 1
+
+    def per_row(indptr, values):
+        return np.bincount(np.repeat(np.arange(n), np.diff(indptr)), weights=values, minlength=n)
+
+    sums = per_row(masked.indptr, masked.weights.astype(np.float64))[np.diff(masked.indptr) > 0]
+    np.testing.assert_allclose(sums, 1.0, atol=FLOAT32_WEIGHT_SUM)
+    # Rows that lost nothing are unchanged; their weights are the same to round-off.
+    lost = per_row(warp.indptr, (~recorded.ravel()[warp.indices]).astype(float))
+    for p in np.flatnonzero((lost == 0) & (np.diff(warp.indptr) > 0))[::97]:
+        a, b = slice(warp.indptr[p], warp.indptr[p + 1]), slice(masked.indptr[p], masked.indptr[p + 1])
+        np.testing.assert_array_equal(masked.indices[b], warp.indices[a])
+        np.testing.assert_allclose(masked.weights[b], warp.weights[a], rtol=FLOAT32_WEIGHT_SUM)
+    # A uniform raw image stays uniform (times the gain) wherever a row keeps a ray.
+    image = masked.apply(np.where(recorded, 1.0, np.nan).astype(np.float32))
+    filled = masked.filled
+    np.testing.assert_allclose(image[filled], masked.gain.reshape(filled.shape)[filled], rtol=FLOAT32_WEIGHT_SUM)
+    assert (image[~filled] == 0).all()
+    assert masked.meta["unrecorded_raw_pixels"] == int((~recorded).sum())
+    assert masked.key == warp.key
+
+
+def test_a_warp_map_with_everything_masked_fills_nothing(warp):
+    masked = mask_warp_map(warp, np.zeros(SHAPE, dtype=bool))
+    assert len(masked.indices) == 0
+    assert not masked.filled.any()
+    assert not masked.exact.any()  # the camera recorded none of the necessary rays
+    assert (masked.coverage == 0).all()
+    assert mask_warp_map(warp, None) is warp
+    with pytest.raises(ParameterError, match=r"recorded must be a bool array of shape \(360, 480\)"):
+        mask_warp_map(warp, np.zeros((2, 2), dtype=bool))
+
+
+# =============================================================================== option files
+def test_camera_options_are_presets_or_camera_files(tmp_path):
+    assert camera_from_option("tiny") == TINY
+    wide = dataclasses.replace(TINY, name="wide", f_number=2.5)
+    write_json(tmp_path / "cam.json", {"camera": wide.to_dict(), "other": 1})
+    assert camera_from_option(tmp_path / "cam.json") == wide
+    write_json(tmp_path / "no.json", {"port": PORT.to_dict()})
+    with pytest.raises(FileFormatError, match=re.escape("no.json' has no key 'camera': it is not a camera file")):
+        camera_from_option(tmp_path / "no.json")
+    (tmp_path / "utf16.json").write_bytes(json.dumps({"schema_version": 1}).encode("utf-16"))
+    with pytest.raises(FileFormatError, match=re.escape("utf16.json' is not UTF-8 text")):
+        camera_from_option(tmp_path / "utf16.json")
+    with pytest.raises(ParameterError, match=r"--camera must be a preset \(f01, illum, tiny, tiny-2x\) or a JSON"):
+        camera_from_option("tiny3")
+
+
+def test_port_files_need_a_port_table(tmp_path):
+    write_json(tmp_path / "p.json", {"port": PORT.to_dict()})
+    assert port_from_file(tmp_path / "p.json") == PORT
+    write_json(tmp_path / "null.json", {"port": None})
+    with pytest.raises(
+        FileFormatError, match=re.escape("null.json': key 'port' must be a table (a JSON object), got None")
+    ):
+        port_from_file(tmp_path / "null.json")
+    write_json(tmp_path / "bad.json", {"port": {"distance_m": "near"}})
+    with pytest.raises(
+        FileFormatError, match=re.escape("bad.json': key 'port': port.distance_m must be a real number")
+    ):
+        port_from_file(tmp_path / "bad.json")
