@@ -148,6 +148,7 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
     reject_unknown_keys("rig", data, {"name", "wall", "camera", "render", "light", "object", "water"})
     require_keys("rig", data, {"wall", "camera"})
     water = Water.from_dict(data["water"]) if "water" in data else None
+    rig_name = text("name", data["name"]) if "name" in data else Path(source).stem
     wall_table = as_table("[wall]", data["wall"])
     reject_unknown_keys("wall", wall_table, _WALL_KEYS)
     require_keys("wall", wall_table, {"normal", "distance_m", "thickness_m"})
@@ -174,7 +175,7 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
         except ParameterError as exc:
             raise ParameterError(f"camera[{i}] ({name!r}): {exc}") from None
         scene_data = {
-            "name": f"{data.get('name', Path(source).stem)}-{name}",
+            "name": f"{rig_name}-{name}",
             "camera": {
                 **(
                     {"preset": table["preset"]}
@@ -187,7 +188,7 @@ def parse_rig(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>
             **{key: data[key] for key in ("render", "light", "object", "water") if key in data},
         }
         cameras.append(RigCamera(name=name, scene=parse_scene(scene_data, base_dir=base_dir, source=source)))
-    name = str(data.get("name", Path(source).stem))
+    name = rig_name
     return RigConfig(name=name, wall=wall, cameras=tuple(cameras), water=water, source=source)
 
 

@@ -181,6 +181,7 @@ def test_a_value_of_the_wrong_type_names_key_type_and_value(tmp_path, case):
 
 
 RIG_WRONG_TYPES = {
+    "name-list": ({"name": ["stereo"]}, "name must be a string, got ['stereo']"),
     "wall-number": ({"wall": 3}, "[wall] must be a table, got 3"),
     "camera-entry-number": ({"camera": [3, 4]}, "camera[0] must be a table, got 3"),
     "camera-name-number": (
