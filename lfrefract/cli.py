@@ -335,6 +335,10 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     thickness = args.thickness_m if args.thickness_m is not None else known.thickness_m
     n_glass = args.n_glass if args.n_glass is not None else known.n_glass
     n_water = args.n_water if args.n_water is not None else known.n_water
+    try:  # checked now, not after minutes of corner detection: a port with these (any distance)
+        FlatPort(distance_m=1.0, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
+    except ParameterError as exc:
+        raise ParameterError(f"--thickness-m / --n-glass / --n-water: {exc}") from None
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     step = args.subaperture_offset_px
     if step != 0 and args.corners != "views":

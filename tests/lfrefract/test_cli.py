@@ -398,3 +398,26 @@ def test_a_view_grid_beyond_the_memory_is_refused_with_the_estimate(tmp_path, ca
     err = _fast_refusal(capsys, [*argv, "100001"])  # beyond any machine
     assert_says(err, "a 100001 x 100001 stack", "866 TiB of memory")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("option", [["--thickness-m", "-1"], ["--n-glass", "1e300"], ["--n-water", "nan"]])
+def test_calibrate_port_checks_the_port_options_before_detecting_corners(tmp_path, capsys, option):
+    # They were checked only after the corners of every capture were found (minutes on the Illum).
+    raw = make_capture(tmp_path / "cap")
+    err = refused(capsys, [*commands(raw, tmp_path / "out")["calibrate-port"], *option])
+    assert_says(err, "--thickness-m / --n-glass / --n-water: port.")
+
+
+def test_a_masked_synthesis_caches_the_full_map(tmp_path, capsys):
+    from lfrefract.synthesis import WarpMap
+
+    holed, _ = holed_raw(0.03)
+    path = make_capture(tmp_path / "holed", raw=holed)
+    cache = tmp_path / "maps"
+    assert main([*commands(path, tmp_path / "a")["synth"], "--nonfinite", "mask", "--map-cache", str(cache)]) == 0
+    (cached,) = cache.glob("*.npz")
+    assert "unrecorded_raw_pixels" not in WarpMap.load(cached).meta
+    clean = make_capture(tmp_path / "clean")
+    assert main([*commands(clean, tmp_path / "b")["synth"], "--map-cache", str(cache)]) == 0
+    assert "loaded" in capsys.readouterr().out
+    assert np.isfinite(read_exr(tmp_path / "b" / "s.exr")).all()
