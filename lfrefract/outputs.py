@@ -18,7 +18,8 @@ The rules (``docs/conventions.md``, "Outputs and --overwrite"):
   the current directory (or one of its parents) as an output directory;
 * staging directories left by a killed process (no live process holds their lock) are removed
   by the next output into the same parent; an earlier output moved aside for replacement is put
-  back if the new one never took its place.
+  back if the new one never took its place; SIGTERM is turned into a clean exit by the CLIs
+  (:func:`terminate_cleanly`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import contextlib
 import fcntl
 import json
 import os
+import re
 import shutil
 import signal
 import stat
@@ -53,9 +55,17 @@ __all__ = [
 MANIFEST_NAME = ".lfrefract-output.json"
 
 _MANIFEST_SCHEMA = 1
-_STAGING_MARKER = ".lfrefract-staging"
+# Staging directories are named ``.<name>.lfrefract-<8 random>.partial`` (earlier outputs moved
+# aside: ``...old.partial``): the name is what marks them as this package's, so a stage starts empty
+# (a render can be staged into a folder of another output's stage).
+_STAGE_TAG = ".lfrefract-"
 _STAGE_SUFFIX = ".partial"
 _ASIDE_SUFFIX = ".old.partial"
+_STAGE_NAME = re.compile(r"^\.(?P<name>.+)\.lfrefract-[a-z0-9_]{8}(?P<aside>\.old)?\.partial$")
+_LOCK_ATTEMPTS = 8
+
+# What this process is writing and has not finished: path -> is a directory (for terminate_cleanly).
+_PENDING: dict[Path, bool] = {}
 _MAX_LISTED = 5  # paths named in a refusal; the rest are counted
 
 
@@ -105,6 +115,7 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp = Path(name)
+    _PENDING[tmp] = False
     try:
         yield tmp
         _apply_umask(tmp, directory=False)
@@ -112,6 +123,8 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        _PENDING.pop(tmp, None)
 
 
 # =============================================================================== inputs
@@ -366,11 +379,11 @@ def _try_lock(path: Path) -> int | None:
 def remove_stale_staging(parent: str | os.PathLike) -> list[Path]:
     """Remove what killed writers left in ``parent``; put back earlier outputs they had moved aside.
 
-    A staging directory (``.<name>.<random>.partial`` holding the staging marker) that no live
-    process holds locked is deleted. An earlier output moved aside for replacement
-    (``.<name>.<random>.old.partial`` holding an output manifest) is renamed back to ``<name>``
-    if nothing has taken that name, else deleted (the new output is in place). Nothing else is
-    touched.
+    A staging directory (``.<name>.lfrefract-<random>.partial``) that no live process holds
+    locked is deleted. An earlier output moved aside for replacement
+    (``.<name>.lfrefract-<random>.old.partial``, holding its manifest) is renamed back to
+    ``<name>`` if nothing has taken that name, else deleted (the new output is in place); an empty
+    one is deleted. Nothing else is touched.
 
     Returns
     -------
@@ -380,22 +393,25 @@ def remove_stale_staging(parent: str | os.PathLike) -> list[Path]:
     parent = Path(parent)
     done: list[Path] = []
     try:
-        candidates = sorted(p for p in parent.iterdir() if p.name.startswith(".") and p.name.endswith(_STAGE_SUFFIX))
+        candidates = sorted(p for p in parent.iterdir() if _STAGE_NAME.match(p.name))
     except OSError:
         return done
     for path in candidates:
         if path.is_symlink() or not path.is_dir():
             continue
-        aside = path.name.endswith(_ASIDE_SUFFIX)
-        if not (path / (MANIFEST_NAME if aside else _STAGING_MARKER)).is_file():
-            continue
+        match = _STAGE_NAME.match(path.name)
         fd = _try_lock(path)
         if fd is None:
             continue  # a live writer holds it
         try:
-            original = parent / path.name[1 : -len(_ASIDE_SUFFIX)].rsplit(".", 1)[0] if aside else None
-            if original is not None and original.name and not (original.exists() or original.is_symlink()):
-                os.replace(path, original)
+            if match["aside"]:
+                original = parent / match["name"]
+                if output_manifest(path) is not None and not (original.exists() or original.is_symlink()):
+                    os.replace(path, original)
+                elif output_manifest(path) is not None or not any(path.iterdir()):
+                    shutil.rmtree(path)
+                else:
+                    continue
             else:
                 shutil.rmtree(path)
             done.append(path)
@@ -404,6 +420,24 @@ def remove_stale_staging(parent: str | os.PathLike) -> list[Path]:
         finally:
             os.close(fd)
     return done
+
+
+def _locked_directory(parent: Path, name: str, suffix: str) -> tuple[Path, int]:
+    """A new empty directory ``.<name>.lfrefract-<random><suffix>`` in ``parent``, locked.
+
+    Another writer's :func:`remove_stale_staging` may take a directory in the instant between its
+    creation and its lock; then another name is tried.
+    """
+    for _ in range(_LOCK_ATTEMPTS):
+        path = Path(tempfile.mkdtemp(prefix=f".{name}{_STAGE_TAG}", suffix=suffix, dir=parent))
+        fd = _try_lock(path)
+        if fd is not None and path.is_dir():
+            return path, fd
+        if fd is not None:
+            os.close(fd)
+        with contextlib.suppress(OSError):
+            path.rmdir()
+    raise OSError(f"could not create a locked staging directory in {str(parent)!r}")
 
 
 @contextlib.contextmanager
@@ -457,12 +491,10 @@ def staged_directory(
         _refuse_replacing(out, kind)
     out.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_staging(out.parent)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=_STAGE_SUFFIX, dir=out.parent))
-    lock = _try_lock(stage)
+    stage, lock = _locked_directory(out.parent, out.name, _STAGE_SUFFIX)
+    _PENDING[stage] = True
     try:
-        (stage / _STAGING_MARKER).touch()
         yield stage
-        (stage / _STAGING_MARKER).unlink()
         _write_manifest(stage, kind)
         _apply_umask(stage, directory=True)
         _commit(stage, out)
@@ -470,23 +502,31 @@ def staged_directory(
         shutil.rmtree(stage, ignore_errors=True)
         raise
     finally:
-        if lock is not None:
-            os.close(lock)
+        _PENDING.pop(stage, None)
+        os.close(lock)
 
 
 def _commit(stage: Path, out: Path) -> None:
-    """Put ``stage`` in the place of ``out``; an earlier ``out`` is moved aside and deleted only
-    after the new one is in place (at no moment is neither on disk; a failed rename puts it back)."""
+    """Put the content of ``stage`` in the place of ``out``.
+
+    ``out`` absent: ``stage`` is renamed to it. ``out`` an empty directory (one the user made, or
+    the stage of an enclosing output): the entries move into it, the manifest last, so the folder
+    itself (and a lock or a shell's working directory on it) stays. ``out`` an earlier output: it
+    is moved aside and deleted only after the new one is in place (at no moment is neither on
+    disk; a failed rename puts it back).
+    """
     if not out.exists():
         os.replace(stage, out)
         return
     if not any(out.iterdir()):
-        os.replace(stage, out)  # an empty directory: rename replaces it
+        names = sorted((p.name for p in stage.iterdir()), key=lambda n: n == MANIFEST_NAME)
+        for name in names:
+            os.replace(stage / name, out / name)
+        stage.rmdir()
         return
-    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=_ASIDE_SUFFIX, dir=out.parent))
-    os.replace(out, aside)
-    aside_lock = _try_lock(aside)
+    aside, aside_lock = _locked_directory(out.parent, out.name, _ASIDE_SUFFIX)
     try:
+        os.replace(out, aside)
         try:
             os.replace(stage, out)
         except BaseException:
@@ -494,14 +534,19 @@ def _commit(stage: Path, out: Path) -> None:
             raise
         shutil.rmtree(aside, ignore_errors=True)
     finally:
-        if aside_lock is not None:
-            os.close(aside_lock)
+        os.close(aside_lock)
 
 
 @contextlib.contextmanager
-def terminate_cleanly() -> Iterator[None]:
-    """Turn SIGTERM into ``SystemExit(143)`` while the block runs, so that staged outputs and
-    temporary files are cleaned up as on Ctrl-C (Python's default for SIGTERM runs no cleanup).
+def terminate_cleanly(prog: str) -> Iterator[None]:
+    """Make SIGTERM remove this process's unfinished outputs before it ends (exit status 143).
+
+    Python's default for SIGTERM ends the process with no cleanup, leaving staging directories and
+    temporary files. Raising an exception from the handler instead is unsafe: it can surface inside
+    native code (Dr.Jit, OpenEXR) and abort the process. So the handler deletes what
+    :func:`staged_directory` and :func:`atomic_file` have not finished, says so on standard error
+    and ends the process at once. An earlier output caught between the two renames of a replacement
+    is put back by the next run (:func:`remove_stale_staging`).
 
     Only the main thread can install signal handlers; elsewhere the block runs unchanged. The
     previous handler is restored afterwards.
@@ -510,10 +555,15 @@ def terminate_cleanly() -> Iterator[None]:
         yield
         return
 
-    def _exit(signum, frame):
-        raise SystemExit(128 + signum)
+    def _terminate(signum, frame):
+        for path, directory in list(_PENDING.items())[::-1]:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(path) if directory else path.unlink()
+        with contextlib.suppress(OSError):
+            os.write(2, f"{prog}: terminated (signal {signum}); unfinished outputs removed\n".encode())
+        os._exit(128 + signum)
 
-    previous = signal.signal(signal.SIGTERM, _exit)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         yield
     finally:

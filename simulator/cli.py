@@ -163,7 +163,7 @@ def _rig(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = _parser().parse_args(argv)
-    with terminate_cleanly():
+    with terminate_cleanly("lfsim"):
         return _run(args)
 
 

@@ -267,7 +267,7 @@ def test_live_staging_and_foreign_hidden_folders_are_kept(tmp_path):
 
 def test_an_earlier_output_moved_aside_by_a_killed_writer_is_put_back(tmp_path):
     out = own_output(tmp_path / "run")
-    aside = tmp_path / ".run.k3x9q2ab.old.partial"
+    aside = tmp_path / ".run.lfrefract-k3x9q2ab.old.partial"
     os.replace(out, aside)  # where a writer killed between its two renames leaves it
     assert remove_stale_staging(tmp_path) == [aside]
     assert entries(tmp_path) == ["run"]

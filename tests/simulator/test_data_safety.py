@@ -160,6 +160,6 @@ def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
         assert time.monotonic() < deadline
         time.sleep(0.02)
     proc.send_signal(signal.SIGTERM)
-    proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGTERM
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
     assert list(tmp_path.iterdir()) == []
