@@ -390,3 +390,19 @@ def test_a_warp_map_saved_over_a_directory_leaves_nothing(tmp_path, small_map):
         WarpMap.load(small_map).save(tmp_path / "key.npz")
     assert entries(tmp_path) == ["key.npz"]
     assert entries(tmp_path / "key.npz") == []
+
+
+def test_an_empty_output_folder_keeps_its_identity_and_nested_staging_works(tmp_path):
+    """A folder the user made (or the stage of an enclosing output) is filled, not replaced."""
+    out = tmp_path / "made-by-me"
+    out.mkdir()
+    inode = out.stat().st_ino
+    with staged_directory(tmp_path / "outer", kind="outer") as outer:
+        own_output(outer, kind="inner")  # staged into the (empty) stage of another output
+        (outer / "extra.txt").write_text("x")
+    assert output_manifest(tmp_path / "outer")["kind"] == "outer"
+    assert entries(tmp_path / "outer") == [MANIFEST_NAME, "a.txt", "extra.txt", "sub"]
+    own_output(out)
+    assert out.stat().st_ino == inode
+    assert entries(out) == [MANIFEST_NAME, "a.txt", "sub"]
+    assert entries(tmp_path) == ["made-by-me", "outer"]
