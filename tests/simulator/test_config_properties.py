@@ -126,7 +126,7 @@ def damaged_scenes(draw):
         action = draw(st.sampled_from(["hostile", "number", "wrap", "remove", "unknown", "scale"]))
         value = parent[key]
         if action == "hostile":
-            parent[key] = draw(HOSTILE)
+            parent[key] = copy.deepcopy(draw(HOSTILE))  # a copy: later mutations must not reach HOSTILE
         elif action == "number":
             parent[key] = draw(NUMBERS)
         elif action == "wrap":
@@ -135,8 +135,11 @@ def damaged_scenes(draw):
             del parent[key]
         elif action == "unknown" and isinstance(parent, dict):
             parent[draw(st.sampled_from(["colour", "spp", "Type", "position"]))] = 1
-        elif action == "scale" and isinstance(value, (int, float)) and not isinstance(value, bool):
-            parent[key] = value * 10.0 ** draw(st.integers(min_value=-330, max_value=330))
+        elif (
+            action == "scale" and isinstance(value, float | int) and not isinstance(value, bool) and abs(value) < 1e300
+        ):
+            # 10.0 ** 308 is the largest power; the product may overflow to inf, which is a case too.
+            parent[key] = float(value) * 10.0 ** draw(st.integers(min_value=-320, max_value=308))
     return data
 
 
