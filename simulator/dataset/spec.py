@@ -118,10 +118,10 @@ DISTRIBUTIONS = {
 }
 
 #: Most samples of one sweep. Measured on the 2-core CI machine (default scene): every sample is
-#: built and checked before any work, at 4-10 ms each (100 000 samples: 7-16 min, said up front with
+#: built and checked before any work, at 4-11 ms each (100 000 samples: 7-18 min, said up front with
 #: a progress bar), and the driver reads ``dataset.json`` (about 0.3 kB per sample) and the manifest
-#: (about 1.5 kB per line, about 6 kB per record in memory) whole on resume and in ``check``: at this
-#: limit some 0.6 GB. Split a bigger sweep into several specs (other seeds, or parts of a grid) in
+#: (about 1.5 kB per line, 6.6 kB per record in memory) whole on resume and in ``check``: at this
+#: limit some 0.7 GB. Split a bigger sweep into several specs (other seeds, or parts of a grid) in
 #: folders of their own.
 MAX_SAMPLES = 100_000
 

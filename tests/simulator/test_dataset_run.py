@@ -28,8 +28,11 @@ from tests.tolerances import DATASET_TURBID_OVER_CLEAR_MAX
 pytestmark = pytest.mark.render
 
 ARRAYS = ("raw", "ideal", "depth_m", "refraction_free", "coverage")
-#: Files whose bytes differ between runs of the same spec: the render sidecar holds timings.
-TIMED_FILES = {"meta.json"}
+#: Files whose bytes differ between runs of the same spec: the render sidecar holds timings, and the
+#: folder's output manifest lists the sidecar's size.
+TIMED_FILES = {"meta.json", ".lfrefract-output.json"}
+#: Files of a view stack folder besides the views.
+VIEW_STACK_FILES = (".lfrefract-output.json", "parameters.cfg", "stack.npz", "valid_mask.png", "views.json")
 #: Seconds a test waits for a subprocess event before it fails.
 WAIT_S = 180.0
 
@@ -84,7 +87,7 @@ def test_run_writes_every_sample_and_its_record(tilt_run):
         assert (record["seed"], record["hash"], record["params"]) == (sample.seed, sample.hash, dict(sample.params))
         assert set(record["seconds"]) >= {"render", "raw", "ideal", "refraction_free", "total"}
         assert sorted(record["files"]) == [
-            "depth.exr", "ideal.exr", "lenses.npz", "meta.json", "port.txt", "raw.exr",
+            ".lfrefract-output.json", "depth.exr", "ideal.exr", "lenses.npz", "meta.json", "port.txt", "raw.exr",
             "refraction_free.coverage.exr", "refraction_free.exr", "sample.json",
         ]  # fmt: skip
         for name, entry in record["files"].items():
@@ -175,7 +178,7 @@ def test_check_reports_corrupt_missing_and_extra_files(tilt_run, tmp_path):
     )
     assert proc.returncode == 1
     assert "s000001: corrupt: raw.exr: SHA-256" in proc.stdout
-    assert "4 samples, 0 verified; 2 missing, 2 corrupt, 0 failed, 0 not run" in proc.stdout
+    assert "4 samples, 0 verified; 2 missing, 2 corrupt, 0 stale, 0 failed, 0 not run" in proc.stdout
 
 
 def test_resume_with_an_edited_spec_is_refused(tilt_run, tmp_path):
@@ -265,8 +268,9 @@ GOOD_OBJ = "v -0.05 -0.05 0\nv 0.05 -0.05 0\nv 0 0.05 0\nf 1 2 3\n"
 
 def test_failed_samples_are_recorded_then_retried_by_the_next_run(tmp_path, scheduler):
     """A mesh file that exists but cannot be read passes the spec checks and fails at render time:
-    retried, then recorded as failed, reported, and rendered by a later run once fixed (on an
-    existing Dask cluster, given by its scheduler's address)."""
+    retried, then recorded as failed, reported, and tried again by a later run (on an existing
+    Dask cluster, given by its scheduler's address). Fixing the mesh makes another sample (its
+    content is in the sample's hash): a resume is then refused, a new folder gets every sample."""
     (tmp_path / "good.obj").write_text(GOOD_OBJ)
     (tmp_path / "bad.obj").write_text("v 1 2\nf 1 2 9\n")
     (tmp_path / "scene.toml").write_text(
@@ -303,7 +307,7 @@ position_m = [0.0, 0.0, 0.4]
     assert report.rendered == 1
     ((sid, error, attempts),) = report.failed
     assert (sid, attempts) == ("s000001", 2)
-    assert "ParameterError" in error
+    assert "FileFormatError" in error
     assert "cannot load" in error
     assert "bad.obj" in error
     records = {r["id"]: r for r in _records(root)}
@@ -318,13 +322,20 @@ position_m = [0.0, 0.0, 0.4]
     data = Dataset(root)
     assert (data.ids, data.missing) == (("s000000",), ("s000001",))
 
-    shutil.copy(tmp_path / "good.obj", tmp_path / "bad.obj")  # the mesh is fixed: same spec, same samples
     again = run_dataset(tmp_path / "spec.toml", root, scheduler=scheduler, retries=0, progress=False)
-    assert (again.ok, again.skipped, again.rendered) == (True, 1, 1)
-    assert check_dataset(root).ok
-    assert Dataset(root).ids == ("s000000", "s000001")
-    assert _records(root)[-1]["id"] == "s000001"
-    assert _records(root)[-1]["status"] == "done"
+    assert (again.ok, again.skipped, again.rendered) == (False, 1, 0)
+    assert [(sid, attempts) for sid, _, attempts in again.failed] == [("s000001", 1)]
+    assert (_records(root)[-1]["id"], _records(root)[-1]["status"]) == ("s000001", "failed")
+
+    shutil.copy(tmp_path / "good.obj", tmp_path / "bad.obj")  # the mesh is fixed: another sample
+    before = sorted((str(p), p.stat().st_mtime_ns) for p in root.rglob("*"))
+    with pytest.raises(DatasetMismatchError, match=r"1 of 2 changed, e.g. \['s000001'\]; input file\(s\) edited"):
+        run_dataset(tmp_path / "spec.toml", root, scheduler=scheduler, retries=0, progress=False)
+    assert sorted((str(p), p.stat().st_mtime_ns) for p in root.rglob("*")) == before
+    fixed = run_dataset(tmp_path / "spec.toml", tmp_path / "fixed", scheduler=scheduler, retries=0, progress=False)
+    assert (fixed.ok, fixed.skipped, fixed.rendered) == (True, 0, 2)
+    assert check_dataset(tmp_path / "fixed").ok
+    assert Dataset(tmp_path / "fixed").ids == ("s000000", "s000001")
 
 
 def test_views_output_is_the_view_stack_of_the_raw_image(tmp_path, scheduler):
@@ -341,9 +352,7 @@ def test_views_output_is_the_view_stack_of_the_raw_image(tmp_path, scheduler):
     assert check_dataset(root).ok
     (sample,) = Dataset(root)
     assert sample.refraction_free is None
-    assert sorted(p.name for p in sample.views_dir.iterdir()) == sorted(
-        [*view_file_names(3, "png"), "parameters.cfg", "stack.npz", "valid_mask.png", "views.json"]
-    )
+    assert sorted(p.name for p in sample.views_dir.iterdir()) == sorted([*view_file_names(3, "png"), *VIEW_STACK_FILES])
     stack = sample.view_stack
     meta = sample.meta
     expected = subaperture_stack(
