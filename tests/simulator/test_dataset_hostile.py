@@ -226,12 +226,12 @@ def test_a_sweep_over_the_limit_is_refused_before_any_sample_is_built(tmp_path, 
         raise AssertionError("a sample was built")
 
     monkeypatch.setattr(spec_module, "_build_sample", never)
-    count = MAX_SAMPLES + 2
+    count = 100_002  # the documented limit (docs/datasets.md), MAX_SAMPLES = 100 000, and 2
     data = {
         "sweep": {"name": "big", "seed": 0, "scene": "default", "repeats": count // 2},
         "grid": {"port.tilt_x_deg": [0.0, 1.0]},
     }
-    with pytest.raises(ParameterError, match=rf"the sweep has {count} samples, more than {MAX_SAMPLES}"):
+    with pytest.raises(ParameterError, match=rf"the sweep has {count} samples, more than 100000"):
         parse_spec(data)
     (tmp_path / "big.toml").write_text(
         f'[sweep]\nname = "big"\nseed = 0\nscene = "default"\nrepeats = {count // 2}\n'
@@ -387,9 +387,9 @@ def test_a_failed_manifest_append_leaves_the_manifest_as_it_was(tmp_path):
     before = manifest.read_bytes()
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert proc.returncode == 3, proc.stderr
-    assert proc.stdout.strip() == f"[Errno 27] File too large: {str(manifest)!r}"
     assert manifest.read_bytes() == before
     assert [r["id"] for r in read_manifest(manifest)] == ["s000000"]
+    assert proc.stdout.strip() == f"[Errno 27] File too large: {str(manifest)!r}"
 
 
 @pytest.mark.render
