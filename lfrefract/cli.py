@@ -2,13 +2,21 @@
 
     lfrefract describe (PRESET | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
-                    [--camera PRESET|FILE] [--port PORT.json] [--mla MLA.json] [--nonfinite refuse|mask]
+                    [--camera PRESET|FILE] [--port PORT.json] [--mla MLA.json] [--nonfinite refuse|mask] [--overwrite]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full] [--camera PRESET|FILE] [--nonfinite refuse|mask]
+                    [--overwrite]
     lfrefract views RAW.exr --out DIR [--grid 9] [--spacing-px S] [--format png|exr] [--overwrite]
                     [--camera PRESET|FILE] [--nonfinite refuse|mask]
-    lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square] [--camera PRESET|FILE]
+    lfrefract calibrate mla WHITE.exr --out MLA.json [--grid hex|square] [--camera PRESET|FILE] [--overwrite]
     lfrefract calibrate port BOARD.exr... --squares C R --square-size-m S --out PORT.json [--camera PRESET|FILE]
+                    [--overwrite]
     lfrefract calibrate approx BOARD.exr... --squares C R --square-size-m S --out APPROX.json [--camera PRESET|FILE]
+                    [--overwrite]
+
+Every command refuses an existing output unless ``--overwrite`` is given, and then replaces only an
+output of the same kind (docs/conventions.md, "Outputs and --overwrite"); no output may be one of
+the command's inputs (the raw image, the ``meta.json`` beside it, a ``--camera``, ``--port`` or
+``--mla`` file).
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
@@ -57,9 +65,11 @@ from lfrefract import (
 )
 from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
+from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
 from lfrefract.capture import (
     NONFINITE_POLICIES,
+    SIDECAR_NAME,
     Capture,
     CaptureParameters,
     camera_from_option,
@@ -80,6 +90,7 @@ from lfrefract.io import (
     write_view_stack,
 )
 from lfrefract.methods import ConventionalView
+from lfrefract.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
 from lfrefract.synthesis import (
     BLOCK_PIXELS,
     SEARCH_METHODS,
@@ -89,6 +100,11 @@ from lfrefract.synthesis import (
     warp_map_key,
 )
 from lfrefract.views import naive_view, subaperture_stack, view_stack_bytes
+
+#: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
+SYNTH_KIND = "lfrefract.synth"
+MLA_KIND = "lfrefract.calibrate.mla"
+PORT_KIND = "lfrefract.calibrate.port"
 
 __all__ = [
     "calibrate_approx_command",
@@ -135,8 +151,38 @@ def _masked_note(capture: Capture) -> str:
     return f"; masked {capture.unrecorded.describe()} as unrecorded"
 
 
+def _option_files(args: argparse.Namespace) -> list[Path]:
+    """The files named by ``--camera`` (unless a preset), ``--port`` and ``--mla``: inputs too."""
+    given = [getattr(args, "camera", None), getattr(args, "port", None), getattr(args, "mla", None)]
+    return [Path(v) for v in given if v is not None and not (v in PRESETS and not Path(v).exists())]
+
+
+def _capture_files(path: str | Path) -> list[Path]:
+    """A raw image and the sidecar beside it: what a command reads of a capture."""
+    return [Path(path), Path(path).parent / SIDECAR_NAME]
+
+
+def _exr_out(args: argparse.Namespace) -> Path:
+    out = Path(args.out)
+    if out.suffix.lower() != ".exr":
+        raise ParameterError(f"--out must name an .exr file, got {args.out!r}")
+    return out
+
+
+def synth_outputs(out: Path) -> dict[Path, ExpectedKind]:
+    """The files ``lfrefract synth --out OUT.exr`` writes, with what each must be to be replaced."""
+    sidecar = out.with_suffix(".json")
+    return {
+        out: ExpectedKind(exr_role="refraction_free"),
+        out.with_suffix(".coverage.exr"): ExpectedKind(exr_role="coverage"),
+        sidecar: ExpectedKind(json_kind=SYNTH_KIND),
+        out.with_suffix(".png"): ExpectedKind(listed_in=sidecar, listed_kind=SYNTH_KIND),
+    }
+
+
 def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
+    out = _exr_out(args)
     capture = read_capture(
         args.raw,
         camera=_given_camera(args),
@@ -152,6 +198,8 @@ def synth(args: argparse.Namespace) -> int:
             f"its sidecar {str(capture.sidecar_path)!r} has no port" if capture.sidecar_path else "it has no meta.json"
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
+    inputs = [*_capture_files(args.raw), *_option_files(args)]
+    prepare_output_files(synth_outputs(out), inputs=inputs, overwrite=args.overwrite)  # before the map is built
     options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
     output = capture.output
     key = warp_map_key(camera, port, output, options)
@@ -190,19 +238,19 @@ def synth(args: argparse.Namespace) -> int:
     warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
     image = warp.apply(capture.raw)
     apply_seconds = time.perf_counter() - start
-    out = Path(args.out)
     stats = {
         "exact_fraction": float(warp.exact.mean()),
         "filled_fraction": float(warp.filled.mean()),
         "mean_coverage": float(warp.coverage.mean()),
         "nonzeros_per_pixel": float(len(warp.indices) / max(1, len(warp.gain))),
     }
+    figure = out.with_suffix(".png")
     write_exr(out, image, role="refraction_free")
     write_exr(out.with_suffix(".coverage.exr"), warp.coverage.astype(np.float32), role="coverage")
     write_json(
         out.with_suffix(".json"),
         {
-            "kind": "lfrefract.synth",
+            "kind": SYNTH_KIND,
             "source": str(args.raw),
             "K": warp.output.K.tolist(),
             "width_px": warp.output.width_px,
@@ -215,10 +263,10 @@ def synth(args: argparse.Namespace) -> int:
             "map_key": warp.key,
             "coverage": stats,
             "seconds": {"map": map_seconds, "apply": apply_seconds},
-            "files": {"image": out.name, "coverage": out.with_suffix(".coverage.exr").name},
+            "files": {"image": out.name, "coverage": out.with_suffix(".coverage.exr").name, "figure": figure.name},
         },
     )
-    _figure(out.with_suffix(".png"), image, warp)
+    _figure(figure, image, warp)
     print(
         f"{how} warp map ({map_seconds:.2f} s), applied in {apply_seconds * 1e3:.1f} ms; exact coverage "
         f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
@@ -239,15 +287,22 @@ def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
     ax.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)
     ax.set_title("refraction-free image; yellow: edge of exact coverage")
     ax.set_axis_off()
-    fig.savefig(path, bbox_inches="tight")
+    with atomic_file(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
     plt.close(fig)
 
 
 def naive(args: argparse.Namespace) -> int:
     """``lfrefract naive``: conventional view with no refraction handling."""
+    out = _exr_out(args)
     capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
+    prepare_output_files(
+        {out: ExpectedKind(exr_role=f"naive_{args.kind}")},
+        inputs=[*_capture_files(args.raw), *_option_files(args)],
+        overwrite=args.overwrite,
+    )
     image = naive_view(capture.camera, capture.raw, output=capture.output, kind=args.kind, recorded=capture.recorded)
-    write_exr(Path(args.out), image, role=f"naive_{args.kind}")
+    write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
     return 0
 
@@ -270,6 +325,7 @@ def views(args: argparse.Namespace) -> int:
         stack,
         overwrite=args.overwrite,
         image_format=args.format,
+        inputs=[*_capture_files(args.raw), *_option_files(args)],
         metadata={
             "source": str(args.raw),
             "pose": None if capture.pose is None else capture.pose.to_dict(),
@@ -286,12 +342,18 @@ def views(args: argparse.Namespace) -> int:
 
 def calibrate_mla_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate mla``."""
+    out = Path(args.out)
     capture = read_capture(args.white, camera=_given_camera(args), camera_required=False)
+    prepare_output_files(
+        {out: ExpectedKind(json_kind=MLA_KIND)},
+        inputs=[*_capture_files(args.white), *_option_files(args)],
+        overwrite=args.overwrite,
+    )
     result = calibrate_mla(capture.raw, grid=args.grid)
-    data = {"kind": "lfrefract.calibrate.mla", "source": str(args.white), "mla": result.to_dict()}
+    data = {"kind": MLA_KIND, "source": str(args.white), "mla": result.to_dict()}
     if capture.camera is not None:  # from --camera or the meta.json beside the white image
         data["camera"] = result.calibrated_camera(capture.camera).to_dict()
-    write_json(Path(args.out), data)
+    write_json(out, data)
     counts = result.status_counts()
     print(
         f"{result.grid} lattice, pitch {result.pitch_px:.4f} px, rotation {math.degrees(result.rotation_rad):.4f} deg; "
@@ -313,6 +375,10 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     return found[0]
 
 
+def _board_inputs(args: argparse.Namespace) -> list[Path]:
+    return [f for path in args.boards for f in _capture_files(path)] + _option_files(args)
+
+
 def _board_raw(path: str, camera: LightFieldCamera) -> np.ndarray:
     """One board capture's raw image, checked (read one at a time: an Illum raw image is 0.5 GB)."""
     return read_capture(path, camera=camera).raw
@@ -321,7 +387,16 @@ def _board_raw(path: str, camera: LightFieldCamera) -> np.ndarray:
 def calibrate_port_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate port``: corners located in each capture's light field (or in its
     sub-aperture views), then :func:`calibrate_port`."""
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
+    flat_port = out.with_suffix(".txt")
     first = _board_parameters(args)
+    prepare_output_files(
+        {out: ExpectedKind(json_kind=PORT_KIND), flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_KIND)},
+        inputs=_board_inputs(args),
+        overwrite=args.overwrite,
+    )
     camera, known = first.camera, first.port  # known: the first capture's port, if its meta.json has one
     view = virtual_camera_for(camera)
     given = {"thickness_m": args.thickness_m, "n_glass": args.n_glass, "n_water": args.n_water}
@@ -363,9 +438,16 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
             )
         views.append(board_view)
     result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
-    out = Path(args.out)
-    write_json(out, {"kind": "lfrefract.calibrate.port", "sources": [str(p) for p in args.boards], **result.to_dict()})
-    write_flat_port(out.with_suffix(".txt"), result.port)
+    write_json(
+        out,
+        {
+            "kind": PORT_KIND,
+            "sources": [str(p) for p in args.boards],
+            "files": {"flat_port": flat_port.name},
+            **result.to_dict(),
+        },
+    )
+    write_flat_port(flat_port, result.port)
     print(
         f"port normal {np.round(result.port.normal, 5).tolist()} (+- {result.normal_std_deg:.3f} deg), distance "
         f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}), "
@@ -376,12 +458,16 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 
 def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
+    out = Path(args.out)
     camera = _board_parameters(args).camera
+    prepare_output_files(
+        {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
+    )
     conventional = ConventionalView(camera=camera, view=virtual_camera_for(camera))
     images = [conventional.apply(_board_raw(path, camera)) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
-    result.save(Path(args.out))
+    result.save(out)
     print(f"pinhole + distortion from {len(images)} views, {result.rms_px:.3f} px RMS; wrote {args.out}")
     return 0
 
@@ -428,6 +514,7 @@ def main(argv: list[str] | None = None) -> int:
         "--port", help="JSON file with a port (`lfrefract calibrate port` output; default: the capture's meta.json)"
     )
     syn.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
+    syn.add_argument("--overwrite", action="store_true", help="replace an earlier synth output of the same name")
     cal = sub.add_parser("calibrate", help="estimate the MLA, the port or the approximation baseline")
     cal_sub = cal.add_subparsers(dest="target", required=True)
     cal_mla = cal_sub.add_parser("mla", help="microlens lattice and micro-image centres from a white image")
@@ -435,6 +522,7 @@ def main(argv: list[str] | None = None) -> int:
     cal_mla.add_argument("--out", required=True, help="output JSON")
     cal_mla.add_argument("--grid", choices=["hex", "square"], help="lattice type (default: detected)")
     _camera_option(cal_mla, "(default: the meta.json beside the white image, if any: its calibrated camera is written)")
+    cal_mla.add_argument("--overwrite", action="store_true", help="replace an earlier MLA calibration in --out")
     for target, what in (("port", "port normal and distance"), ("approx", "pinhole + distortion at one depth")):
         board = cal_sub.add_parser(target, help=f"{what} from underwater chessboard captures")
         board.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
@@ -443,6 +531,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         board.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
         board.add_argument("--out", required=True, help="output JSON")
+        board.add_argument("--overwrite", action="store_true", help=f"replace an earlier {target} calibration in --out")
         _camera_option(board)
     cal_port = cal_sub.choices["port"]
     cal_port.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
@@ -464,6 +553,7 @@ def main(argv: list[str] | None = None) -> int:
     nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
     nv.add_argument("--out", required=True, help="output EXR")
     nv.add_argument("--kind", choices=["central", "full"], default="central")
+    nv.add_argument("--overwrite", action="store_true", help="replace an earlier naive view of this kind in --out")
     _capture_options(nv)
     vw = sub.add_parser("views", help="grid of sub-aperture views in the HCI 4D light field benchmark layout")
     vw.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
@@ -477,6 +567,11 @@ def main(argv: list[str] | None = None) -> int:
     _capture_options(vw)
     _capture_options(syn)
     args = parser.parse_args(argv)
+    with terminate_cleanly("lfrefract"):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         if args.command == "synth":
             return synth(args)
@@ -493,7 +588,9 @@ def main(argv: list[str] | None = None) -> int:
         else:
             sidecar = read_sidecar(args.source)
             info = describe(sidecar.camera, sidecar.port)
-    except (ParameterError, FileFormatError, FileExistsError) as exc:
+    except (ParameterError, FileFormatError, OSError) as exc:
+        # OSError: refusals (FileExistsError), missing files, failed writes (read-only, disk full): one
+        # line naming the path; every file is written atomically, so earlier outputs are as they were.
         print(f"lfrefract: error: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -256,7 +256,7 @@ def test_a_given_camera_replaces_the_meta_json_camera(tmp_path, capsys):
     raw = make_capture(tmp_path / "cap", camera=MISSING)
     assert main([*commands(raw, tmp_path / "out")["naive"], "--camera", "tiny"]) == 0
     raw = make_capture(tmp_path / "cap2", camera=camera_preset("tiny-2x").to_dict())
-    assert main([*commands(raw, tmp_path / "out")["naive"], "--camera", "tiny"]) == 0
+    assert main([*commands(raw, tmp_path / "out2")["naive"], "--camera", "tiny"]) == 0
 
 
 # ------------------------------------------------------------------------------- NaN, inf, negative raw values
@@ -334,21 +334,24 @@ def test_masked_views_and_naive_views_skip_unrecorded_pixels(tmp_path, capsys):
     clean = make_capture(tmp_path / "clean", raw=np.full((360, 480, 3), 0.5, "f4"))
     holed, n_nan = holed_raw(0.03, value=0.5)
     path = make_capture(tmp_path / "holed", raw=holed)
-    for command, extra, name in (
-        ("naive", [], "n.exr"),
-        ("naive", ["--kind", "full"], "n.exr"),
-        ("views", ["--format", "exr", "--overwrite"], "v/input_Cam000.exr"),
+    for index, (command, extra, name) in enumerate(
+        (
+            ("naive", [], "n.exr"),
+            ("naive", ["--kind", "full"], "n.exr"),
+            ("views", ["--format", "exr"], "v/input_Cam000.exr"),
+        )
     ):
-        assert main([*commands(clean, tmp_path / "a")[command], *extra]) == 0
-        assert main([*commands(path, tmp_path / "b")[command], *extra, "--nonfinite", "mask"]) == 0
+        reference_dir, masked_dir = tmp_path / f"a{index}", tmp_path / f"b{index}"
+        assert main([*commands(clean, reference_dir)[command], *extra]) == 0
+        assert main([*commands(path, masked_dir)[command], *extra, "--nonfinite", "mask"]) == 0
         assert f"masked {n_nan} NaN pixel values" in capsys.readouterr().out
-        reference, image = read_exr(tmp_path / "a" / name), read_exr(tmp_path / "b" / name)
+        reference, image = read_exr(reference_dir / name), read_exr(masked_dir / name)
         # NaN only where no recorded pixel contributes: a few, not the 30 % that spreading NaN gave.
         extra_nan = np.isnan(image).any(axis=2) & ~np.isnan(reference).any(axis=2)
         assert extra_nan.mean() <= MASKED_VIEW_EXTRA_NAN_FRACTION, extra_nan.mean()
         both = ~np.isnan(image) & ~np.isnan(reference)
         np.testing.assert_allclose(image[both], 0.5, rtol=FLOAT32_WEIGHT_SUM)
-    metadata = json.loads((tmp_path / "b" / "v" / "views.json").read_text())["metadata"]
+    metadata = json.loads((tmp_path / "b2" / "v" / "views.json").read_text())["metadata"]
     assert metadata["unrecorded_raw"]["nan"] == n_nan
 
 

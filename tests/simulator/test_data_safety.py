@@ -67,11 +67,20 @@ def test_render_overwrite_keeps_a_home_folder_with_a_copied_meta_json(tmp_path, 
 def test_a_calibration_written_as_meta_json_does_not_make_a_folder_replaceable(tmp_path, outputs, capsys):
     home = thesis_folder(tmp_path)
     white = outputs / "render" / "raw.exr"
-    assert core_cli.main(["calibrate", "mla", str(white), "--out", str(home / "meta.json")]) == 0
+    mla = ["calibrate", "mla", str(white), "--out", str(home / "meta.json")]
+    assert core_cli.main(mla) == 0
     capsys.readouterr()
     before = tree(home)
     refused(capsys, ["render", "white", "--out", str(home), "--overwrite", *QUICK])
     assert tree(home) == before
+    # The calibration itself: refused without --overwrite, replaced with it, never over a foreign JSON.
+    assert "exists (pass --overwrite" in refused(capsys, mla, main=core_cli.main)
+    assert core_cli.main([*mla, "--overwrite"]) == 0
+    capsys.readouterr()
+    shutil.copy(outputs / "render" / "meta.json", home / "meta.json")  # a render's sidecar under that name
+    err = refused(capsys, [*mla, "--overwrite"], main=core_cli.main)
+    assert "is not a JSON sidecar of kind 'lfrefract.calibrate.mla'" in err
+    assert (home / "meta.json").read_bytes() == (outputs / "render" / "meta.json").read_bytes()
 
 
 def test_outputs_of_other_kinds_are_never_replaced(tmp_path, outputs, capsys):

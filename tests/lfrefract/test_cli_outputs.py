@@ -1,0 +1,146 @@
+"""Data safety of the core's commands on real files (issue 12): no command writes over its own
+inputs, every command refuses an existing output unless --overwrite is given, and --overwrite
+replaces only an output of the same kind."""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lfrefract.cli import main
+from lfrefract.io import read_exr, read_json, write_exr, write_json
+from tests.lfrefract.test_cli import commands, make_capture, refused
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def capture(tmp_path) -> Path:
+    return make_capture(tmp_path / "R")
+
+
+@pytest.mark.parametrize(
+    ("command", "out", "named"),
+    [
+        ("naive", "raw.exr", "raw.exr"),  # the capture itself
+        ("synth", "raw.exr", "raw.exr"),
+        ("synth", "meta.exr", "meta.json"),  # its sidecar OUT.json would be the capture's meta.json
+        ("calibrate-mla", "meta.json", "meta.json"),
+        ("calibrate-approx", "raw.exr", "raw.exr"),
+    ],
+)
+def test_no_command_writes_over_its_input(capture, capsys, command, out, named):
+    """``naive R/raw.exr --out R/raw.exr`` replaced the capture; ``synth R/raw.exr --out
+    R/meta.exr`` replaced its meta.json (the sidecar is OUT with .json)."""
+    folder = capture.parent
+    before = snapshot(folder)
+    argv = commands(capture, folder)[command]
+    argv[argv.index("--out") + 1] = str(folder / out)
+    for extra in ([], ["--overwrite"]):
+        err = refused(capsys, [*argv, *extra])
+        assert "the command's own input" in err, err
+        assert named in err
+    assert snapshot(folder) == before
+
+
+def test_views_never_replaces_the_capture_folder(capture, capsys):
+    folder = capture.parent
+    before = snapshot(folder)
+    argv = commands(capture, folder)["views"]
+    argv[argv.index("--out") + 1] = str(folder)
+    refused(capsys, [*argv, "--overwrite"])
+    assert snapshot(folder) == before
+
+
+def test_views_overwrite_keeps_a_folder_with_a_copied_views_json(tmp_path, capture, capsys):
+    """The audit's repro: a folder with a copied views.json (even with the manifest copied too)."""
+    argv = commands(capture, tmp_path / "out")["views"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    home = tmp_path / "V"
+    (home / "Documents").mkdir(parents=True)
+    (home / "Documents" / "thesis.tex").write_text("t")
+    shutil.copy(tmp_path / "out" / "v" / "views.json", home)
+    before = snapshot(home)
+    target = [*argv[: argv.index("--out") + 1], str(home), *argv[argv.index("--out") + 2 :], "--overwrite"]
+    assert "is not an lfrefract output" in refused(capsys, target)
+    shutil.copy(tmp_path / "out" / "v" / ".lfrefract-output.json", home)
+    assert "'Documents' (a folder it did not make)" in refused(capsys, target)
+    assert (home / "Documents" / "thesis.tex").read_text() == "t"
+    assert {k: v for k, v in snapshot(home).items() if k != ".lfrefract-output.json"} == before
+
+
+@pytest.mark.parametrize("command", ["synth", "naive"])  # calibrate mla: tests/simulator/test_data_safety.py
+def test_an_existing_output_needs_overwrite_and_of_the_same_kind(tmp_path, capture, capsys, command):
+    out = tmp_path / "out"
+    argv = commands(capture, out)[command]
+    assert main(argv) == 0
+    capsys.readouterr()
+    written = snapshot(out)
+    assert "exists (pass --overwrite" in refused(capsys, argv)
+    assert snapshot(out) == written
+    assert main([*argv, "--overwrite"]) == 0  # its own earlier output
+    capsys.readouterr()
+    target = Path(argv[argv.index("--out") + 1])
+    if target.suffix == ".exr":
+        write_exr(target, np.zeros((4, 4), np.float32), role="raw")  # someone's image under that name
+    else:
+        write_json(target, {"kind": "notes of mine"})
+    foreign = target.read_bytes()
+    assert "refusing to replace it" in refused(capsys, [*argv, "--overwrite"])
+    assert target.read_bytes() == foreign
+
+
+def test_synth_companions_are_replaced_only_as_listed_by_its_sidecar(tmp_path, capture, capsys):
+    out = tmp_path / "out"
+    argv = commands(capture, out)["synth"]
+    assert main(argv) == 0
+    sidecar = read_json(out / "s.json")
+    assert sidecar["files"] == {"image": "s.exr", "coverage": "s.coverage.exr", "figure": "s.png"}
+    (out / "s.json").unlink()  # the figure is no longer listed anywhere: it may be the user's
+    (out / "s.exr").unlink()
+    (out / "s.coverage.exr").unlink()
+    figure = (out / "s.png").read_bytes()
+    assert "is not a file listed in" in refused(capsys, [*argv, "--overwrite"])
+    assert (out / "s.png").read_bytes() == figure
+
+
+def test_an_output_file_that_is_a_directory_or_not_exr_is_refused(tmp_path, capture, capsys):
+    argv = commands(capture, tmp_path)["naive"]
+    (tmp_path / "n.exr").mkdir()
+    assert "is an existing directory" in refused(capsys, [*argv, "--overwrite"])
+    argv[argv.index("--out") + 1] = str(tmp_path / "n.json")
+    assert "--out must name an .exr file" in refused(capsys, argv)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["R", "n.exr"]
+
+
+def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, capture, capsys, monkeypatch):
+    out = tmp_path / "out"
+    argv = commands(capture, out)["naive"]
+    assert main(argv) == 0
+    earlier = read_exr(out / "n.exr")
+    real_replace = os.replace
+
+    def disk_full(src, dst):
+        raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+
+    monkeypatch.setattr(os, "replace", disk_full)
+    err = refused(capsys, [*argv, "--overwrite"])
+    monkeypatch.setattr(os, "replace", real_replace)
+    assert "No space left on device" in err
+    assert str(out / "n.exr") in err
+    assert len(err.strip().splitlines()) == 1
+    np.testing.assert_array_equal(read_exr(out / "n.exr"), earlier)
+    assert sorted(p.name for p in out.iterdir()) == ["n.exr"]  # no temporary file left
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    argv[argv.index("--out") + 1] = str(blocker / "n.exr")
+    err = refused(capsys, argv)
+    assert "a-file" in err
