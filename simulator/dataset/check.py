@@ -7,6 +7,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from lfrefract._validate import ParameterError
+from lfrefract.io import FileFormatError
 from simulator.dataset.manifest import (
     MANIFEST_FILE,
     DigestCache,
@@ -16,6 +18,7 @@ from simulator.dataset.manifest import (
     read_manifest,
     staging_leftovers,
 )
+from simulator.dataset.spec import toml_digest
 
 __all__ = ["PROBLEMS", "CheckReport", "SampleProblem", "check_dataset", "verify_folder"]
 
@@ -34,8 +37,8 @@ class SampleProblem:
         ``missing``: recorded done, but its folder or a file is gone. ``corrupt``: a file's size
         or SHA-256 differs from the record, a file is not in the record, or the record is not
         the planned sample's. ``stale``: done and intact, but an input file it was rendered from
-        (a mesh) has changed since the run was planned. ``failed``: its latest record is a
-        failure. ``not run``: no record.
+        (a mesh, or its base scene's TOML content) has changed since the run was planned.
+        ``failed``: its latest record is a failure. ``not run``: no record.
     detail : str
         What exactly (the file, the error).
     """
@@ -187,6 +190,15 @@ def _changed_inputs(recorded: dict, *, hashes: bool) -> tuple[dict[str, str], li
     for path, entry in sorted(recorded.items()):
         if not Path(path).is_file():
             gone.append(path)
+            continue
+        if "toml_sha256" in entry:  # a base scene: its TOML content counts, not its formatting
+            try:
+                now = toml_digest(path)
+            except (FileFormatError, ParameterError) as exc:
+                changed[path] = f"{path!r} (no longer a readable scene: {exc})"
+                continue
+            if now != entry["toml_sha256"]:
+                changed[path] = f"{path!r} (its TOML content changed since the run was planned)"
             continue
         if hashes:
             size, sha = digests.digest(path)

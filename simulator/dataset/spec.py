@@ -103,6 +103,7 @@ __all__ = [
     "parse_spec",
     "sample_id",
     "sample_seed",
+    "toml_digest",
 ]
 
 #: Optional outputs of a sample besides the render files: the refraction-free image (and its
@@ -268,8 +269,10 @@ class SweepSample:
     scene_data : Mapping
         The scene in TOML form that ``config`` was parsed from, read-only.
     inputs : Mapping
-        The files the scene reads besides its TOML (mesh files), read-only: absolute path ->
-        ``{"bytes", "sha256"}`` as hashed when the sample was built.
+        The files the sample is made from, read-only: absolute path -> ``{"bytes", "sha256"}``
+        (of the bytes) as read when the sample was built: its base scene file (whose entry also
+        has ``toml_sha256``, the SHA-256 of its TOML in :func:`canonical_json` form: what the
+        sample's hash covers of it) and the files its scene names (meshes).
     """
 
     id: str
@@ -636,6 +639,18 @@ def load_spec(path: str | Path) -> SweepSpec:
     return parse_spec(data, base_dir=p.parent, source=str(p))
 
 
+def toml_digest(path: str | Path) -> str:
+    """SHA-256 (hex) of a TOML file's content in :func:`canonical_json` form: what a sample's hash
+    covers of its base scene file (formatting and comments aside).
+
+    Raises
+    ------
+    FileNotFoundError, FileFormatError, ParameterError
+        As :func:`load_spec`, if the file is gone, not UTF-8, or not TOML.
+    """
+    return _sha256(_read_toml(Path(path), "scene"))
+
+
 def _read_toml(path: Path, what: str) -> dict:
     """The TOML document at ``path`` (``what`` names it in errors: "sweep spec", "scene").
 
@@ -805,12 +820,15 @@ def iter_samples(
     if not isinstance(spec, SweepSpec):
         raise ParameterError(f"spec must be a SweepSpec, got {spec!r}")
     digests = DigestCache() if digests is None else digests
-    scenes: dict[str, tuple[Path, dict]] = {}
+    scenes: dict[str, tuple[Path, dict, dict]] = {}
 
-    def base_scene(value: str) -> tuple[Path, dict]:
+    def base_scene(value: str) -> tuple[Path, dict, dict]:
+        """The base scene file, its TOML, and its entry among the inputs."""
         if value not in scenes:
             path = _scene_file(SCENE_KEY, value, spec.base_dir)
-            scenes[value] = (path, _read_toml(path, "scene"))
+            data = _read_toml(path, "scene")
+            size, sha = digests.digest(path)
+            scenes[value] = (path, data, {"bytes": size, "sha256": sha, "toml_sha256": _sha256(data)})
         return scenes[value]
 
     wanted = range(spec.size) if indices is None else indices
@@ -892,7 +910,7 @@ def _build_sample(
     sid = sample_id(index)
     where = f"sample {sid} ({_describe(params)})"
     scene_name = params.get(SCENE_KEY, spec.scene)
-    path, base = base_scene(scene_name)
+    path, base, scene_entry = base_scene(scene_name)
     data = copy.deepcopy(base)
     try:
         _unset(data, spec.unset)
@@ -914,11 +932,13 @@ def _build_sample(
             _check_views(spec.views, config.camera)
         except ParameterError as exc:
             raise ParameterError(f"{where}: {exc}") from None
-    inputs: dict[str, dict] = {}
+    # The base scene's content is in the hash as TOML (``data``: formatting and comments aside, as
+    # for the spec); the files the scene names (meshes) by the SHA-256 of their bytes.
+    inputs: dict[str, dict] = {str(path): scene_entry}
     content = []
-    for location, path in _input_files(config):
-        size, sha = digests.digest(path)
-        inputs[str(path)] = {"bytes": size, "sha256": sha}
+    for location, file in _input_files(config):
+        size, sha = digests.digest(file)
+        inputs[str(file)] = {"bytes": size, "sha256": sha}
         content.append([location, sha])
     hashed = {"scene": data, "base_scene": scene_name, "outputs": list(spec.outputs),
               "synthesis": None if spec.synthesis is None else spec.synthesis.to_dict(),

@@ -25,7 +25,7 @@ from simulator.dataset import Dataset, DatasetMismatchError, check_dataset, expa
 from simulator.dataset import manifest as manifest_module
 from simulator.dataset import run as run_module
 from simulator.dataset import spec as spec_module
-from simulator.dataset.manifest import DigestCache, append_record, read_manifest
+from simulator.dataset.manifest import DigestCache, append_record, file_digest, read_manifest
 from simulator.dataset.run import _plan, _prepare
 from simulator.dataset.spec import MAX_SAMPLES, iter_samples
 from tests.tolerances import DATASET_PLAN_BYTES_PER_SAMPLE_MAX, DATASET_STREAM_PEAK_GROWTH_BYTES
@@ -113,12 +113,12 @@ def test_sample_hash_follows_mesh_content_read_once_per_run(tmp_path, monkeypatc
     digest = manifest_module.file_digest
     monkeypatch.setattr(manifest_module, "file_digest", lambda path: reads.append(path) or digest(path))
     before = expand(spec)
-    assert reads == [(tmp_path / "cube.obj").resolve()]  # six samples, one read
-    mesh = str((tmp_path / "cube.obj").resolve())
-    assert all(
-        dict(s.inputs) == {mesh: {"bytes": len(MESH_OBJ), "sha256": before[0].inputs[mesh]["sha256"]}} for s in before
-    )
-    assert before[0].record()["inputs"] == [mesh]
+    scene, mesh = (str((tmp_path / name).resolve()) for name in ("scene.toml", "cube.obj"))
+    assert reads == [Path(scene), Path(mesh)]  # six samples, each file read once
+    assert all(dict(s.inputs) == dict(before[0].inputs) for s in before)
+    assert dict(before[0].inputs[mesh]) == {"bytes": len(MESH_OBJ), "sha256": file_digest(Path(mesh))[1]}
+    assert set(before[0].inputs[scene]) == {"bytes", "sha256", "toml_sha256"}
+    assert before[0].record()["inputs"] == sorted([scene, mesh])
     (tmp_path / "cube.obj").write_text(EDITED_OBJ)  # same path, same size, other content
     after = expand(spec)
     assert all(a.hash != b.hash for a, b in zip(after, before, strict=True))
@@ -155,7 +155,27 @@ def test_an_edited_mesh_is_refused_on_resume_and_reported_by_check(mesh_run, tmp
     shutil.rmtree(inputs)
     gone = check_dataset(root)
     assert gone.ok
-    assert gone.inputs_gone == (str(inputs / "cube.obj"),)
+    assert gone.inputs_gone == (str(inputs / "cube.obj"), str(inputs / "scene.toml"))
+
+
+@pytest.mark.render
+def test_a_base_scene_is_compared_by_its_toml_content(mesh_run, tmp_path):
+    """A comment added to the base scene changes nothing; a changed value makes other samples:
+    the resume is refused and check calls the done samples stale."""
+    inputs, root = _copy(mesh_run, tmp_path)
+    scene = inputs / "scene.toml"
+    scene.write_text("# a comment\n" + SCENE)
+    again = run_dataset(inputs / "spec.toml", root, workers=1, progress=False)
+    assert (again.ok, again.skipped, again.rendered) == (True, 2, 0)
+    assert check_dataset(root).ok
+    scene.write_text(SCENE.replace("texture_px = 64", "texture_px = 65"))
+    with pytest.raises(DatasetMismatchError, match=r"2 of 2 changed.*input file\(s\) edited since: \[.*scene\.toml'\]"):
+        run_dataset(inputs / "spec.toml", root, workers=1, progress=False)
+    report = check_dataset(root)
+    assert [(p.id, p.kind) for p in report.problems] == [("s000000", "stale"), ("s000001", "stale")]
+    assert "scene.toml' (its TOML content changed since the run was planned)" in report.problems[0].detail
+    scene.write_text("[camera\n")
+    assert "no longer a readable scene" in check_dataset(root).problems[0].detail
 
 
 @pytest.mark.render
@@ -165,7 +185,7 @@ def test_a_mesh_edited_after_planning_fails_the_sample(tmp_path):
 
     _write_inputs(tmp_path)
     (sample,) = expand(parse_spec({"sweep": {"name": "m", "seed": 1, "scene": "scene.toml"}}, base_dir=tmp_path))
-    (mesh,) = sample.inputs
+    mesh = str((tmp_path / "cube.obj").resolve())
     task = SampleTask(
         id=sample.id, index=0, seed=sample.seed, hash=sample.hash, params={}, config=sample.config,
         dataset_dir=str(tmp_path / "out"), inputs={mesh: sample.inputs[mesh]["sha256"]},

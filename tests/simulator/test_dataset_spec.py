@@ -392,7 +392,7 @@ def test_sample_names_and_records():
         "seed": s.seed,
         "params": {"port.tilt_x_deg": 7.0},
         "hash": s.hash,
-        "inputs": [],
+        "inputs": [str(default_scene_path())],  # the base scene file (a sample read no mesh)
     }
     assert re.fullmatch(r"[0-9a-f]{64}", s.hash)
     with pytest.raises(TypeError):
