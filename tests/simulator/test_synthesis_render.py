@@ -97,8 +97,9 @@ def test_cli_synth_and_naive_on_a_render(tmp_path, capsys):
     assert sim_cli.main(["render", "--out", str(render), "--spp", "2", "--quiet", "--no-previews"]) == 0
     cache = tmp_path / "maps"
     out = tmp_path / "synth" / "frame.exr"
-    for _ in range(2):  # build and cache, then load from the cache
-        assert core_cli.main(["synth", str(render / "raw.exr"), "--out", str(out), "--map-cache", str(cache)]) == 0
+    for again in ([], ["--overwrite"]):  # build and cache, then load from the cache (replacing its own output)
+        synth = ["synth", str(render / "raw.exr"), "--out", str(out), "--map-cache", str(cache), *again]
+        assert core_cli.main(synth) == 0
     printed = capsys.readouterr().out
     assert "built, cached as" in printed
     assert "loaded" in printed
