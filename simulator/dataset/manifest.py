@@ -119,11 +119,7 @@ def read_dataset(root: Path) -> dict:
             raise FileFormatError(
                 f"{str(path)!r}: samples[{i}] is not a planned sample (id, index, hash): {sample!r:.200}"
             )
-    inputs = data.get("inputs", {})
-    if not isinstance(inputs, dict) or not all(
-        isinstance(e, dict) and isinstance(e.get("bytes"), int) and isinstance(e.get("sha256"), str)
-        for e in inputs.values()
-    ):
+    if not _file_table(data.get("inputs", {})):
         raise FileFormatError(f"{str(path)!r}: 'inputs' is not a table of files with their bytes and sha256")
     return data
 
@@ -166,8 +162,24 @@ def read_manifest(path: Path, *, repair: bool = False) -> list[dict]:
             raise FileFormatError(f"{str(path)!r} line {number} is not a JSON record: {exc}") from None
         if not isinstance(record, dict) or "id" not in record or record.get("status") not in ("done", "failed"):
             raise FileFormatError(f"{str(path)!r} line {number} is not a sample record: {line[:200]!r}")
+        if record["status"] == "done" and not _file_table(record.get("files")):
+            raise FileFormatError(
+                f"{str(path)!r} line {number}: a done record needs 'files', a table of paths with their bytes and "
+                f"sha256: {line[:200]!r}"
+            )
         records.append(record)
     return records
+
+
+def _file_table(files: object) -> bool:
+    """Whether ``files`` is a manifest's table of files: relative path -> ``{"bytes", "sha256"}``."""
+    return isinstance(files, dict) and all(
+        isinstance(name, str)
+        and isinstance(entry, dict)
+        and isinstance(entry.get("bytes"), int)
+        and isinstance(entry.get("sha256"), str)
+        for name, entry in files.items()
+    )
 
 
 def append_record(path: Path, record: dict) -> None:

@@ -384,6 +384,16 @@ def test_a_malformed_dataset_json_is_a_clear_error(tmp_path, info):
         check_dataset(tmp_path)
 
 
+def test_a_malformed_manifest_record_is_a_clear_error(tmp_path):
+    root = tmp_path / "data"
+    _planned_dataset(root)
+    record = {"id": "s000000", "status": "done", "files": {"raw.exr": 9}}  # a size, not {bytes, sha256}
+    (root / "manifest.jsonl").write_text(json.dumps(record) + "\n")
+    for read in (Dataset, check_dataset):
+        with pytest.raises(FileFormatError, match=r"manifest\.jsonl' line 1: a done record needs 'files'"):
+            read(root)
+
+
 # ------------------------------------------------------------------- 5. failed writes
 def test_a_failed_manifest_append_leaves_the_manifest_as_it_was(tmp_path):
     """A write that fails part-way (here: the file-size limit, EFBIG, as a full disk would) is cut
