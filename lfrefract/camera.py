@@ -40,6 +40,7 @@ from lfrefract._validate import (
 )
 
 __all__ = [
+    "CAMERA_RANGES",
     "GRID_TYPES",
     "MAX_IMAGE_SIDE_PX",
     "MAX_SENSOR_PIXELS",
@@ -62,6 +63,30 @@ MAX_IMAGE_SIDE_PX = 65536
 
 #: Most pixels of a sensor: a warp map stores raw pixel indices as int32.
 MAX_SENSOR_PIXELS = 2**31 - 1
+
+
+#: Physical ranges of a camera's parameters, metres unless named otherwise: (low, high, why). Beyond
+#: them a value is a typing error (a focal length of 1e300 m), not a camera; they also keep every
+#: product the models form finite.
+CAMERA_RANGES: dict[str, tuple[float, float, str]] = {
+    "focal_length_m": (1e-4, 10.0, "a 0.1 mm micro-objective to a 10 m telescope"),
+    "lens_to_mla_m": (1e-4, 10.0, "as the focal length"),
+    "f_number": (0.5, 128.0, "f/0.5 is the limit of a lens in air; none is slower than f/128"),
+    "mla.pitch_m": (1e-6, 1e-2, "a microlens of 1 um (two wavelengths) to 10 mm"),
+    "mla.focal_length_m": (1e-6, 1e-1, "as the pitch, at f-numbers from 1 to 10"),
+    "mla.rotation_rad": (-2.0 * math.pi, 2.0 * math.pi, "a whole turn either way"),
+    "mla.offset_m": (-1.0, 1.0, "each coordinate: larger than any sensor"),
+    "sensor.pixel_pitch_m": (1e-7, 1e-3, "0.1 um (below the diffraction limit) to 1 mm"),
+}
+
+
+def in_camera_range(name: str, value: object) -> float:
+    """``value`` as a float, or raise unless it is finite and inside :data:`CAMERA_RANGES` ``[name]``."""
+    low, high, why = CAMERA_RANGES[name]
+    out = positive_float(name, value) if low > 0 else finite_float(name, value)
+    if not low <= out <= high:
+        raise ParameterError(f"{name} must lie in [{low:g}, {high:g}] ({why}), got {value!r}")
+    return out
 
 
 def image_side_px(name: str, value: object) -> int:
@@ -99,10 +124,13 @@ class MicrolensArray:
 
     def __post_init__(self) -> None:
         one_of("mla.grid", self.grid, GRID_TYPES)
-        positive_float("mla.pitch_m", self.pitch_m)
-        positive_float("mla.focal_length_m", self.focal_length_m)
-        finite_float("mla.rotation_rad", self.rotation_rad)
-        object.__setattr__(self, "offset_m", finite_vector("mla.offset_m", self.offset_m, 2))
+        in_camera_range("mla.pitch_m", self.pitch_m)
+        in_camera_range("mla.focal_length_m", self.focal_length_m)
+        in_camera_range("mla.rotation_rad", self.rotation_rad)
+        offset = finite_vector("mla.offset_m", self.offset_m, 2)
+        for value in offset:
+            in_camera_range("mla.offset_m", value)
+        object.__setattr__(self, "offset_m", offset)
 
     @property
     def f_number(self) -> float:
@@ -199,7 +227,7 @@ class SensorGeometry:
                 f"sensor.width_px x sensor.height_px must be at most {MAX_SENSOR_PIXELS} pixels (int32 raw indices), "
                 f"got {self.width_px} x {self.height_px}"
             )
-        positive_float("sensor.pixel_pitch_m", self.pixel_pitch_m)
+        in_camera_range("sensor.pixel_pitch_m", self.pixel_pitch_m)
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -281,9 +309,9 @@ class LightFieldCamera:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
             raise ParameterError(f"name must be a string, got {self.name!r}")
-        positive_float("focal_length_m", self.focal_length_m)
-        positive_float("lens_to_mla_m", self.lens_to_mla_m)
-        positive_float("f_number", self.f_number)
+        in_camera_range("focal_length_m", self.focal_length_m)
+        in_camera_range("lens_to_mla_m", self.lens_to_mla_m)
+        in_camera_range("f_number", self.f_number)
         if not isinstance(self.mla, MicrolensArray):
             raise ParameterError(f"mla must be a MicrolensArray, got {self.mla!r}")
         if not isinstance(self.sensor, SensorGeometry):

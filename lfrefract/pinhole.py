@@ -17,12 +17,25 @@ from lfrefract._validate import (
 )
 from lfrefract.camera import MAX_IMAGE_SIDE_PX, LightFieldCamera, image_side_px
 
-__all__ = ["DEFAULT_PIXELS_PER_LENS", "MAX_IMAGE_SIDE_PX", "PinholeCamera", "virtual_camera_for"]
+__all__ = [
+    "DEFAULT_PIXELS_PER_LENS",
+    "MAX_FOCAL_PX",
+    "MAX_IMAGE_SIDE_PX",
+    "MAX_PRINCIPAL_POINT_PX",
+    "PinholeCamera",
+    "virtual_camera_for",
+]
 
 #: Output pixels per microlens pitch of the default refraction-free image. Two, because the
 #: paper's super-sampling (s = 2) selects sub-lens rays: objects away from the plane conjugate to
 #: the MLA are sampled more densely than once per lens.
 DEFAULT_PIXELS_PER_LENS = 2.0
+
+
+#: Largest focal length, pixels: a 65536 px image 0.4 deg across (a telescope); more is a typing error.
+MAX_FOCAL_PX = 1e7
+#: Largest principal-point coordinate, pixels: ten of the largest image sides off the image.
+MAX_PRINCIPAL_POINT_PX = 10 * MAX_IMAGE_SIDE_PX
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,9 +65,13 @@ class PinholeCamera:
     height_px: int
 
     def __post_init__(self) -> None:
-        positive_float("focal_px", self.focal_px)
-        finite_float("cx_px", self.cx_px)
-        finite_float("cy_px", self.cy_px)
+        if positive_float("focal_px", self.focal_px) > MAX_FOCAL_PX:
+            raise ParameterError(f"focal_px must be at most {MAX_FOCAL_PX:g} px, got {self.focal_px!r}")
+        for name in ("cx_px", "cy_px"):
+            if abs(finite_float(name, getattr(self, name))) > MAX_PRINCIPAL_POINT_PX:
+                raise ParameterError(
+                    f"{name} must lie within +-{MAX_PRINCIPAL_POINT_PX} px, got {getattr(self, name)!r}"
+                )
         image_side_px("width_px", self.width_px)
         image_side_px("height_px", self.height_px)
 

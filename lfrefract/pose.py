@@ -29,6 +29,10 @@ def rotation_from_euler_xyz(angles_rad: tuple[float, float, float]) -> np.ndarra
     return rz @ ry @ rx
 
 
+#: Largest camera or board coordinate, metres: far beyond any tank or underwater visibility.
+MAX_POSITION_M = 1e4
+
+
 @dataclass(frozen=True, kw_only=True)
 class Pose:
     """Camera-to-world rigid transform.
@@ -54,7 +58,10 @@ class Pose:
         if not np.allclose(rows @ rows.T, np.eye(3), atol=1e-9) or np.linalg.det(rows) < 0:
             raise ParameterError(f"pose.rotation must be a proper rotation, got {rows.round(6).tolist()}")
         object.__setattr__(self, "rotation", tuple(tuple(float(v) for v in r) for r in rows))
-        object.__setattr__(self, "position_m", finite_vector("pose.position_m", self.position_m, 3))
+        position = finite_vector("pose.position_m", self.position_m, 3)
+        if max(abs(v) for v in position) > MAX_POSITION_M:
+            raise ParameterError(f"pose.position_m must lie within +-{MAX_POSITION_M:g} m, got {self.position_m!r}")
+        object.__setattr__(self, "position_m", position)
 
     @classmethod
     def from_euler_xyz_deg(cls, rotation_xyz_deg=(0.0, 0.0, 0.0), position_m=(0.0, 0.0, 0.0)) -> Pose:
