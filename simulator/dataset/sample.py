@@ -20,7 +20,7 @@ from typing import Any
 
 from lfrefract import PinholeCamera
 from lfrefract.io import FileFormatError, read_exr, write_exr, write_flat_port, write_json
-from lfrefract.outputs import MANIFEST_NAME, staged_directory
+from lfrefract.outputs import staged_directory
 from lfrefract.synthesis import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
 
@@ -32,7 +32,6 @@ PORT_FILE = "port.txt"
 REFRACTION_FREE_FILE = "refraction_free.exr"
 COVERAGE_FILE = "refraction_free.coverage.exr"
 VIEWS_DIR = "views"
-_RENDER_DIR = "render"  # inside the staging folder only
 
 _threads_set: int | None = None
 _digests = None  # this worker process's DigestCache (a mesh that many samples use is hashed once)
@@ -131,20 +130,13 @@ def render_sample(task: SampleTask) -> dict:
     out = Path(task.dataset_dir) / task.id
     with staged_directory(out, kind="lfsim.dataset.sample", overwrite=True) as stage:
         t0 = time.perf_counter()
-        # render_job stages its own output (it refuses a non-empty folder such as this stage):
-        # it renders into a folder of the stage, whose files then move up (its manifest aside:
-        # the sample folder gets one of its own).
         result = render_job(
             config,
-            stage / _RENDER_DIR,
+            stage,
             variant=task.variant,
             progress=False,
             write_previews="previews" in task.outputs,
         )
-        (stage / _RENDER_DIR / MANIFEST_NAME).unlink(missing_ok=True)
-        for path in (stage / _RENDER_DIR).iterdir():
-            path.rename(stage / path.name)
-        (stage / _RENDER_DIR).rmdir()
         seconds["render"] = time.perf_counter() - t0
         _check_inputs(task)  # once the render has read them
         seconds["raw"], seconds["ideal"] = result.raw_seconds, result.ideal_seconds
