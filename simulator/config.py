@@ -786,7 +786,10 @@ def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path
 
 def _camera(table: Any) -> tuple[LightFieldCamera, Pose]:
     table = as_table("[camera]", table)
-    pose = Pose.from_dict(as_table("[camera.pose]", table.pop("pose"))) if "pose" in table else Pose()
+    pose_table = as_table("[camera.pose]", table.pop("pose")) if "pose" in table else {}
+    if "position_m" in pose_table:  # the scene's bound first (lfrefract's Pose allows a wider one)
+        _position("camera.pose.position_m", pose_table["position_m"])
+    pose = Pose.from_dict(pose_table) if pose_table else Pose()
     if "preset" in table:
         reject_unknown_keys("camera", table, {"preset"})
         return camera_preset(table["preset"]), pose

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
+from lfrefract.outputs import MANIFEST_NAME
 from lfrefract.synthesis import build_warp_map
 from simulator.experiments import run_experiment
 from simulator.experiments.fov import exact_mask, fov_measures, original_fov
@@ -42,7 +43,9 @@ def _series(rows, series):
 
 def test_files_and_table(tiny_run):
     out, result, rows = tiny_run
-    assert sorted(p.name for p in out.iterdir()) == sorted(["meta.json", "table.csv", "table.md", *FIGURES])
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [MANIFEST_NAME, "meta.json", "table.csv", "table.md", *FIGURES]
+    )
     assert [p.name for p in result.figures] == list(FIGURES)
     for name in FIGURES:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
