@@ -99,6 +99,7 @@ import dataclasses
 import math
 import os
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -161,6 +162,7 @@ __all__ = [
     "load_scene",
     "parse_scene",
     "read_toml",
+    "scene_files",
 ]
 
 
@@ -836,6 +838,31 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
         objects=_typed_entries(data.get("object", []), OBJECT_TYPES, "object", base),
         render=render,
     )
+
+
+#: Values that hold no file path (skipped while looking for one).
+_NO_PATHS = (bool, int, float, complex, str, bytes, type(None), np.ndarray, np.generic)
+
+
+def scene_files(config: SceneConfig) -> list[tuple[str, Path]]:
+    """Every file path held in ``config`` (where in the config, path), sorted: the files its render
+    reads besides the scene file itself (meshes today; any ``Path`` field of a scene type counts)."""
+    found: list[tuple[str, Path]] = []
+    stack: list[tuple[str, Any]] = [("", config)]  # (a recursive closure would be a reference cycle)
+    while stack:
+        where, value = stack.pop()
+        if isinstance(value, Path):
+            found.append((where, value))
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            for f in dataclasses.fields(value):
+                v = getattr(value, f.name)
+                if not isinstance(v, _NO_PATHS):
+                    stack.append((f"{where}.{f.name}" if where else f.name, v))
+        elif isinstance(value, (list, tuple)):
+            stack.extend((f"{where}[{i}]", v) for i, v in enumerate(value) if not isinstance(v, _NO_PATHS))
+        elif isinstance(value, Mapping):
+            stack.extend((f"{where}.{k}", v) for k, v in value.items() if not isinstance(v, _NO_PATHS))
+    return sorted(found)
 
 
 def load_scene(path: str | Path | None = None) -> SceneConfig:

@@ -14,7 +14,7 @@ from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
 from lfrefract.io import write_exr, write_json
 from lfrefract.outputs import staged_directory
 from simulator import backend, groundtruth, previews
-from simulator.config import MeshFile, SceneConfig
+from simulator.config import SceneConfig, scene_files
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
 from simulator.scene import build_scene, check_geometry, integrator, water_medium
 from simulator.sensor import plenoptic_sensor_dict
@@ -92,7 +92,7 @@ RENDER_KIND = "lfsim.render"
 def scene_inputs(config: SceneConfig) -> list[Path]:
     """The files a render of ``config`` reads: its scene file and its meshes (an output may hold none)."""
     files = [Path(config.source)] if Path(config.source).is_file() else []
-    return files + [obj.path for obj in config.objects if isinstance(obj, MeshFile)]
+    return files + [path for _, path in scene_files(config)]
 
 
 def render_job(

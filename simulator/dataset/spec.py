@@ -83,7 +83,7 @@ from lfrefract._validate import (
 )
 from lfrefract.io import FileFormatError
 from lfrefract.synthesis import SynthesisOptions
-from simulator.config import SceneConfig, embedded_scenes, parse_scene, scenes_dir
+from simulator.config import SceneConfig, embedded_scenes, parse_scene, scene_files, scenes_dir
 from simulator.dataset.manifest import DigestCache
 from simulator.scene import check_geometry
 
@@ -880,30 +880,6 @@ def _grid_point(spec: SweepSpec, p: int) -> tuple:
     return tuple(reversed(values))
 
 
-#: Values that hold no file path (skipped while looking for one).
-_NO_PATHS = (bool, int, float, complex, str, bytes, type(None), np.ndarray, np.generic)
-
-
-def _input_files(config: SceneConfig) -> list[tuple[str, Path]]:
-    """Every file path in ``config`` (where in the config, path): the files its render reads."""
-    found: list[tuple[str, Path]] = []
-    stack: list[tuple[str, Any]] = [("", config)]  # (a recursive closure would be a reference cycle)
-    while stack:
-        where, value = stack.pop()
-        if isinstance(value, Path):
-            found.append((where, value))
-        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-            for f in dataclasses.fields(value):
-                v = getattr(value, f.name)
-                if not isinstance(v, _NO_PATHS):
-                    stack.append((f"{where}.{f.name}" if where else f.name, v))
-        elif isinstance(value, (list, tuple)):
-            stack.extend((f"{where}[{i}]", v) for i, v in enumerate(value) if not isinstance(v, _NO_PATHS))
-        elif isinstance(value, Mapping):
-            stack.extend((f"{where}.{k}", v) for k, v in value.items() if not isinstance(v, _NO_PATHS))
-    return sorted(found)
-
-
 def _build_sample(
     spec: SweepSpec, index: int, seed: int, params: dict, base_scene, digests: DigestCache
 ) -> SweepSample:
@@ -936,7 +912,7 @@ def _build_sample(
     # for the spec); the files the scene names (meshes) by the SHA-256 of their bytes.
     inputs: dict[str, dict] = {str(path): scene_entry}
     content = []
-    for location, file in _input_files(config):
+    for location, file in scene_files(config):
         size, sha = digests.digest(file)
         inputs[str(file)] = {"bytes": size, "sha256": sha}
         content.append([location, sha])
