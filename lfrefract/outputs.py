@@ -66,6 +66,8 @@ _LOCK_ATTEMPTS = 8
 
 # What this process is writing and has not finished: path -> is a directory (for terminate_cleanly).
 _PENDING: dict[Path, bool] = {}
+# Parents whose stale staging this process has removed (what is stale there now was left before it began).
+_CLEANED_PARENTS: set[Path] = set()
 _MAX_LISTED = 5  # paths named in a refusal; the rest are counted
 
 
@@ -455,8 +457,8 @@ def staged_directory(
     kind, every file with its size, every folder) is written into it and it takes the place of
     ``out_dir``; on any exception it is deleted and ``out_dir`` is left as it was. An earlier
     output being replaced is first renamed aside and deleted only after the new one is in place.
-    Stale staging directories of killed writers in the same parent are removed first
-    (:func:`remove_stale_staging`). Directories get the mode the user's umask gives.
+    Stale staging directories of killed writers in the same parent are removed first, once per
+    parent and process (:func:`remove_stale_staging`). Directories get the mode the user's umask gives.
 
     Parameters
     ----------
@@ -490,7 +492,10 @@ def staged_directory(
         refuse_own_inputs([out], inputs)
         _refuse_replacing(out, kind)
     out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_staging(out.parent)
+    parent = out.parent.resolve()
+    if parent not in _CLEANED_PARENTS:  # once per parent and process: a dataset stages 10^5 samples in one folder
+        remove_stale_staging(parent)
+        _CLEANED_PARENTS.add(parent)
     stage, lock = _locked_directory(out.parent, out.name, _STAGE_SUFFIX)
     _PENDING[stage] = True
     try:
