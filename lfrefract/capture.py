@@ -36,7 +36,7 @@ import numpy as np
 
 from lfrefract._validate import ParameterError, one_of
 from lfrefract.camera import LightFieldCamera
-from lfrefract.io import FileFormatError, read_exr, read_json
+from lfrefract.io import FileFormatError, read_exr, read_flat_port, read_json
 from lfrefract.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.port import FlatPort
 from lfrefract.pose import Pose
@@ -480,15 +480,18 @@ def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
 
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:
-    """The port of a JSON file with a ``port`` table (``lfrefract calibrate port`` output, a render's
-    ``meta.json``).
+    """The port of a file: a ``.txt`` in the flat-port layout of Refractive COLMAP / calibmar (what
+    ``lfrefract calibrate port`` writes beside its JSON, :func:`lfrefract.io.read_flat_port`), or a
+    JSON file with a ``port`` table (``lfrefract calibrate port`` output, a render's ``meta.json``).
 
     Raises
     ------
     FileFormatError
-        If the file is missing, not lfrefract JSON, or its ``port`` is missing, null or invalid.
+        If the file is missing, not of either kind, or its port is missing, null or invalid.
     """
     path = Path(path)
+    if path.suffix.lower() == ".txt":
+        return read_flat_port(path)
     return _parse(path, "port", _json_key(path, "port", "a port file"), FlatPort.from_dict)
 
 

@@ -511,7 +511,9 @@ def main(argv: list[str] | None = None) -> int:
     syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     syn.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
     syn.add_argument(
-        "--port", help="JSON file with a port (`lfrefract calibrate port` output; default: the capture's meta.json)"
+        "--port",
+        help="port file: PORT.json or the flat-port PORT.txt of `lfrefract calibrate port` (default: the capture's "
+        "meta.json)",
     )
     syn.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
     syn.add_argument("--overwrite", action="store_true", help="replace an earlier synth output of the same name")

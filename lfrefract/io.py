@@ -30,6 +30,7 @@ from lfrefract.port import FlatPort
 from lfrefract.views import ViewStack
 
 __all__ = [
+    "MAX_FLAT_PORT_BYTES",
     "PNG_WHITE_PERCENTILE",
     "SCHEMA_VERSION",
     "VIEW_STACK_FORMATS",
@@ -47,6 +48,9 @@ __all__ = [
     "write_text_atomically",
     "write_view_stack",
 ]
+
+#: Largest flat-port file read, bytes: the format is one line of eight numbers and a comment.
+MAX_FLAT_PORT_BYTES = 65536
 
 #: Field order of a flat port in Refractive COLMAP and calibmar (``FLATPORT`` parameters).
 FLAT_PORT_FIELDS = ("Nx", "Ny", "Nz", "int_dist", "int_thick", "na", "ng", "nw")
@@ -246,11 +250,27 @@ def write_flat_port(path: str | os.PathLike, port: FlatPort) -> Path:
 
 
 def read_flat_port(path: str | os.PathLike) -> FlatPort:
-    """Read a port written by :func:`write_flat_port` (or any file with that one line)."""
+    """Read a port written by :func:`write_flat_port` (or any file with that one line).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, larger than a port file can be (:data:`MAX_FLAT_PORT_BYTES`), not
+        UTF-8 text, not one line of the eight fields, or its values are not a valid port (the
+        normal not a unit vector, a value outside :class:`FlatPort`'s ranges).
+    """
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"no such file: {str(path)!r}")
-    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if path.stat().st_size > MAX_FLAT_PORT_BYTES:
+        raise FileFormatError(
+            f"{str(path)!r} is {path.stat().st_size} bytes: not a flat port (at most {MAX_FLAT_PORT_BYTES} bytes)"
+        )
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{str(path)!r} is not UTF-8 text (byte {exc.start}): not a flat port") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     try:
         values = [float(v) for v in lines[0].split()] if len(lines) == 1 else []
     except ValueError:
@@ -260,9 +280,12 @@ def read_flat_port(path: str | os.PathLike) -> FlatPort:
     nx, ny, nz, distance, thickness, n_air, n_glass, n_water = values
     if abs(np.hypot(np.hypot(nx, ny), nz) - 1.0) > 1e-6:
         raise FileFormatError(f"{str(path)!r}: the normal ({nx!r}, {ny!r}, {nz!r}) is not a unit vector")
-    return FlatPort.from_normal(
-        [nx, ny, nz], distance_m=distance, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water
-    )
+    try:
+        return FlatPort.from_normal(
+            [nx, ny, nz], distance_m=distance, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water
+        )
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r} is not a valid port: {exc}") from None
 
 
 _PLY_TYPES = {

@@ -144,3 +144,24 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, captu
     argv[argv.index("--out") + 1] = str(blocker / "n.exr")
     err = refused(capsys, argv)
     assert "a-file" in err
+
+
+def test_synth_takes_the_flat_port_txt_that_calibrate_port_writes(tmp_path, capsys):
+    """``--port port.txt`` (the calibmar / Refractive COLMAP layout the project writes) was "not valid JSON"."""
+    from lfrefract.io import write_flat_port
+    from tests.lfrefract.test_cli import PORT
+
+    raw = make_capture(tmp_path / "R", port=None)
+    port_txt = write_flat_port(tmp_path / "port.txt", PORT)
+    argv = commands(raw, tmp_path / "out")["synth"]
+    assert main([*argv, "--port", str(port_txt)]) == 0
+    assert read_json(tmp_path / "out" / "s.json")["port"]["distance_m"] == pytest.approx(PORT.distance_m)
+    capsys.readouterr()
+    bad = {
+        "utf16.txt": ("# Nx Ny Nz\n0 0 1 0.02 0 1 1.5 1.33\n".encode("utf-16"), "is not UTF-8 text"),
+        "range.txt": (b"0 0 1 0.02 0 1 1e300 1.33\n", "is not a valid port"),
+        "big.txt": (b"#" * 70000, "not a flat port (at most"),
+    }
+    for name, (content, message) in bad.items():
+        (tmp_path / name).write_bytes(content)
+        assert message in refused(capsys, [*argv, "--overwrite", "--port", str(tmp_path / name)])
