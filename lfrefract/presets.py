@@ -1,4 +1,4 @@
-"""Camera presets from published optics (see DESIGN.md, "Facts for presets").
+"""Camera presets from published optics (Lytro metadata and the paper's reference implementation).
 
 Every preset focuses at infinity (f' = f) and has a main-lens image-side f-number at or above the
 microlens f-number, so micro-images tile the sensor without overlapping.

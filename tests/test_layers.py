@@ -1,4 +1,4 @@
-"""Layering: the core never imports the renderer (DESIGN.md, "Layers")."""
+"""Layering: the core never imports the renderer (README, "Layout")."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ not at all):
 - ``meta.json``: the experiment, scale, parameters and timings (kind ``lfsim.experiment``).
 
 Scales (:data:`SCALES`): ``tiny`` runs in CI in seconds to minutes on two cores; ``illum`` is the
-paper's size (the Illum camera of DESIGN.md) and takes much longer.
+paper's size (the Lytro Illum preset) and takes much longer.
 """
 
 from __future__ import annotations

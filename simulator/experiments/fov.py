@@ -37,7 +37,7 @@ pinhole image; all full angles, degrees):
 The grid: port tilts about the camera x axis (``tilt_x_deg``, normal turned up) from 0 to 40 deg,
 main-lens f-numbers from the preset's upwards (larger ones are always allowed: the image-side
 f-number must not fall below the microlenses'); an untilted port at several distances; for scale
-``illum`` also the reference port of DESIGN.md (59.2 mm, normal proportional to
+``illum`` also the reference port of the authors' code (59.2 mm, normal proportional to
 (0.0085, 0.5004, 1), 5 mm glass, water 1.33).
 """
 
@@ -513,8 +513,8 @@ def _summary(setup: FovSetup, rows: list[dict], untilted_radius, output: Pinhole
     doubled = fov_measures(untilted_radius <= 2 * aperture, output)["perfect_fov_h_deg"]
     r30 = _radius_for_fov(untilted_radius, output, PAPER_PERFECT_FOV_DEG)
     lines += [
-        f"- Reference port of DESIGN.md ({ref['tilt_deg']:.1f} deg, normal down), f/{n0:g}: {fov(ref)}; none at "
-        f"f/{setup.f_numbers[1]:g} and above.",
+        f"- Reference port of the authors' code ({ref['tilt_deg']:.1f} deg, normal down), f/{n0:g}: {fov(ref)}; "
+        f"none at f/{setup.f_numbers[1]:g} and above.",
         f"- Paper (section 6): perfect FOV about {PAPER_PERFECT_FOV_DEG:g} deg against about "
         f"{PAPER_ORIGINAL_FOV_DEG:g} deg original. The original agrees ({zero['original_fov_h_deg']:.1f} deg "
         f"horizontally in air); the perfect FOV here is much narrower: {zero['perfect_fov_h_deg']:.1f} deg untilted "
