@@ -30,7 +30,7 @@ PAPER_BUILD_S = 8.9
 
 def _worker(camera_name: str, k: int, supersample: int, frames: int, search: str) -> dict:
     from lfrefract import FlatPort, camera_preset
-    from lfrefract.synthesis import SynthesisOptions, build_warp_map
+    from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 
     camera = camera_preset(camera_name)
     # The reference set-up: port 59.2 mm away, normal proportional to (0.0085, 0.5004, 1), 5 mm glass.

@@ -47,12 +47,13 @@ from matplotlib.patches import Ellipse, Patch, Polygon
 
 from lfrefract import camera_preset
 from lfrefract.calibration.mla import LENS_STATUS, calibrate_mla
-from lfrefract.camera import LightFieldCamera, MicrolensArray, SensorGeometry
-from lfrefract.io import read_exr, read_json
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.jsonio import read_json
 from lfrefract.metrics import psnr, shift_px, ssim
-from lfrefract.port import FlatPort
-from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map
-from lfrefract.views import naive_view
+from lfrefract.optics.camera import LightFieldCamera, MicrolensArray, SensorGeometry
+from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis.views import naive_view
+from lfrefract.synthesis.warp_map import SynthesisOptions, WarpMap, build_warp_map
 from simulator.config import RenderSettings, SceneConfig, embedded_scenes, load_scene
 from simulator.job import render_job
 from simulator.previews import display_rgb, downsample, white_level

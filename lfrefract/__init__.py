@@ -3,13 +3,13 @@
 The core is numpy/scipy/OpenCV only; it never imports the renderer.
 """
 
-from lfrefract._validate import ParameterError
-from lfrefract.camera import CapturedRays, LightFieldCamera, MicrolensArray, SensorGeometry
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.port import FlatPort, PortTrace, fresnel_transmittance, refract
-from lfrefract.pose import Pose
-from lfrefract.presets import PRESETS, camera_preset
-from lfrefract.water import seawater_index
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import CapturedRays, LightFieldCamera, MicrolensArray, SensorGeometry
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort, PortTrace, fresnel_transmittance, refract
+from lfrefract.optics.pose import Pose
+from lfrefract.optics.presets import PRESETS, camera_preset
+from lfrefract.optics.water import seawater_index
 
 __version__ = "0.1.0"
 

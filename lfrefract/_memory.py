@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from lfrefract._validate import ParameterError
+from lfrefract.errors import ParameterError
 
 __all__ = [
     "MEMINFO",
@@ -103,7 +103,7 @@ def warp_map_bytes(
 ) -> int:
     """Estimated peak memory of building a warp map and applying it once, bytes.
 
-    What ``lfrefract.synthesis.build_warp_map`` allocates:
+    What ``lfrefract.synthesis.warp_map.build_warp_map`` allocates:
 
     * the map: about ``k * (1 + s) / 2`` entries per output pixel (the ``s^2`` sub-pixel rays of a
       pixel share most of their ``k`` nearest captured rays: measured 1.7-2.1 k at s = 2 and
@@ -130,13 +130,13 @@ def warp_map_bytes(
     channels : int
         Channels of the raw image.
     supersample, k : int
-        :class:`lfrefract.synthesis.SynthesisOptions` ``supersample`` and ``k``.
+        :class:`lfrefract.synthesis.warp_map.SynthesisOptions` ``supersample`` and ``k``.
     kdtree : bool
         Whether the k-d tree search is used.
     workers : int
         Threads building blocks at once.
     block_pixels : int
-        Output pixels per block (``lfrefract.synthesis.BLOCK_PIXELS``).
+        Output pixels per block (``lfrefract.synthesis.warp_map.BLOCK_PIXELS``).
 
     Returns
     -------

@@ -24,7 +24,7 @@ refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (K, size, pose, opti
 statistics), the coverage map ``OUT.coverage.exr`` and a figure ``OUT.png``. ``naive`` writes the
 conventional view with no refraction handling, for comparison. ``views`` writes a regular grid of
 sub-aperture views (no refraction handling either) in the HCI 4D light field benchmark layout that
-light-field depth-estimation methods read (``lfrefract.io.write_view_stack``).
+light-field depth-estimation methods read (``lfrefract.formats.viewstack.write_view_stack``).
 
 ``calibrate`` estimates what the pipeline would otherwise be told: ``mla`` the microlens lattice
 and every micro-image centre from a white image; ``port`` the port's normal and distance from
@@ -34,7 +34,7 @@ in the Refractive COLMAP / calibmar flat-port layout (``PORT.txt``); ``approx`` 
 baseline (a pinhole with distortion from views at one depth). ``synth --port PORT.json
 --mla MLA.json`` uses the estimates instead of the capture's ``meta.json``.
 
-Every command reads its captures with :func:`lfrefract.capture.read_capture`: the raw image and the
+Every command reads its captures with :func:`lfrefract.formats.capture.read_capture`: the raw image and the
 ``meta.json`` beside it, whose ``camera``, ``port``, ``ideal`` and ``pose`` are checked (a missing or
 malformed key is an error naming the file and the key). A bare raw image without ``meta.json``
 works too, given ``--camera`` (a preset, or a JSON file with a ``camera`` table such as
@@ -67,7 +67,8 @@ from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
-from lfrefract.capture import (
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
     SIDECAR_NAME,
     Capture,
@@ -80,18 +81,14 @@ from lfrefract.capture import (
     read_capture,
     read_sidecar,
 )
-from lfrefract.io import (
-    SCHEMA_VERSION,
-    VIEW_STACK_FORMATS,
-    FileFormatError,
-    write_exr,
-    write_flat_port,
-    write_json,
-    write_view_stack,
-)
+from lfrefract.formats.exr import write_exr
+from lfrefract.formats.flatport import write_flat_port
+from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
+from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
+from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.methods import ConventionalView
-from lfrefract.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
-from lfrefract.synthesis import (
+from lfrefract.synthesis.views import naive_view, subaperture_stack, view_stack_bytes
+from lfrefract.synthesis.warp_map import (
     BLOCK_PIXELS,
     SEARCH_METHODS,
     SynthesisOptions,
@@ -99,7 +96,6 @@ from lfrefract.synthesis import (
     build_warp_map,
     warp_map_key,
 )
-from lfrefract.views import naive_view, subaperture_stack, view_stack_bytes
 
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"

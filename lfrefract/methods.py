@@ -13,7 +13,7 @@ A method turns a raw lenslet image into a central-projection image with a known 
     undistorted with a pinhole plus radial-tangential distortion calibrated from chessboard views
     at one depth (:func:`lfrefract.calibration.approx.calibrate_approx`). Right near that depth.
 ``proposed``
-    The refraction-free synthesis (:mod:`lfrefract.synthesis`): exact at every depth inside the
+    The refraction-free synthesis (:mod:`lfrefract.synthesis.warp_map`): exact at every depth inside the
     coverage.
 ``proposed+distortion``
     Paper condition (d): the synthesized image, with a residual distortion fitted on the
@@ -33,13 +33,20 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy import sparse
 
-from lfrefract._validate import ParameterError, as_points, one_of, positive_float, require_keys
 from lfrefract.calibration.approx import ApproxCalibration, calibrate_approx
-from lfrefract.camera import LightFieldCamera
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.port import FlatPort
-from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map
-from lfrefract.views import apply_resampling, micro_image_samples, naive_view, raw_channels, resampling_matrix
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis.views import (
+    apply_resampling,
+    micro_image_samples,
+    naive_view,
+    raw_channels,
+    resampling_matrix,
+)
+from lfrefract.synthesis.warp_map import SynthesisOptions, WarpMap, build_warp_map
+from lfrefract.validate import as_points, one_of, positive_float, require_keys
 
 __all__ = [
     "METHODS",
@@ -89,7 +96,7 @@ def conventional_image(camera: LightFieldCamera, raw: np.ndarray, *, view: Pinho
     """The image a conventional camera would take: the central sub-aperture view.
 
     One sample per microlens at its micro-image centre (the ray through the main-lens centre),
-    resampled onto the pinhole ``view`` (:func:`lfrefract.views.naive_view`, ``kind="central"``):
+    resampled onto the pinhole ``view`` (:func:`lfrefract.synthesis.views.naive_view`, ``kind="central"``):
     an exact pinhole image in air with ``view.K``, whose centre of projection is the main-lens
     centre; behind a port, the port's refraction is in it. For many frames of one camera,
     :class:`ConventionalView` gives the same images faster.
@@ -116,8 +123,8 @@ class ConventionalView:
 
     The central view interpolates linearly between the lens positions over their Delaunay
     triangulation, as ``scipy.interpolate.LinearNDInterpolator`` does in
-    :func:`~lfrefract.views.naive_view`; the interpolation matrix
-    (:func:`~lfrefract.views.resampling_matrix`) is built once here and kept.
+    :func:`~lfrefract.synthesis.views.naive_view`; the interpolation matrix
+    (:func:`~lfrefract.synthesis.views.resampling_matrix`) is built once here and kept.
 
     Attributes
     ----------
@@ -172,7 +179,7 @@ class NaiveProjector:
 
 @dataclass(frozen=True, eq=False)
 class ProposedProjector:
-    """``proposed``: a :class:`~lfrefract.synthesis.WarpMap`, with unfilled pixels NaN."""
+    """``proposed``: a :class:`~lfrefract.synthesis.warp_map.WarpMap`, with unfilled pixels NaN."""
 
     warp: WarpMap
     name: str = field(default="proposed", init=False)

@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from lfrefract._validate import ParameterError, as_points, positive_float, positive_int
+from lfrefract.errors import ParameterError
+from lfrefract.validate import as_points, positive_float, positive_int
 
 __all__ = [
     "DepthErrors",

@@ -1,7 +1,7 @@
 """Procedural scene content in plain numpy: textures, calibration boards and triangle meshes.
 
 Everything here is deterministic given its arguments (and ``seed`` where there is one), does not
-import Mitsuba or Dr.Jit, and validates its input with :class:`lfrefract._validate.ParameterError`.
+import Mitsuba or Dr.Jit, and validates its input with :class:`lfrefract.validate.ParameterError`.
 
 Conventions
 -----------
@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from lfrefract._validate import ParameterError, non_negative_float, positive_float, positive_int, regular_file
-from lfrefract.io import FileFormatError
-from lfrefract.outputs import atomic_file
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.outputs import atomic_file
+from lfrefract.validate import non_negative_float, positive_float, positive_int, regular_file
 
 __all__ = [
     "BLACK",

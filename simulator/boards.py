@@ -39,9 +39,9 @@ from lfrefract.calibration.port import (
     project_through_port,
 )
 from lfrefract.methods import CalibrationViews
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.port import FlatPort
-from lfrefract.views import subaperture_view
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis.views import subaperture_view
 from simulator import assets
 from simulator.backend import load_mitsuba
 from simulator.config import Chessboard, SceneConfig, parse_scene

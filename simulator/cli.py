@@ -25,8 +25,8 @@ import sys
 from pathlib import Path
 
 from lfrefract import PRESETS, ParameterError, camera_preset
-from lfrefract.io import FileFormatError
-from lfrefract.outputs import terminate_cleanly
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.outputs import terminate_cleanly
 from simulator.config import PORT_MODELS, embedded_scenes, load_scene
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 

@@ -107,8 +107,10 @@ from typing import Any
 import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset, seawater_index
-from lfrefract._validate import (
-    ParameterError,
+from lfrefract.errors import ParameterError
+from lfrefract.optics.pose import rotation_from_euler_xyz
+from lfrefract.optics.water import SODIUM_D_NM
+from lfrefract.validate import (
     as_table,
     bounded_float,
     bounded_int,
@@ -121,8 +123,6 @@ from lfrefract._validate import (
     shown,
     text,
 )
-from lfrefract.pose import rotation_from_euler_xyz
-from lfrefract.water import SODIUM_D_NM
 from simulator import assets
 
 __all__ = [

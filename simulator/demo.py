@@ -14,8 +14,8 @@ import math
 import time
 from pathlib import Path
 
-from lfrefract.io import write_json, write_text_atomically
-from lfrefract.outputs import staged_directory
+from lfrefract.formats.jsonio import write_json, write_text_atomically
+from lfrefract.formats.outputs import staged_directory
 from simulator.experiments import write_table
 from simulator.experiments.planes import PLANE_DEPTHS_M, run_planes
 from simulator.experiments.rigstereo import MATCHERS, METHOD_NAMES

@@ -11,8 +11,9 @@ import numpy as np
 
 import lfrefract
 from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
-from lfrefract.io import write_exr, write_json
-from lfrefract.outputs import staged_directory
+from lfrefract.formats.exr import write_exr
+from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.outputs import staged_directory
 from simulator import backend, groundtruth, previews
 from simulator.config import SceneConfig, scene_files
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands

@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from lfrefract import FlatPort, ParameterError, Pose
-from lfrefract._validate import as_table, finite_vector, positive_float, reject_unknown_keys, require_keys, text
-from lfrefract.io import write_json
-from lfrefract.outputs import staged_directory
+from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.outputs import staged_directory
+from lfrefract.validate import as_table, finite_vector, positive_float, reject_unknown_keys, require_keys, text
 from simulator.config import SceneConfig, Water, apply_water_index, parse_scene, read_toml, scenes_dir
 
 __all__ = ["RIG_KIND", "RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
@@ -127,7 +127,7 @@ class RigConfig:
 
     def relative_pose(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Rotation (3, 3) and translation (3,), metres, of camera ``index`` relative to the first:
-        ``X_cam = R @ X_first + t`` (the convention of :class:`lfrefract.stereo.StereoCalibration`)."""
+        ``X_cam = R @ X_first + t`` (the convention of :class:`lfrefract.stereo.geometry.StereoCalibration`)."""
         first, other = self.cameras[0].scene.pose, self.cameras[index].scene.pose
         r0, r1 = np.asarray(first.rotation), np.asarray(other.rotation)
         rotation = r1.T @ r0
@@ -240,7 +240,7 @@ def render_rig(
     each camera's folder, pose and port, and the stereo ground truth (each camera's rotation and
     translation relative to the first, and the baseline), plus the plain data of ``metadata`` (the
     caller's own keys, e.g. what the scene holds). The directory appears only when every camera is
-    rendered; ``overwrite`` replaces only an earlier rig output (:func:`lfrefract.outputs.staged_directory`).
+    rendered; ``overwrite`` replaces only an earlier rig output (:func:`lfrefract.formats.outputs.staged_directory`).
 
     Returns
     -------

@@ -28,7 +28,7 @@ from types import ModuleType
 import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError
-from lfrefract.io import FileFormatError
+from lfrefract.errors import FileFormatError
 from simulator import assets
 from simulator.config import (
     MAX_COORDINATE_M,

@@ -161,7 +161,7 @@ def register(mi: ModuleType) -> None:
             return mi.RayDifferential3f(ray), weight
 
     class PlenopticSensor(_CameraSensor):
-        """Raw lenslet image of a plenoptic 1.0 camera (see :mod:`lfrefract.camera`).
+        """Raw lenslet image of a plenoptic 1.0 camera (see :mod:`lfrefract.optics.camera`).
 
         Each sample picks a point in the pixel (film sample) and a point on the aperture of the
         microlens whose micro-image holds it (aperture sample, uniform over the lattice cell).

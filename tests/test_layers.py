@@ -8,7 +8,7 @@ import sys
 
 def test_core_imports_no_renderer():
     code = (
-        "import sys, lfrefract, lfrefract.cli, lfrefract.io\n"
+        "import sys, lfrefract, lfrefract.cli, lfrefract.formats.capture\n"
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('mitsuba', 'drjit', 'simulator'))\n"
         "print(','.join(bad))\n"
     )

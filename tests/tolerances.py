@@ -646,7 +646,7 @@ VIEW_STACK_CORNER_DARKENING_MAX = 0.01
 
 # ----------------------------------------------------------------------------- port properties
 # tests/lfrefract/test_port_properties.py and test_port.py (issue 12): random ports and rays,
-# grazing ones included, through lfrefract.port.FlatPort.
+# grazing ones included, through lfrefract.optics.port.FlatPort.
 
 # Dimensionless; Snell's tangential invariant n (d - (d . n) n) of unit directions across one or
 # two faces, indices up to N_MAX = 5. Each refraction keeps the tangential part to a few ulps of
@@ -706,7 +706,7 @@ MASKED_VIEW_EXTRA_NAN_FRACTION = 1e-3
 # 20-60 ms on a busy 2-core machine); before issue 12 these ran for minutes or allocated 71 GiB.
 OVERSIZE_REFUSAL_SECONDS = 1.0
 
-# Ratio of the tracemalloc peak to the estimate of lfrefract._memory (warp map) and lfrefract.views
+# Ratio of the tracemalloc peak to the estimate of lfrefract._memory (warp map) and lfrefract.synthesis.views
 # (naive views, view stacks), on the tiny camera. An estimate may err high (it refuses work that would
 # have fitted, by at most 1 / 0.4 = 2.5x) more than low (the work may then fail for memory, so by at
 # most 25 %). Measured: warp maps 0.49-0.83 (analytic search) and 0.96-1.12 (k-d tree), naive views

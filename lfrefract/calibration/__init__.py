@@ -5,12 +5,12 @@ from lfrefract.calibration.corners import CornerTracks, light_field_corners
 from lfrefract.calibration.mla import LATTICE_MODELS, LENS_STATUS, MlaCalibration, calibrate_mla
 from lfrefract.calibration.port import (
     BoardView,
-    CalibrationError,
     PortCalibration,
     board_view_from_light_field,
     calibrate_port,
     project_through_port,
 )
+from lfrefract.errors import CalibrationError
 
 __all__ = [
     "LATTICE_MODELS",

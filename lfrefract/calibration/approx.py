@@ -41,17 +41,10 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from lfrefract._validate import (
-    ParameterError,
-    as_points,
-    finite_float,
-    positive_float,
-    positive_int,
-    reject_unknown_keys,
-    require_keys,
-)
-from lfrefract.io import read_json, write_json
-from lfrefract.pinhole import PinholeCamera
+from lfrefract.errors import ParameterError
+from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.validate import as_points, finite_float, positive_float, positive_int, reject_unknown_keys, require_keys
 
 __all__ = ["DISTORTION_MODEL", "ApproxCalibration", "calibrate_approx", "detect_chessboard"]
 

@@ -6,7 +6,7 @@ tiny-2x test camera, which does not determine a port (``docs/calibration.md``). 
 a sample of some sub-aperture view: its captured ray (:meth:`LightFieldCamera.captured_rays`)
 leaves the main lens at the aperture point ``a`` (camera frame, metres, on the lens plane z = 0)
 along direction ``d``, which is pixel ``x = K d`` of the pinhole view centred at ``a`` (the
-convention of :mod:`lfrefract.views` and :class:`~lfrefract.calibration.port.BoardView`). A board
+convention of :mod:`lfrefract.synthesis.views` and :class:`~lfrefract.calibration.port.BoardView`). A board
 corner appears in the view from ``a`` at ``x(a)``; over the small aperture that track is affine,
 
     ``x(a) = p + J a``,
@@ -41,10 +41,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.special import erf
 
-from lfrefract._validate import ParameterError, as_points, finite_vector, positive_float
-from lfrefract.camera import LightFieldCamera
-from lfrefract.pinhole import PinholeCamera
-from lfrefract.views import raw_channels
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.synthesis.views import raw_channels
+from lfrefract.validate import as_points, finite_vector, positive_float
 
 __all__ = ["RIM_MARGIN_PX", "CornerTracks", "light_field_corners"]
 
@@ -52,7 +53,7 @@ _N_PARAMS = 13  # p (2), J (4), theta1, theta2, c0, gx, gy, c1, s
 _MM = 1e3  # aperture points are handled in millimetres, J in px/mm, for a well-scaled problem
 _CHUNK = 64  # corners fitted together (bounds the (chunk, samples, 13) Jacobian)
 #: Default margin from the micro-image rim (pixels): half a pixel diagonal, the geometric limit
-#: of partial vignetting (as :class:`lfrefract.synthesis.SynthesisOptions`).
+#: of partial vignetting (as :class:`lfrefract.synthesis.warp_map.SynthesisOptions`).
 RIM_MARGIN_PX = 0.71
 
 

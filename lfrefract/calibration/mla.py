@@ -49,16 +49,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from lfrefract._validate import (
-    ParameterError,
-    finite_float,
-    finite_vector,
-    one_of,
-    positive_float,
-    reject_unknown_keys,
-    require_keys,
-)
-from lfrefract.camera import GRID_TYPES, LightFieldCamera, MicrolensArray
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import GRID_TYPES, LightFieldCamera, MicrolensArray
+from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, reject_unknown_keys, require_keys
 
 __all__ = ["LATTICE_MODELS", "LENS_STATUS", "MlaCalibration", "calibrate_mla"]
 

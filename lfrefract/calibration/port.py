@@ -3,7 +3,7 @@
 The camera behind the port is a pinhole in air whose intrinsics are known from in-air
 calibration: for a light-field camera, its central sub-aperture view (the ray through the
 main-lens centre and each microlens centre), resampled onto a ``K`` by
-:func:`lfrefract.views.naive_view`. A pixel's line of sight ``K^-1 p`` is refracted by the port
+:func:`lfrefract.synthesis.views.naive_view`. A pixel's line of sight ``K^-1 p`` is refracted by the port
 (its normal and distance unknown; glass thickness and refractive indices known) and meets the
 board somewhere in the water. The unknowns are the port's two tilt angles and its distance, and
 one board pose per view.
@@ -37,15 +37,16 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from lfrefract._validate import ParameterError, as_points, finite_vector, one_of, positive_float, positive_int
 from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
-from lfrefract.camera import LightFieldCamera
-from lfrefract.pinhole import PinholeCamera
-from lfrefract.port import FlatPort
-from lfrefract.pose import Pose
-from lfrefract.views import subaperture_centre_m, subaperture_view
+from lfrefract.errors import CalibrationError, ParameterError
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.optics.port import FlatPort
+from lfrefract.optics.pose import Pose
+from lfrefract.synthesis.views import subaperture_centre_m, subaperture_view
+from lfrefract.validate import as_points, finite_vector, one_of, positive_float, positive_int
 
 __all__ = [
     "CORNER_METHODS",
@@ -59,10 +60,6 @@ __all__ = [
 ]
 
 
-class CalibrationError(ParameterError):
-    """The observations do not determine the parameters (degenerate or inconsistent views)."""
-
-
 @dataclass(frozen=True, eq=False)
 class BoardView:
     """Chessboard corners seen in one underwater view.
@@ -70,7 +67,7 @@ class BoardView:
     One board pose, seen by one or several in-air pinhole cameras that share the intrinsics and
     orientation of ``camera`` in :func:`calibrate_port` but may sit elsewhere: a light-field
     camera's sub-aperture views are pinholes at points of the main-lens plane
-    (:func:`lfrefract.views.subaperture_centre_m`), so each corner carries the centre of the view
+    (:func:`lfrefract.synthesis.views.subaperture_centre_m`), so each corner carries the centre of the view
     it was found in.
 
     Attributes

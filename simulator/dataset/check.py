@@ -7,8 +7,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfrefract._validate import ParameterError
-from lfrefract.io import FileFormatError
+from lfrefract.errors import FileFormatError, ParameterError
 from simulator.dataset.manifest import (
     MANIFEST_FILE,
     DigestCache,

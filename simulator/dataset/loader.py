@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from lfrefract.io import read_exr, read_flat_port, read_json
-from lfrefract.port import FlatPort
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.flatport import read_flat_port
+from lfrefract.formats.jsonio import read_json
+from lfrefract.optics.port import FlatPort
 from simulator.dataset.manifest import MANIFEST_FILE, latest_records, read_dataset, read_manifest
 from simulator.dataset.sample import COVERAGE_FILE, PORT_FILE, REFRACTION_FREE_FILE, VIEWS_DIR
 
@@ -110,9 +112,9 @@ class Sample:
 
     @property
     def view_stack(self):
-        """The sub-aperture view stack (:class:`lfrefract.views.ViewStack`: ``views`` float32,
+        """The sub-aperture view stack (:class:`lfrefract.synthesis.views.ViewStack`: ``views`` float32,
         shape (grid, grid, h, w, 3), NaN outside the lenses' hull), or None unless asked for."""
-        from lfrefract.io import read_view_stack
+        from lfrefract.formats.viewstack import read_view_stack
 
         return None if self.views_dir is None else read_view_stack(self.views_dir)
 

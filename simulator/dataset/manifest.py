@@ -25,7 +25,8 @@ import os
 import shutil
 from pathlib import Path
 
-from lfrefract.io import FileFormatError, read_json
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.jsonio import read_json
 
 __all__ = [
     "DATASET_FILE",

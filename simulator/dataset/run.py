@@ -38,8 +38,9 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 import lfrefract
-from lfrefract._validate import ParameterError, one_of, positive_int
-from lfrefract.io import FileFormatError, write_json
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.jsonio import write_json
+from lfrefract.validate import one_of, positive_int
 from simulator.backend import VARIANTS
 from simulator.dataset.check import verify_folder
 from simulator.dataset.manifest import (

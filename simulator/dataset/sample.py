@@ -19,9 +19,12 @@ from pathlib import Path
 from typing import Any
 
 from lfrefract import PinholeCamera
-from lfrefract.io import FileFormatError, read_exr, write_exr, write_flat_port, write_json
-from lfrefract.outputs import staged_directory
-from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.flatport import write_flat_port
+from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.outputs import staged_directory
+from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
 
 __all__ = ["SampleTask", "render_sample"]
@@ -56,7 +59,7 @@ class SampleTask:
     synthesis : SynthesisOptions or None
         Options of the refraction-free image.
     views : dict
-        Options of :func:`lfrefract.views.subaperture_stack`.
+        Options of :func:`lfrefract.synthesis.views.subaperture_stack`.
     inputs : dict
         The files the scene reads (mesh files): absolute path -> SHA-256 (hex) when the sample
         was planned. The render fails if one differs once the scene has been read.
@@ -217,8 +220,8 @@ def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: Sa
 
 def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
     """The sub-aperture view stack of the raw image (the ideal image's geometry), under ``views/``."""
-    from lfrefract.io import write_view_stack
-    from lfrefract.views import subaperture_stack
+    from lfrefract.formats.viewstack import write_view_stack
+    from lfrefract.synthesis.views import subaperture_stack
 
     options = dict(task.views)
     writing = {k: options.pop(k) for k in ("image_format", "white_level") if k in options}

@@ -11,11 +11,11 @@ A sweep spec has three tables::
     outputs = ["refraction_free"]     # optional extras: "refraction_free", "views", "previews"
     spp = 4                           # optional: samples per pixel of every sample
     unset = ["port.n_water"]          # optional: dotted keys removed from the base scene first
-    [sweep.synthesis]                 # optional: lfrefract.synthesis.SynthesisOptions fields
+    [sweep.synthesis]                 # optional: lfrefract.synthesis.warp_map.SynthesisOptions fields
     k = 32                            #   (only with "refraction_free")
     [sweep.views]                     # optional (only with "views"): grid, spacing_px of
-    grid = 5                          #   lfrefract.views.subaperture_stack; image_format,
-                                      #   white_level of lfrefract.io.write_view_stack
+    grid = 5                          #   lfrefract.synthesis.views.subaperture_stack; image_format,
+                                      #   white_level of lfrefract.formats.viewstack.write_view_stack
 
     [grid]                            # dotted scene keys -> lists of values (Cartesian product)
     "port.tilt_x_deg" = [0.0, 10.0, 20.0, 30.0]
@@ -72,17 +72,9 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from lfrefract._validate import (
-    ParameterError,
-    finite_float,
-    finite_vector,
-    one_of,
-    positive_float,
-    positive_int,
-    reject_unknown_keys,
-)
-from lfrefract.io import FileFormatError
-from lfrefract.synthesis import SynthesisOptions
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.synthesis.warp_map import SynthesisOptions
+from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, positive_int, reject_unknown_keys
 from simulator.config import SceneConfig, embedded_scenes, parse_scene, scene_files, scenes_dir
 from simulator.dataset.manifest import DigestCache
 from simulator.scene import check_geometry
@@ -319,7 +311,7 @@ class SweepSpec:
     synthesis : SynthesisOptions or None
         Options of the refraction-free image (None unless ``"refraction_free"`` is an output).
     views : Mapping
-        Keyword options of :func:`lfrefract.views.subaperture_stack` (``"views"`` output).
+        Keyword options of :func:`lfrefract.synthesis.views.subaperture_stack` (``"views"`` output).
     grid : tuple of (str, tuple)
         Grid keys in file order with their values.
     random : tuple of Distribution
@@ -571,14 +563,14 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     return spec
 
 
-#: Keys of ``[sweep.views]``: options of :func:`lfrefract.views.subaperture_stack` and of
-#: :func:`lfrefract.io.write_view_stack`.
+#: Keys of ``[sweep.views]``: options of :func:`lfrefract.synthesis.views.subaperture_stack` and of
+#: :func:`lfrefract.formats.viewstack.write_view_stack`.
 VIEW_STACK_KEYS = ("grid", "spacing_px", "image_format", "white_level")
 
 
 def _view_options(table: Any) -> dict:
     """Validate ``[sweep.views]`` (the checks that do not depend on the camera)."""
-    from lfrefract import io as lfio
+    from lfrefract.formats import viewstack as lfio
 
     if not isinstance(table, dict):
         raise ParameterError(f"[sweep.views] must be a table, got {table!r}")
@@ -597,7 +589,7 @@ def _view_options(table: Any) -> dict:
 
 def _check_views(views: Mapping[str, Any], camera) -> None:
     """Raise unless ``camera``'s micro-images leave room for the view stack of ``views``."""
-    from lfrefract.views import subaperture_limit_px
+    from lfrefract.synthesis.views import subaperture_limit_px
 
     limit = subaperture_limit_px(camera)
     if limit <= 0.0:

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lfrefract import ParameterError
-from lfrefract._validate import one_of
-from lfrefract.io import write_text_atomically
+from lfrefract.formats.jsonio import write_text_atomically
+from lfrefract.validate import one_of
 
 __all__ = ["EXPERIMENTS", "SCALES", "ExperimentResult", "load_experiments", "register", "run_experiment", "write_table"]
 
@@ -137,8 +137,8 @@ def run_experiment(
     """
     import time
 
-    from lfrefract.io import write_json
-    from lfrefract.outputs import staged_directory
+    from lfrefract.formats.jsonio import write_json
+    from lfrefract.formats.outputs import staged_directory
 
     experiments = load_experiments()
     function = experiments[one_of("experiment", name, tuple(sorted(experiments)))]

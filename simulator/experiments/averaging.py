@@ -11,7 +11,7 @@ preset (scale ``illum``). The raw image is rendered at :attr:`Setup.spp` samples
 seeds (0 and 1): Monte Carlo noise stands in for the capture noise of a real camera. The ideal image
 (the same scene without the port, seen by the virtual pinhole ``virtual_camera_for(camera)``, which
 is also the synthesis output geometry) is rendered at :attr:`Setup.ideal_spp` at two seeds too.
-Warp maps are built with the default :class:`~lfrefract.synthesis.SynthesisOptions` (lambda 0.3
+Warp maps are built with the default :class:`~lfrefract.synthesis.warp_map.SynthesisOptions` (lambda 0.3
 m/rad, super-sampling 2) and k in :data:`K_VALUES`; the paper's k = 1, 8, 64 are in the figure.
 
 Every measure is taken on channel means inside the exact coverage (``WarpMap.exact``, the same for
@@ -51,7 +51,7 @@ import numpy as np
 
 from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.metrics import psnr, ssim
-from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.experiments import ExperimentResult, check_scale, register
 
 mpl.use("Agg")

@@ -3,10 +3,10 @@
 A pixel of the refraction-free image is *exact* when the camera records its necessary ray usably:
 for each of its ``s x s`` sub-pixel lines of sight (``s`` = :attr:`SynthesisOptions.supersample`)
 the light arriving along it, traced back through the port into the air
-(:func:`~lfrefract.synthesis.necessary_air_rays`) and continued to the main-lens plane, crosses it
+(:func:`~lfrefract.synthesis.warp_map.necessary_air_rays`) and continued to the main-lens plane, crosses it
 inside the usable aperture (:meth:`LightFieldCamera.usable_aperture_radius_m`, the aperture less
 ``rim_margin_px``) and, followed through the thin lens, lands on the sensor. This is exactly
-:attr:`WarpMap.exact <lfrefract.synthesis.WarpMap.exact>` without building the map: the ray trace
+:attr:`WarpMap.exact <lfrefract.synthesis.warp_map.WarpMap.exact>` without building the map: the ray trace
 and the sensor test do not depend on the f-number, so each pixel gets one *required aperture
 radius* (the largest lens-plane radius among its sub-pixel rays; infinite where one of them is
 lost to the port or misses the sensor), and the pixel is exact at f-number ``N`` when that radius
@@ -16,7 +16,7 @@ Measures of a mask of exact pixels (angles in the water, where the refraction-fr
 pinhole image; all full angles, degrees):
 
 - ``exact_share``: exact pixels over all pixels of the refraction-free image
-  (:func:`~lfrefract.pinhole.virtual_camera_for`).
+  (:func:`~lfrefract.optics.pinhole.virtual_camera_for`).
 - ``perfect_fov_h_deg`` / ``perfect_fov_v_deg``: the widest run of consecutive exact pixels in
   any one row / column, as the angle between the lines of sight through the outer edges of its
   end pixels (0 without exact pixels).
@@ -52,7 +52,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
-from lfrefract.synthesis import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
+from lfrefract.synthesis.warp_map import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
 from simulator.experiments import ExperimentResult, check_scale, register
 
 __all__ = ["FovSetup", "exact_mask", "fov_measures", "original_fov", "required_aperture_radius", "run", "setup_for"]
@@ -127,7 +127,7 @@ def required_aperture_radius(
     The largest radius at which one of its ``supersample x supersample`` necessary rays crosses the
     main-lens plane; ``inf`` where one of them does not reach the air (port missed, total internal
     reflection) or, followed through the thin lens, misses the sensor (as in
-    :func:`~lfrefract.synthesis.build_warp_map`, whose :attr:`WarpMap.exact` is
+    :func:`~lfrefract.synthesis.warp_map.build_warp_map`, whose :attr:`WarpMap.exact` is
     ``required_aperture_radius(...) <= camera.usable_aperture_radius_m(rim_margin_px)``).
 
     Returns

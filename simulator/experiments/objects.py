@@ -36,9 +36,10 @@ from pathlib import Path
 import numpy as np
 
 from lfrefract import virtual_camera_for
-from lfrefract.io import read_exr, write_ply
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import depth_errors, disparity_errors
-from lfrefract.stereo import disparity_to_points
+from lfrefract.stereo.geometry import disparity_to_points
 from simulator.experiments import ExperimentResult, check_scale, register
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,

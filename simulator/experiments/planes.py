@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from lfrefract import Pose
-from lfrefract.io import write_ply
+from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import fit_plane_ransac
-from lfrefract.stereo import disparity_to_depth, disparity_to_points
+from lfrefract.stereo.geometry import disparity_to_depth, disparity_to_points
 from simulator.experiments import ExperimentResult, check_scale, register
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,

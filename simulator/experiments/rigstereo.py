@@ -16,17 +16,12 @@ from tqdm import tqdm
 
 from lfrefract import ParameterError, virtual_camera_for
 from lfrefract.calibration.approx import detect_chessboard
-from lfrefract.io import read_exr, read_json
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.jsonio import read_json
 from lfrefract.methods import CalibrationViews, build_projector
-from lfrefract.stereo import (
-    Rectification,
-    StereoCalibration,
-    calibrate_stereo,
-    rectify,
-    sgbm_disparity,
-    zncc_disparity,
-)
-from lfrefract.synthesis import WarpMap, build_warp_map
+from lfrefract.stereo.geometry import Rectification, StereoCalibration, calibrate_stereo, rectify
+from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
+from lfrefract.synthesis.warp_map import WarpMap, build_warp_map
 from simulator.boards import chessboard_corners_world
 from simulator.config import Chessboard, Placement, read_toml
 from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
@@ -54,8 +49,8 @@ __all__ = [
 METHOD_NAMES = ("approx far", "approx near", "proposed", "proposed+distortion", "ideal")
 
 #: Stereo matchers run on every method's rectified pair: the paper's NCC cost
-#: (:func:`lfrefract.stereo.zncc_disparity`) and OpenCV's semi-global matcher
-#: (:func:`lfrefract.stereo.sgbm_disparity`), whose smoothness terms hold up better at depth edges.
+#: (:func:`lfrefract.stereo.matching.zncc_disparity`) and OpenCV's semi-global matcher
+#: (:func:`lfrefract.stereo.matching.sgbm_disparity`), whose smoothness terms hold up better at depth edges.
 MATCHERS = ("zncc", "sgbm")
 
 
@@ -198,7 +193,7 @@ def match(matcher: str, left: np.ndarray, right: np.ndarray, *, min_disparity_px
 
 
 def warp_maps(rig: RigConfig) -> dict[str, WarpMap]:
-    """Each camera's warp map (:func:`lfrefract.synthesis.build_warp_map`) with the default options."""
+    """Each camera's warp map (:func:`lfrefract.synthesis.warp_map.build_warp_map`) with the default options."""
     return {c.name: build_warp_map(c.scene.camera, c.scene.port) for c in rig.cameras}
 
 

@@ -17,7 +17,7 @@ from scipy import ndimage
 from lfrefract import ParameterError, PinholeCamera
 from lfrefract.calibration import ApproxCalibration, calibrate_approx, detect_chessboard
 from lfrefract.calibration.approx import DISTORTION_MODEL, INTRINSIC_NAMES
-from lfrefract.pose import rotation_from_euler_xyz
+from lfrefract.optics.pose import rotation_from_euler_xyz
 from tests.tolerances import (
     APPROX_SYNTHETIC_DIST_ABS,
     APPROX_SYNTHETIC_FOCAL_RELATIVE,

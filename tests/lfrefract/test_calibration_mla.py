@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from lfrefract import LightFieldCamera, MicrolensArray, ParameterError, SensorGeometry
 from lfrefract.calibration import LENS_STATUS, MlaCalibration, calibrate_mla
 from lfrefract.calibration.mla import _reindexed
-from lfrefract.io import read_json, write_json
+from lfrefract.formats.jsonio import read_json, write_json
 from tests.tolerances import (
     FLOAT64_PIXEL_PX,
     FLOAT64_RELATIVE,

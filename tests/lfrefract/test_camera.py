@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lfrefract import LightFieldCamera, MicrolensArray, ParameterError, SensorGeometry, camera_preset
-from lfrefract.presets import PRESETS
+from lfrefract.optics.presets import PRESETS
 from tests.tolerances import (
     CELL_INNER_FRACTION,
     CELL_MOMENT_RELATIVE,
@@ -589,7 +589,7 @@ def test_camera_from_dict_of_the_wrong_types_is_a_parameter_error(data, message)
 
 
 def test_sensor_sizes_are_bounded():
-    from lfrefract.camera import MAX_IMAGE_SIDE_PX
+    from lfrefract.optics.camera import MAX_IMAGE_SIDE_PX
 
     assert MAX_IMAGE_SIDE_PX == 65536
     SensorGeometry(width_px=65536, height_px=16, pixel_pitch_m=1e-6)

@@ -1,4 +1,4 @@
-"""lfrefract.capture: the one reader of captures (raw image + meta.json, or a bare raw image given a
+"""lfrefract.formats.capture: the one reader of captures (raw image + meta.json, or a bare raw image given a
 camera and a port), its checks, the counts of unrecorded raw values, and warp maps that skip them."""
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose, camera_preset, virtual_camera_for
-from lfrefract.capture import (
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.capture import (
     Capture,
     UnrecordedValues,
     camera_from_option,
@@ -21,8 +22,9 @@ from lfrefract.capture import (
     read_capture,
     read_sidecar,
 )
-from lfrefract.io import FileFormatError, write_exr, write_json
-from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from lfrefract.formats.exr import write_exr
+from lfrefract.formats.jsonio import write_json
+from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from tests.tolerances import FLOAT32_WEIGHT_SUM
 
 TINY = camera_preset("tiny")

@@ -12,7 +12,8 @@ import pytest
 
 from lfrefract import FlatPort, Pose, camera_preset, virtual_camera_for
 from lfrefract.cli import main
-from lfrefract.io import read_exr, write_exr, write_json
+from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.jsonio import write_json
 
 
 def test_describe_preset_prints_derived_optics(capsys):
@@ -412,7 +413,7 @@ def test_calibrate_port_checks_the_port_options_before_detecting_corners(tmp_pat
 
 
 def test_a_masked_synthesis_caches_the_full_map(tmp_path, capsys):
-    from lfrefract.synthesis import WarpMap
+    from lfrefract.synthesis.warp_map import WarpMap
 
     holed, _ = holed_raw(0.03)
     path = make_capture(tmp_path / "holed", raw=holed)

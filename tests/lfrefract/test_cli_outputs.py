@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from lfrefract.cli import main
-from lfrefract.io import read_exr, read_json, write_exr, write_json
+from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.jsonio import read_json, write_json
 from tests.lfrefract.test_cli import commands, make_capture, refused
 
 
@@ -148,7 +149,7 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, captu
 
 def test_synth_takes_the_flat_port_txt_that_calibrate_port_writes(tmp_path, capsys):
     """``--port port.txt`` (the calibmar / Refractive COLMAP layout the project writes) was "not valid JSON"."""
-    from lfrefract.io import write_flat_port
+    from lfrefract.formats.flatport import write_flat_port
     from tests.lfrefract.test_cli import PORT
 
     raw = make_capture(tmp_path / "R", port=None)

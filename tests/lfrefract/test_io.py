@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import SCHEMA_VERSION, FileFormatError, read_exr, read_json, write_exr, write_json
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.jsonio import SCHEMA_VERSION, read_json, write_json
 
 SPECIAL = np.array([0.0, -0.0, 1.5, np.inf, -np.inf, np.nan, 1e-45, -3.4e38, 65504.0, 1e-8], dtype=np.float32)
 # Non-canonical NaN payloads (quiet, negative, signalling) must survive too.
@@ -210,7 +212,7 @@ def test_json_unserialisable_value_writes_nothing(tmp_path):
 
 def test_flat_port_round_trip_in_the_refractive_colmap_layout(tmp_path):
     from lfrefract import FlatPort
-    from lfrefract.io import read_flat_port, write_flat_port
+    from lfrefract.formats.flatport import read_flat_port, write_flat_port
 
     port = FlatPort.from_degrees(distance_m=0.0592, thickness_m=0.005, tilt_x_deg=26.6, tilt_y_deg=-3.0, n_water=1.34)
     path = write_flat_port(tmp_path / "port.txt", port)

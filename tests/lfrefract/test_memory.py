@@ -12,8 +12,8 @@ import pytest
 
 import lfrefract._memory as memory
 from lfrefract import FlatPort, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
-from lfrefract.synthesis import BLOCK_PIXELS, SynthesisOptions, build_warp_map
-from lfrefract.views import naive_view, naive_view_bytes, subaperture_stack, view_stack_bytes
+from lfrefract.synthesis.views import naive_view, naive_view_bytes, subaperture_stack, view_stack_bytes
+from lfrefract.synthesis.warp_map import BLOCK_PIXELS, SynthesisOptions, build_warp_map
 from tests.tolerances import MEMORY_ESTIMATE_RATIO_MAX, MEMORY_ESTIMATE_RATIO_MIN
 
 TINY = camera_preset("tiny")

@@ -25,8 +25,8 @@ from lfrefract.methods import (
     build_projector,
     conventional_image,
 )
-from lfrefract.synthesis import build_warp_map
-from lfrefract.views import naive_view
+from lfrefract.synthesis.views import naive_view
+from lfrefract.synthesis.warp_map import build_warp_map
 from tests.tolerances import FLOAT32_WEIGHT_SUM
 
 

@@ -1,4 +1,4 @@
-"""Data safety (lfrefract.outputs): atomic files, staged output directories with a manifest of their
+"""Data safety (lfrefract.formats.outputs): atomic files, staged output directories with a manifest of their
 own files, what --overwrite may replace, stale staging of killed writers, the user's umask."""
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfrefract.io import read_json, write_exr, write_json
-from lfrefract.outputs import (
+from lfrefract.formats.exr import write_exr
+from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.formats.outputs import (
     MANIFEST_NAME,
     ExpectedKind,
     atomic_file,
@@ -222,7 +223,7 @@ def test_an_output_directory_holding_an_input_is_refused(tmp_path):
 # =============================================================================== killed writers
 KILL_INSIDE_BLOCK = """
 import os, sys
-from lfrefract.outputs import staged_directory
+from lfrefract.formats.outputs import staged_directory
 with staged_directory(sys.argv[1], kind="test.output", overwrite=True) as stage:
     (stage / "half.txt").write_text("half")
     print("staged", flush=True)
@@ -351,7 +352,7 @@ def test_prepare_output_files_replaces_only_the_same_kind_and_never_an_input(tmp
 # =============================================================================== the warp-map cache
 SAVE_LOOP = """
 import sys
-from lfrefract.synthesis import WarpMap
+from lfrefract.synthesis.warp_map import WarpMap
 warp = WarpMap.load(sys.argv[1])
 for _ in range(15):
     warp.save(sys.argv[2])
@@ -361,7 +362,7 @@ for _ in range(15):
 @pytest.fixture(scope="module")
 def small_map(tmp_path_factory):
     from lfrefract import FlatPort, camera_preset
-    from lfrefract.synthesis import build_warp_map
+    from lfrefract.synthesis.warp_map import build_warp_map
 
     warp = build_warp_map(camera_preset("tiny"), FlatPort.from_degrees(distance_m=0.02, tilt_x_deg=20.0))
     return warp.save(tmp_path_factory.mktemp("map") / "source.npz")
@@ -369,7 +370,7 @@ def small_map(tmp_path_factory):
 
 def test_warp_maps_saved_at_once_into_one_cache_never_collide(tmp_path, small_map):
     """Two ``synth --map-cache C`` runs at once crashed (a fixed temporary name, 2 of 6 trials)."""
-    from lfrefract.synthesis import WarpMap
+    from lfrefract.synthesis.warp_map import WarpMap
 
     target = tmp_path / "cache" / "key.npz"
     runs = [
@@ -383,7 +384,7 @@ def test_warp_maps_saved_at_once_into_one_cache_never_collide(tmp_path, small_ma
 
 
 def test_a_warp_map_saved_over_a_directory_leaves_nothing(tmp_path, small_map):
-    from lfrefract.synthesis import WarpMap
+    from lfrefract.synthesis.warp_map import WarpMap
 
     (tmp_path / "key.npz").mkdir()
     with pytest.raises(IsADirectoryError, match="is an existing directory"):

@@ -115,7 +115,7 @@ def test_virtual_camera_rejects_bad_density():
 # =============================================================================== hostile sidecars (issue 12)
 def test_image_sizes_are_bounded_at_once():
     # A meta.json whose ideal was 200000 x 200000 ran for minutes; it is refused by the dataclass.
-    from lfrefract.pinhole import MAX_IMAGE_SIDE_PX
+    from lfrefract.optics.pinhole import MAX_IMAGE_SIDE_PX
 
     assert MAX_IMAGE_SIDE_PX == 65536
     PinholeCamera(focal_px=1e4, cx_px=0.0, cy_px=0.0, width_px=65536, height_px=65536)

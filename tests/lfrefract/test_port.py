@@ -17,7 +17,7 @@ from hypothesis.extra import numpy as hnp
 from scipy.optimize import minimize_scalar
 
 from lfrefract import FlatPort, ParameterError, fresnel_transmittance, refract
-from lfrefract.port import GRAZING_COS_MIN, MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
+from lfrefract.optics.port import GRAZING_COS_MIN, MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
 from tests.tolerances import (
     FLOAT64_ANGLE_DEG,
     FLOAT64_ANGLE_RAD,

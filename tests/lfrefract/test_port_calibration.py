@@ -9,13 +9,8 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose
-from lfrefract.calibration.port import (
-    BoardView,
-    CalibrationError,
-    calibrate_port,
-    estimate_normal,
-    project_through_port,
-)
+from lfrefract.calibration.port import BoardView, calibrate_port, estimate_normal, project_through_port
+from lfrefract.errors import CalibrationError
 from tests.tolerances import FLOAT64_UNIT, PORT_CALIB_DISTANCE_M, PORT_CALIB_NORMAL_DEG
 
 CAMERA = PinholeCamera(focal_px=600.0, cx_px=399.5, cy_px=299.5, width_px=800, height_px=600)

@@ -26,7 +26,7 @@ from hypothesis import given, note, settings
 from hypothesis import strategies as st
 
 from lfrefract import FlatPort, ParameterError
-from lfrefract.port import GRAZING_COS_MIN, MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
+from lfrefract.optics.port import GRAZING_COS_MIN, MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
 from tests.tolerances import (
     FLOAT64_UNIT,
     PORT_REVERSAL_CONDITION,

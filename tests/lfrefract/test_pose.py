@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from lfrefract import ParameterError, Pose
-from lfrefract.pose import rotation_from_euler_xyz
+from lfrefract.optics.pose import rotation_from_euler_xyz
 from tests.tolerances import FLOAT64_GEOMETRY_M, FLOAT64_UNIT
 
 angles_deg = st.tuples(*(st.floats(-360.0, 360.0) for _ in range(3)))

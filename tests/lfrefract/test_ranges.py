@@ -8,9 +8,9 @@ import dataclasses
 import pytest
 
 from lfrefract import PRESETS, ParameterError, PinholeCamera, Pose, camera_preset
-from lfrefract.camera import CAMERA_RANGES
-from lfrefract.pinhole import MAX_FOCAL_PX, MAX_PRINCIPAL_POINT_PX
-from lfrefract.pose import MAX_POSITION_M
+from lfrefract.optics.camera import CAMERA_RANGES
+from lfrefract.optics.pinhole import MAX_FOCAL_PX, MAX_PRINCIPAL_POINT_PX
+from lfrefract.optics.pose import MAX_POSITION_M
 
 TINY = camera_preset("tiny")
 

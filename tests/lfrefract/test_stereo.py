@@ -15,17 +15,16 @@ from scipy import ndimage
 
 from lfrefract import ParameterError, PinholeCamera
 from lfrefract.metrics import fit_plane_ransac
-from lfrefract.pose import rotation_from_euler_xyz
-from lfrefract.stereo import (
+from lfrefract.optics.pose import rotation_from_euler_xyz
+from lfrefract.stereo.geometry import (
     Rectification,
     StereoCalibration,
     calibrate_stereo,
     disparity_to_depth,
     disparity_to_points,
     rectify,
-    sgbm_disparity,
-    zncc_disparity,
 )
+from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from tests.tolerances import (
     FLOAT64_GEOMETRY_M,
     FLOAT64_PIXEL_PX,

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import FileFormatError, read_ply, write_ply
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.ply import read_ply, write_ply
 from lfrefract.metrics import DepthErrors, depth_errors, disparity_errors, fit_plane_ransac
 from tests.tolerances import (
     FLOAT64_UNIT,

@@ -14,11 +14,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import lfrefract.synthesis as synthesis
+import lfrefract.synthesis.warp_map as synthesis
 from lfrefract import FlatPort, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
-from lfrefract._raytree import RayTree
-from lfrefract.io import FileFormatError
-from lfrefract.synthesis import SynthesisOptions, WarpMap, build_warp_map, necessary_air_rays, warp_map_key
+from lfrefract.errors import FileFormatError
+from lfrefract.synthesis._raytree import RayTree
+from lfrefract.synthesis.warp_map import (
+    SynthesisOptions,
+    WarpMap,
+    build_warp_map,
+    necessary_air_rays,
+    warp_map_key,
+)
 from tests.tolerances import FLOAT32_WEIGHT_SUM, FLOAT64_UNIT
 
 TINY = camera_preset("tiny")
@@ -437,8 +443,8 @@ def test_a_map_with_an_index_past_the_raw_never_reaches_the_gather(tmp_path, war
     np.savez(path, **_corrupt(warp, indices=lambda a: _with(a, len(a) // 2, 2**31 - 1)))
     script = (
         "import sys, numpy as np\n"
-        "from lfrefract.io import FileFormatError\n"
-        "from lfrefract.synthesis import WarpMap\n"
+        "from lfrefract.errors import FileFormatError\n"
+        "from lfrefract.synthesis.warp_map import WarpMap\n"
         "try:\n"
         "    warp = WarpMap.load(sys.argv[1])\n"
         "except FileFormatError as exc:\n"

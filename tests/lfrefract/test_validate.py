@@ -1,4 +1,4 @@
-"""The shared validators of lfrefract._validate against hostile values (issue 12)."""
+"""The shared validators of lfrefract.validate against hostile values (issue 12)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from lfrefract import _validate as v
-from lfrefract._validate import ParameterError
+from lfrefract import validate as v
+from lfrefract.errors import ParameterError
 
 
 def test_an_integer_beyond_the_float_range_is_a_parameter_error():

@@ -1,5 +1,5 @@
-"""Sub-aperture view stacks (lfrefract.views.subaperture_stack) and their export in the HCI 4D light
-field benchmark layout (lfrefract.io.write_view_stack), on raw images computed from the captured-ray
+"""Sub-aperture view stacks (lfrefract.synthesis.views.subaperture_stack) and their export in the HCI 4D light
+field benchmark layout (lfrefract.formats.viewstack.write_view_stack), on raw images computed from the captured-ray
 model: every pixel's chief ray onto a fronto-parallel textured plane at a known depth, so the
 disparity between neighbouring views is known."""
 
@@ -19,18 +19,12 @@ from scipy import ndimage
 
 from lfrefract import LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
 from lfrefract.cli import main
-from lfrefract.io import (
-    SCHEMA_VERSION,
-    FileFormatError,
-    read_exr,
-    read_view_stack,
-    view_file_names,
-    write_exr,
-    write_json,
-    write_view_stack,
-)
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
+from lfrefract.formats.viewstack import read_view_stack, view_file_names, write_view_stack
 from lfrefract.metrics import shift_px
-from lfrefract.views import (
+from lfrefract.synthesis.views import (
     ViewStack,
     subaperture_centre_m,
     subaperture_limit_px,
@@ -70,7 +64,7 @@ def plane_raw(camera: LightFieldCamera, depth_m: float, *, seed: int = 0, channe
 
 
 def srgb_8bit(linear: np.ndarray, white: float) -> np.ndarray:
-    """The PNG encoding views.json states, written out independently of lfrefract.io."""
+    """The PNG encoding views.json states, written out independently of lfrefract.formats.viewstack."""
     x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64) / white, nan=0.0), 0.0, 1.0)
     return np.round(255 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)).astype(np.uint8)
 
@@ -288,10 +282,10 @@ def test_writing_is_atomic_and_never_replaces_a_foreign_directory(tmp_path, rgb_
     with pytest.raises(FileExistsError, match=r"is not an lfrefract output"):
         write_view_stack(foreign, rgb_stack, overwrite=True)
     # A failure half-way leaves the earlier output as it was and no staging directory behind.
-    import lfrefract.io
+    import lfrefract.formats.viewstack
 
     calls = []
-    real = lfrefract.io._write_png
+    real = lfrefract.formats.viewstack._write_png
 
     def failing(path, image):
         calls.append(path)
@@ -299,7 +293,7 @@ def test_writing_is_atomic_and_never_replaces_a_foreign_directory(tmp_path, rgb_
             raise OSError("disk full")
         real(path, image)
 
-    monkeypatch.setattr(lfrefract.io, "_write_png", failing)
+    monkeypatch.setattr(lfrefract.formats.viewstack, "_write_png", failing)
     with pytest.raises(OSError, match="disk full"):
         write_view_stack(out, rgb_stack, overwrite=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lf", "thesis"]
@@ -357,9 +351,9 @@ def test_an_off_focus_stack_keeps_one_interpolation_matrix_alive(monkeypatch):
     # them held 81 at once for a 9 x 9 stack. Count the matrices still alive when each is built.
     import weakref
 
-    import lfrefract.views
+    import lfrefract.synthesis.views
 
-    real = lfrefract.views.resampling_matrix
+    real = lfrefract.synthesis.views.resampling_matrix
     built: list[weakref.ref] = []
     alive_at_build: list[int] = []
 
@@ -369,17 +363,17 @@ def test_an_off_focus_stack_keeps_one_interpolation_matrix_alive(monkeypatch):
         built.append(weakref.ref(result[1]))
         return result
 
-    monkeypatch.setattr(lfrefract.views, "resampling_matrix", counting)
+    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", counting)
     raw = plane_raw(TINY_OFF_FOCUS, 0.1)
     stack = subaperture_stack(TINY_OFF_FOCUS, raw, grid=3)
     assert len(alive_at_build) == 9  # one shift per view
     assert max(alive_at_build) == 0, alive_at_build
-    monkeypatch.setattr(lfrefract.views, "resampling_matrix", real)
+    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", real)
     np.testing.assert_array_equal(
         stack.views[0, 2], subaperture_view(TINY_OFF_FOCUS, raw, tuple(stack.offsets_px[0, 2]))
     )
     alive_at_build.clear()
-    monkeypatch.setattr(lfrefract.views, "resampling_matrix", counting)
+    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", counting)
     subaperture_stack(TINY, plane_raw(TINY, 0.1), grid=3)
     assert alive_at_build == [0]  # f' = f: one matrix for every view
 
@@ -448,7 +442,7 @@ def test_a_stack_beyond_the_memory_is_refused_before_any_view_is_allocated(monke
     import time
 
     import lfrefract._memory
-    from lfrefract.views import view_stack_bytes
+    from lfrefract.synthesis.views import view_stack_bytes
     from tests.tolerances import OVERSIZE_REFUSAL_SECONDS
 
     views_bytes = 1001**2 * 92 * 69 * 3 * 4

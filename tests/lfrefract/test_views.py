@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError, camera_preset, virtual_camera_for
-from lfrefract.views import naive_view, subaperture_centre_m, subaperture_view
+from lfrefract.synthesis.views import naive_view, subaperture_centre_m, subaperture_view
 from tests.tolerances import SENSOR_VS_NUMPY_DIRECTION, SENSOR_VS_NUMPY_ORIGIN_M
 
 TINY = camera_preset("tiny")
@@ -106,7 +106,7 @@ def test_a_recorded_mask_of_the_wrong_shape_or_type_is_refused():
 def test_a_view_beyond_the_memory_is_refused_before_it_is_allocated(monkeypatch):
     import lfrefract._memory
     from lfrefract import PinholeCamera
-    from lfrefract.views import naive_view_bytes
+    from lfrefract.synthesis.views import naive_view_bytes
 
     huge = PinholeCamera(focal_px=3e4, cx_px=3e4, cy_px=3e4, width_px=60_000, height_px=60_000)
     raw, _ = _holed(0.0)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lfrefract._validate import ParameterError
+from lfrefract.errors import ParameterError
 from simulator.assets import (
     BLACK,
     WHITE,
@@ -535,7 +535,7 @@ TRIANGLE_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 
 def _refusal(path):
     """The message of check_mesh_content's refusal of ``path`` (FileFormatError or ParameterError)."""
-    from lfrefract.io import FileFormatError
+    from lfrefract.errors import FileFormatError
     from simulator import assets
 
     with pytest.raises((FileFormatError, ParameterError)) as err:
@@ -593,7 +593,7 @@ def test_mesh_path_of_the_wrong_kind_or_size_is_refused_from_its_metadata(tmp_pa
     ],
 )  # fmt: skip
 def test_bad_obj_content_is_named_with_its_file_and_line(tmp_path, content, message):
-    from lfrefract.io import FileFormatError
+    from lfrefract.errors import FileFormatError
 
     path = tmp_path / "thing.obj"
     path.write_bytes(content)
@@ -661,7 +661,7 @@ PLY_OK = (
     ids=["magic", "no-end", "empty-body", "truncated", "no-z", "no-face", "version", "type", "statement"],
 )
 def test_bad_ply_headers_are_named_with_their_file(tmp_path, content, message):
-    from lfrefract.io import FileFormatError
+    from lfrefract.errors import FileFormatError
 
     path = tmp_path / "thing.ply"
     path.write_bytes(content)

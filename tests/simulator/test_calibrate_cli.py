@@ -10,7 +10,9 @@ import pytest
 
 from lfrefract import FlatPort, virtual_camera_for
 from lfrefract import cli as core_cli
-from lfrefract.io import read_exr, read_flat_port, read_json, write_json
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.flatport import read_flat_port
+from lfrefract.formats.jsonio import read_json, write_json
 from simulator import cli as sim_cli
 from simulator.boards import SQUARES, board_scene, calibration_boards, empty_scene
 from simulator.job import render_job

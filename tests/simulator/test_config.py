@@ -337,7 +337,7 @@ def test_a_mesh_scale_out_of_range_is_refused(tmp_path):
     ids=["empty", "garbage", "no-faces"],
 )
 def test_a_bad_mesh_file_is_named_before_mitsuba_reads_it(mi, tmp_path, content, message):
-    from lfrefract.io import FileFormatError
+    from lfrefract.errors import FileFormatError
     from simulator.scene import build_scene
 
     path = tmp_path / "thing.obj"

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from lfrefract import cli as core_cli
-from lfrefract.outputs import MANIFEST_NAME
+from lfrefract.formats.outputs import MANIFEST_NAME
 from simulator import cli
 
 pytestmark = pytest.mark.render

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import FileFormatError
+from lfrefract.errors import FileFormatError
 from simulator.dataset import Dataset, DatasetMismatchError, check_dataset, expand, load_spec, parse_spec, run_dataset
 from simulator.dataset import manifest as manifest_module
 from simulator.dataset import run as run_module
@@ -377,7 +377,7 @@ def test_a_dataset_json_or_manifest_that_is_not_utf8_is_a_clear_error(tmp_path):
     ids=["sample without hash", "inputs not files"],
 )
 def test_a_malformed_dataset_json_is_a_clear_error(tmp_path, info):
-    from lfrefract.io import write_json
+    from lfrefract.formats.jsonio import write_json
 
     write_json(tmp_path / "dataset.json", info)
     with pytest.raises(FileFormatError, match=r"dataset\.json'"):

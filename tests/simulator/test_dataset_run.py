@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, PinholeCamera
-from lfrefract.io import read_flat_port, read_json
-from lfrefract.synthesis import SynthesisOptions, build_warp_map
+from lfrefract.formats.flatport import read_flat_port
+from lfrefract.formats.jsonio import read_json
+from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.dataset import Dataset, DatasetMismatchError, check_dataset, expand, load_spec, parse_spec, run_dataset
 from simulator.dataset.manifest import file_digest, read_manifest
 from tests.tolerances import DATASET_TURBID_OVER_CLEAR_MAX
@@ -340,8 +341,8 @@ position_m = [0.0, 0.0, 0.4]
 
 def test_views_output_is_the_view_stack_of_the_raw_image(tmp_path, scheduler):
     from lfrefract import LightFieldCamera
-    from lfrefract.io import view_file_names
-    from lfrefract.views import subaperture_stack
+    from lfrefract.formats.viewstack import view_file_names
+    from lfrefract.synthesis.views import subaperture_stack
 
     data = {
         "sweep": {"name": "views", "seed": 3, "scene": "default", "spp": 2, "outputs": ["views"], "views": {"grid": 3}},

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from lfrefract.io import read_json, read_ply
+from lfrefract.formats.jsonio import read_json
+from lfrefract.formats.ply import read_ply
 from simulator import cli as sim_cli
 
 pytestmark = pytest.mark.render

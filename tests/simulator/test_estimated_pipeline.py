@@ -12,7 +12,7 @@ import pytest
 
 from lfrefract import camera_preset
 from lfrefract.calibration import calibrate_mla
-from lfrefract.synthesis import build_warp_map
+from lfrefract.synthesis.warp_map import build_warp_map
 from simulator import boards
 from simulator.boards import DIRECTIONS, TILTED, chessboard_corners_world
 from simulator.config import RenderSettings, embedded_scenes, load_scene

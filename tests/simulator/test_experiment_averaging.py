@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lfrefract.outputs import MANIFEST_NAME
+from lfrefract.formats.outputs import MANIFEST_NAME
 from simulator.experiments import run_experiment
 from simulator.experiments.averaging import FIGURE_K, K_VALUES, noise_free_psnr, noise_rel, sharpness_ratio
 from tests.tolerances import (

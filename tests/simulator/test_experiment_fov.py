@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
-from lfrefract.outputs import MANIFEST_NAME
-from lfrefract.synthesis import build_warp_map
+from lfrefract.formats.outputs import MANIFEST_NAME
+from lfrefract.synthesis.warp_map import build_warp_map
 from simulator.experiments import run_experiment
 from simulator.experiments.fov import exact_mask, fov_measures, original_fov
 from tests.tolerances import (

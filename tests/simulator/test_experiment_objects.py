@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from lfrefract.io import read_ply
+from lfrefract.formats.ply import read_ply
 from simulator.experiments import run_experiment
 from tests.tolerances import OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN, OBJECTS_COMPLETENESS_MIN
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from lfrefract.io import read_json
+from lfrefract.formats.jsonio import read_json
 from simulator import cli as sim_cli
 from simulator.experiments import load_experiments
 

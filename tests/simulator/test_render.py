@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import FileFormatError, read_exr, read_json
+from lfrefract.errors import FileFormatError
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.jsonio import read_json
 from simulator import cli
 from simulator.config import RenderSettings, embedded_scenes, load_scene, parse_scene
 from simulator.job import render_job, render_raw

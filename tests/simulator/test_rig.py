@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError, PinholeCamera, Pose
-from lfrefract.io import read_exr, read_json
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.jsonio import read_json
 from simulator import cli as sim_cli
 from simulator.rig import Wall, embedded_rigs, load_rig, parse_rig
 from tests.tolerances import FLOAT64_GEOMETRY_M, RIG_DEPTH_AGREEMENT_RELATIVE

@@ -14,8 +14,8 @@ import functools
 import numpy as np
 import pytest
 
-from lfrefract.synthesis import WarpMap, build_warp_map
-from lfrefract.views import naive_view
+from lfrefract.synthesis.views import naive_view
+from lfrefract.synthesis.warp_map import WarpMap, build_warp_map
 from simulator import boards
 from simulator.boards import chessboard_corners_world
 from simulator.config import SceneConfig

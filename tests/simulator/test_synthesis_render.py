@@ -7,8 +7,8 @@ import pytest
 
 from lfrefract import virtual_camera_for
 from lfrefract.metrics import psnr, shift_px, ssim
-from lfrefract.synthesis import build_warp_map
-from lfrefract.views import naive_view
+from lfrefract.synthesis.views import naive_view
+from lfrefract.synthesis.warp_map import build_warp_map
 from simulator import groundtruth
 from simulator.job import render_raw
 from simulator.scene import build_scene
@@ -90,7 +90,8 @@ def test_without_refraction_synthesis_is_the_central_projection(mi):
 
 def test_cli_synth_and_naive_on_a_render(tmp_path, capsys):
     from lfrefract import cli as core_cli
-    from lfrefract.io import read_exr, read_json
+    from lfrefract.formats.exr import read_exr
+    from lfrefract.formats.jsonio import read_json
     from simulator import cli as sim_cli
 
     render = tmp_path / "render"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from lfrefract.io import read_exr
+from lfrefract.formats.exr import read_exr
 from simulator.job import render_job
 from tests.simulator.scenes import port, scene
 from tests.tolerances import TEXTURED_MESH_CONTRAST_GAIN_MIN

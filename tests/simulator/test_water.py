@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError, seawater_index, virtual_camera_for
-from lfrefract.io import read_json
+from lfrefract.formats.jsonio import read_json
 from simulator import groundtruth
 from simulator.config import RenderSettings, SceneConfig, Water, parse_scene, read_toml
 from simulator.job import render_job, render_raw

@@ -18,10 +18,10 @@ A view stack (:func:`subaperture_stack`) is a regular ``grid x grid`` set of sub
 offsets ``((column - h) s, (row - h) s)`` with ``h = (grid - 1) / 2``: its centres of projection
 form a regular grid on the main-lens plane, ``baseline = s * pixel_pitch * f' / f_mla`` apart, and
 every view has the same K and orientation, so it is the input that light-field depth-estimation
-methods expect (``lfrefract.io.write_view_stack`` writes it in the HCI benchmark layout).
+methods expect (``lfrefract.formats.viewstack.write_view_stack`` writes it in the HCI benchmark layout).
 
 Unrecorded raw pixels (NaN, inf or negative values a capture was told to mask,
-:func:`lfrefract.capture.read_capture`) are excluded with ``recorded``, an (H, W) bool mask of the
+:func:`lfrefract.formats.capture.read_capture`) are excluded with ``recorded``, an (H, W) bool mask of the
 raw image: every sample then averages the recorded pixels only, with its weights renormalised over
 them, and a sample with no recorded pixel has no value (NaN), which the resampling onto the pinhole
 image skips in turn (its barycentric weights renormalised over the lenses that have a value).
@@ -43,9 +43,10 @@ from scipy import ndimage, sparse
 from scipy.spatial import Delaunay
 
 from lfrefract._memory import require_memory
-from lfrefract._validate import ParameterError, finite_vector, one_of, positive_float
-from lfrefract.camera import LightFieldCamera
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.validate import finite_vector, one_of, positive_float
 
 __all__ = [
     "VIEW_KINDS",
@@ -223,7 +224,7 @@ def view_stack_bytes(
 
     The views, ``grid^2`` float32 images of ``channels`` channels; the contiguous channel planes of
     the raw image; one resampling (:data:`RESAMPLING_BYTES_PER_PIXEL` per output pixel) and one
-    view's product. ``exported`` adds what ``lfrefract.io.write_view_stack`` allocates over the
+    view's product. ``exported`` adds what ``lfrefract.formats.viewstack.write_view_stack`` allocates over the
     whole stack: one byte per value (its mask of finite values). Measured with tracemalloc on the
     tiny camera (3 x 3 and 9 x 9 views of 6 000 to 630 000 pixels): 0.80-0.91 of the estimate.
     """

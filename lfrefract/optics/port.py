@@ -19,7 +19,7 @@ never reach the port are reported in masks, never dropped. A ray that meets a fa
 at a cosine below :data:`GRAZING_COS_MIN` counts as never reaching it (see there): no ray whose
 mask says valid carries a NaN or infinite point or direction.
 
-Accepted parameter ranges (anything else is a :class:`~lfrefract._validate.ParameterError`):
+Accepted parameter ranges (anything else is a :class:`~lfrefract.validate.ParameterError`):
 refractive indices in [:data:`N_MIN`, :data:`N_MAX`], distance in (0, :data:`MAX_DISTANCE_M`],
 thickness in [0, :data:`MAX_THICKNESS_M`], each tilt angle in (-pi/2, pi/2) with ``n_z > 0``.
 """
@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfrefract._validate import (
-    ParameterError,
+from lfrefract.errors import ParameterError
+from lfrefract.validate import (
     as_points,
     finite_float,
     finite_vector,

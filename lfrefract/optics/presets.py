@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from lfrefract._validate import one_of
-from lfrefract.camera import LightFieldCamera, MicrolensArray, SensorGeometry
+from lfrefract.optics.camera import LightFieldCamera, MicrolensArray, SensorGeometry
+from lfrefract.validate import one_of
 
 __all__ = ["PRESETS", "camera_preset"]
 

@@ -1,7 +1,7 @@
 """Numba kernels of the refraction-free synthesis: candidate search and the sparse gather.
 
 Everything here works on plain arrays and scalars in the camera frame (metres) and raw-pixel
-coordinates; :mod:`lfrefract.synthesis` prepares the inputs and documents the method. The build
+coordinates; :mod:`lfrefract.synthesis.warp_map` prepares the inputs and documents the method. The build
 kernel is serial and releases the GIL: the caller runs blocks of output pixels on a thread pool.
 """
 

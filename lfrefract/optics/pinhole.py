@@ -7,15 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfrefract._validate import (
-    ParameterError,
-    as_points,
-    finite_float,
-    positive_float,
-    reject_unknown_keys,
-    require_keys,
-)
-from lfrefract.camera import MAX_IMAGE_SIDE_PX, LightFieldCamera, image_side_px
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import MAX_IMAGE_SIDE_PX, LightFieldCamera, image_side_px
+from lfrefract.validate import as_points, finite_float, positive_float, reject_unknown_keys, require_keys
 
 __all__ = [
     "DEFAULT_PIXELS_PER_LENS",

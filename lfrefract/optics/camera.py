@@ -26,8 +26,8 @@ from typing import Literal
 
 import numpy as np
 
-from lfrefract._validate import (
-    ParameterError,
+from lfrefract.errors import ParameterError
+from lfrefract.validate import (
     as_points,
     finite_float,
     finite_vector,
@@ -56,7 +56,7 @@ GridType = Literal["hex", "square"]
 _SQRT3 = math.sqrt(3.0)
 
 #: Largest width or height, pixels, of a sensor or an image (:class:`SensorGeometry`,
-#: :class:`lfrefract.pinhole.PinholeCamera`): 65536, the practical limit of image files and of
+#: :class:`lfrefract.optics.pinhole.PinholeCamera`): 65536, the practical limit of image files and of
 #: OpenCV (whose remap and PNG paths take sizes below 2^15-2^16), and 8.5 times the Illum's 7728.
 #: It refuses typing errors (a 200000 x 200000 image) at once rather than after minutes of work.
 MAX_IMAGE_SIDE_PX = 65536

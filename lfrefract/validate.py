@@ -18,8 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from lfrefract.errors import ParameterError
+
 __all__ = [
-    "ParameterError",
     "as_points",
     "as_table",
     "bounded_float",
@@ -37,10 +38,6 @@ __all__ = [
     "shown",
     "text",
 ]
-
-
-class ParameterError(ValueError):
-    """A parameter has an impossible, non-finite or unknown value."""
 
 
 _SHORT = reprlib.Repr()

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfrefract._validate import ParameterError, as_points, finite_vector, reject_unknown_keys
+from lfrefract.errors import ParameterError
+from lfrefract.validate import as_points, finite_vector, reject_unknown_keys
 
 __all__ = ["Pose", "rotation_from_euler_xyz"]
 

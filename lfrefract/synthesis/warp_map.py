@@ -43,14 +43,14 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract import __version__
-from lfrefract._kernels import gather, merge_rows, select_candidates
-from lfrefract._raytree import LazyRayTree
-from lfrefract._validate import ParameterError, non_negative_float, one_of, positive_int
-from lfrefract.camera import LightFieldCamera, image_side_px
-from lfrefract.io import FileFormatError
-from lfrefract.outputs import atomic_file
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.port import FlatPort
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.outputs import atomic_file
+from lfrefract.optics.camera import LightFieldCamera, image_side_px
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis._kernels import gather, merge_rows, select_candidates
+from lfrefract.synthesis._raytree import LazyRayTree
+from lfrefract.validate import non_negative_float, one_of, positive_int
 
 __all__ = [
     "SynthesisOptions",

@@ -16,8 +16,8 @@ import threading
 import numpy as np
 from scipy.spatial import cKDTree
 
-from lfrefract.camera import LightFieldCamera
-from lfrefract.port import FlatPort
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.port import FlatPort
 
 __all__ = ["LazyRayTree", "RayTree"]
 

@@ -17,7 +17,8 @@ an extrapolation, refused here.
 
 from __future__ import annotations
 
-from lfrefract._validate import ParameterError, finite_float
+from lfrefract.errors import ParameterError
+from lfrefract.validate import finite_float
 
 __all__ = [
     "SALINITY_RANGE_PSU",

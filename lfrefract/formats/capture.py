@@ -1,7 +1,7 @@
 """A capture: a raw lenslet image and the parameters it was taken with, read and checked in one place.
 
 A capture folder holds ``raw.exr`` (the raw lenslet image, float, (H, W) or (H, W, 3)) and its
-sidecar ``meta.json`` (:func:`lfrefract.io.write_json`) beside it; the core reads these keys of the
+sidecar ``meta.json`` (:func:`lfrefract.formats.jsonio.write_json`) beside it; the core reads these keys of the
 sidecar, and ignores the others:
 
 * ``camera`` (required unless a camera is given): a table, :meth:`LightFieldCamera.from_dict`;
@@ -18,10 +18,10 @@ A given camera or port replaces the sidecar's.
 Raw values that are NaN, infinite or negative record no radiance. :func:`read_capture` refuses a
 raw image holding any (``nonfinite="refuse"``, the default), with their count, or, with
 ``nonfinite="mask"``, marks their pixels as unrecorded (:attr:`Capture.recorded`): the commands
-then give them no weight (:func:`mask_warp_map`; ``recorded`` of :mod:`lfrefract.views`) and
+then give them no weight (:func:`mask_warp_map`; ``recorded`` of :mod:`lfrefract.synthesis.views`) and
 report how many were masked.
 
-Every problem is a :class:`lfrefract.io.FileFormatError` naming the file and the key (a missing
+Every problem is a :class:`lfrefract.errors.FileFormatError` naming the file and the key (a missing
 key, a value of the wrong type or an impossible value), never a KeyError or a traceback.
 """
 
@@ -34,16 +34,22 @@ from pathlib import Path
 
 import numpy as np
 
-from lfrefract._validate import ParameterError, one_of
-from lfrefract.camera import LightFieldCamera
-from lfrefract.io import FileFormatError, read_exr, read_flat_port, read_json
-from lfrefract.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.port import FlatPort
-from lfrefract.pose import Pose
-from lfrefract.presets import PRESETS, camera_preset
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.flatport import read_flat_port
+from lfrefract.formats.jsonio import read_json
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.optics.pose import Pose
+from lfrefract.optics.presets import PRESETS, camera_preset
+from lfrefract.validate import one_of
 
 __all__ = [
+    "DEPTH_NAME",
+    "IDEAL_NAME",
     "NONFINITE_POLICIES",
+    "RAW_NAME",
     "SIDECAR_NAME",
     "Capture",
     "CaptureParameters",
@@ -60,6 +66,15 @@ __all__ = [
 
 #: Name of a capture's sidecar, beside its raw image.
 SIDECAR_NAME = "meta.json"
+
+#: Name of a capture folder's raw lenslet image (EXR role ``"raw"``).
+RAW_NAME = "raw.exr"
+
+#: Name of a rendered capture's ideal refraction-free image (EXR role ``"ideal"``; ground truth).
+IDEAL_NAME = "ideal.exr"
+
+#: Name of a rendered capture's depth map along the ideal image's rays (EXR role ``"depth"``; ground truth).
+DEPTH_NAME = "depth.exr"
 
 #: What :func:`read_capture` does with NaN, infinite and negative raw values.
 NONFINITE_POLICIES = ("refuse", "mask")
@@ -481,7 +496,7 @@ def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:
     """The port of a file: a ``.txt`` in the flat-port layout of Refractive COLMAP / calibmar (what
-    ``lfrefract calibrate port`` writes beside its JSON, :func:`lfrefract.io.read_flat_port`), or a
+    ``lfrefract calibrate port`` writes beside its JSON, :func:`lfrefract.formats.flatport.read_flat_port`), or a
     JSON file with a ``port`` table (``lfrefract calibrate port`` output, a render's ``meta.json``).
 
     Raises
@@ -523,13 +538,13 @@ def mask_warp_map(warp, recorded: np.ndarray | None):
 
     Parameters
     ----------
-    warp : lfrefract.synthesis.WarpMap
+    warp : lfrefract.synthesis.warp_map.WarpMap
     recorded : ndarray of bool, shape (H_raw, W_raw), or None
         :attr:`Capture.recorded`; None returns ``warp`` itself.
 
     Returns
     -------
-    lfrefract.synthesis.WarpMap
+    lfrefract.synthesis.warp_map.WarpMap
         Same output, key and meta (plus ``meta["unrecorded_raw_pixels"]``); not to be cached under
         that key.
     """
