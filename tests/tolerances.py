@@ -38,16 +38,16 @@ FLOAT64_PIXEL_PX = 1e-9
 FLOAT64_RELATIVE = 1e-12
 
 # ----------------------------------------------------------------------------- stated figures
-# Degrees; DESIGN.md quotes the reference port tilt as "about 26.6 deg" for the normal
+# Degrees; docs/design.md quotes the reference port tilt as "about 26.6 deg" for the normal
 # proportional to (0.0085, 0.5004, 1); the exact value is 26.58..., so the quoted figure is
 # rounded to 0.1 deg and agrees within half of that.
 QUOTED_TILT_DEG = 0.05
 
-# Pixels per micro-image pitch; DESIGN.md quotes "about 14.3 px per lens" for the Illum (the exact
+# Pixels per micro-image pitch; docs/design.md quotes "about 14.3 px per lens" for the Illum (the exact
 # figure for its preset is 14.337): the quoted figure is rounded to 0.1 px.
 QUOTED_PX_PER_LENS = 0.05
 
-# Relative; DESIGN.md quotes "about 541 x 434 microlenses" for the Illum (from Lytro metadata,
+# Relative; docs/design.md quotes "about 541 x 434 microlenses" for the Illum (from Lytro metadata,
 # whose MLA calibration differs slightly from the ideal preset lattice; the preset gives 539 x 433).
 QUOTED_LENS_COUNT_RELATIVE = 0.01
 

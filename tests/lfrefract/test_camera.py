@@ -278,7 +278,7 @@ def test_micro_image_centre_chief_rays_pass_the_lens_centre(camera):
 
 
 def test_micro_image_offsets_grow_towards_the_edge():
-    # DESIGN.md: the micro-image centre is offset from the lens centre by about c * f_mla / f'.
+    # docs/design.md: the micro-image centre is offset from the lens centre by about c * f_mla / f'.
     cam = camera_preset("tiny")
     idx = cam.lens_indices_on_sensor()
     lens_px = lattice_centres("hex", 1e-4, 0.0, (0, 0), idx) / 1e-5 + np.array([239.5, 179.5])

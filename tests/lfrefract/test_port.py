@@ -187,7 +187,7 @@ def test_normal_from_tilt_angles(tilt_x_deg, tilt_y_deg, expected):
 
 
 def test_from_normal_reference_port():
-    # The reference implementation's port normal, 59.2 mm away (DESIGN.md).
+    # The reference implementation's port normal, 59.2 mm away (docs/design.md, "Facts the presets rest on").
     raw = np.array([0.0085, 0.5004, 1.0])
     port = FlatPort.from_normal(raw, distance_m=59.2e-3, thickness_m=3e-3, n_water=1.33)
     norm = math.sqrt(0.0085**2 + 0.5004**2 + 1.0)
