@@ -34,8 +34,9 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -78,9 +79,9 @@ _KEYS = frozenset(
 )
 
 
-def _pattern(pattern: object) -> tuple[int, int]:
+def _pattern(pattern: Any) -> tuple[int, int]:
     try:
-        items = tuple(pattern)  # type: ignore[arg-type]
+        items = tuple(pattern)
     except TypeError:
         raise ParameterError(f"pattern must be (columns, rows) of inner corners, got {pattern!r}") from None
     if len(items) != 2:
@@ -207,7 +208,7 @@ class ApproxCalibration:
     view_rms_px: np.ndarray
     intrinsic_std: np.ndarray
     fixed_intrinsics: bool = False
-    rotation: np.ndarray | None = None
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     known_corners: bool = False
 
     def __post_init__(self) -> None:
@@ -226,7 +227,7 @@ class ApproxCalibration:
         if len(size) != 2:
             raise ParameterError(f"image_size must be (width, height), got {self.image_size!r}")
         size = tuple(positive_int(f"image_size[{i}]", s) for i, s in enumerate(size))
-        rotation = np.eye(3) if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
+        rotation = np.asarray(self.rotation, dtype=np.float64)
         if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9):
             raise ParameterError(f"rotation must be a 3 x 3 rotation matrix, got {rotation.tolist()}")
         if np.linalg.det(rotation) < 0:
@@ -560,7 +561,8 @@ def calibrate_approx(
     if intrinsics is not None:
         flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_FOCAL_LENGTH
         k_init = intrinsics.K.copy()
-    rms, k, dist, rvecs, tvecs, std_intr, _, per_view = cv2.calibrateCameraExtended(
+    # OpenCV accepts None for the initial K and distortion (its type stubs say arrays only).
+    rms, k, dist, rvecs, tvecs, std_intr, _, per_view = cv2.calibrateCameraExtended(  # type: ignore[call-overload]
         [board.astype(np.float32)] * len(views),
         [c.reshape(-1, 1, 2).astype(np.float32) for c in detected],
         (width, height),

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import typing
 from dataclasses import dataclass
 
 import cv2
@@ -100,6 +101,11 @@ class BoardView:
         object.__setattr__(self, "corners_px", corners)
         object.__setattr__(self, "board_points_m", board)
         object.__setattr__(self, "centres_m", centres)
+
+    @property
+    def centres(self) -> np.ndarray:
+        """:attr:`centres_m` as constructed: (N, 3), never None (None is the origin for every corner)."""
+        return typing.cast(np.ndarray, self.centres_m)
 
     @property
     def central(self) -> np.ndarray:
@@ -211,7 +217,10 @@ def board_view_from_light_field(
         centred on the inner-corner grid, so a detector's half-turned order is just another pose.
     """
     one_of("method", method, CORNER_METHODS)
-    offsets = [tuple(finite_vector("offsets_px[i]", o, 2)) for o in offsets_px]
+    offsets: list[tuple[float, float]] = []
+    for o in offsets_px:
+        du, dv = finite_vector("offsets_px[i]", o, 2)
+        offsets.append((du, dv))
     if not offsets or offsets[0] != (0.0, 0.0):
         raise ParameterError(f"offsets_px must start with (0, 0), the central view; got {offsets_px!r}")
     if method == "light-field" and len(offsets) > 1:
@@ -234,7 +243,7 @@ def board_view_from_light_field(
         reach = fraction * camera.usable_aperture_radius_m(LIGHT_FIELD_RIM_MARGIN_PX)
         points = [(0.0, 0.0), (reach, 0.0), (-reach, 0.0), (0.0, reach), (0.0, -reach)]
         corners = [tracks.at(a)[tracks.ok] for a in points]
-        centres = [np.tile([a[0], a[1], 0.0], (np.count_nonzero(tracks.ok), 1)) for a in points]
+        centres = [np.tile([a[0], a[1], 0.0], (int(np.count_nonzero(tracks.ok)), 1)) for a in points]
         board = board[tracks.ok]
     for offset in offsets[1:] if method == "views" else ():
         found = detect_chessboard(subaperture_view(camera, raw, offset, output=view), pattern, name=name)
@@ -406,7 +415,7 @@ class _Problem:
     def view_residuals(self, port: FlatPort, view: int, pose6: np.ndarray) -> np.ndarray:
         """Residuals (2N,) of one view, pixels: board-plane miss of the refracted line of sight,
         scaled by focal / depth."""
-        origin, d = _water_rays(port, self.views[view].centres_m, self.directions[view])
+        origin, d = _water_rays(port, self.views[view].centres, self.directions[view])
         rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
         t = pose6[3:]
         normal_b = rot[:, 2]
@@ -441,7 +450,7 @@ def _linear_pose(problem: _Problem, port: FlatPort, view: int) -> np.ndarray | N
     ``w x (x r1 + y r2 + t) = w x q``: linear in ``(r1, r2, t)``. The rotation is the nearest
     one to ``(r1, r2, r1 x r2)``, and ``t`` is solved again with it.
     """
-    q, w = _water_rays(port, problem.views[view].centres_m, problem.directions[view])
+    q, w = _water_rays(port, problem.views[view].centres, problem.directions[view])
     if not np.all(np.isfinite(w)):
         return None
     board = problem.views[view].board_points_m
@@ -489,7 +498,7 @@ def _candidate_tilts(axial_normal: np.ndarray) -> list[tuple[float, float]]:
     tilts = [(axial.tilt_x_rad, axial.tilt_y_rad), (0.0, 0.0)]
     for total in np.radians([10.0, 20.0, 30.0, 40.0]):
         for azimuth in np.radians(np.arange(0.0, 360.0, 45.0)):
-            n = [math.sin(total) * math.cos(azimuth), math.sin(total) * math.sin(azimuth), math.cos(total)]
+            n = np.array([math.sin(total) * math.cos(azimuth), math.sin(total) * math.sin(azimuth), math.cos(total)])
             p = FlatPort.from_normal(n, distance_m=1.0)
             tilts.append((p.tilt_x_rad, p.tilt_y_rad))
     return tilts
@@ -560,12 +569,14 @@ def calibrate_port(
     for tilt_x, tilt_y in _candidate_tilts(estimate_normal(camera, views)):
         for distance in np.geomspace(lo, hi, 8):
             trial = _port_from_params(np.array([tilt_x, tilt_y, distance]), template)
-            linear = [_linear_pose(problem, trial, i) for i in range(len(views))]
-            for i, p in enumerate(linear):
-                if p is None:
+            linear: list[np.ndarray] = []
+            for i in range(len(views)):
+                pose = _linear_pose(problem, trial, i)
+                if pose is None:
                     if i not in pnp:
                         pnp[i] = _initial_pose(camera, views[i])
-                    linear[i] = pnp[i]
+                    pose = pnp[i]
+                linear.append(pose)
             cost = sum(float(np.sum(problem.view_residuals(trial, i, p) ** 2)) for i, p in enumerate(linear))
             starts.append((cost, [tilt_x, tilt_y, distance], linear))
     starts.sort(key=lambda item: item[0])

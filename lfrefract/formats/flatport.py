@@ -67,7 +67,12 @@ def read_flat_port(path: str | os.PathLike) -> FlatPort:
         raise FileFormatError(f"{str(path)!r}: the normal ({nx!r}, {ny!r}, {nz!r}) is not a unit vector")
     try:
         return FlatPort.from_normal(
-            [nx, ny, nz], distance_m=distance, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water
+            np.array([nx, ny, nz]),
+            distance_m=distance,
+            thickness_m=thickness,
+            n_air=n_air,
+            n_glass=n_glass,
+            n_water=n_water,
         )
     except ParameterError as exc:
         raise FileFormatError(f"{str(path)!r} is not a valid port: {exc}") from None

@@ -227,7 +227,9 @@ def _is_kind(path: Path, expected: ExpectedKind) -> bool:
     if expected.json_kind is not None:
         data = _json_object(path)
         return data is not None and data.get("kind") == expected.json_kind
-    sidecar = _json_object(Path(expected.listed_in))
+    listed_in = expected.listed_in
+    assert listed_in is not None  # ExpectedKind holds exactly one of the three
+    sidecar = _json_object(Path(listed_in))
     if sidecar is None or sidecar.get("kind") != expected.listed_kind:
         return False
     files = sidecar.get("files")
@@ -395,13 +397,13 @@ def remove_stale_staging(parent: str | os.PathLike) -> list[Path]:
     parent = Path(parent)
     done: list[Path] = []
     try:
-        candidates = sorted(p for p in parent.iterdir() if _STAGE_NAME.match(p.name))
+        names = sorted(p.name for p in parent.iterdir())
     except OSError:
         return done
-    for path in candidates:
+    for match in filter(None, map(_STAGE_NAME.match, names)):
+        path = parent / match.string
         if path.is_symlink() or not path.is_dir():
             continue
-        match = _STAGE_NAME.match(path.name)
         fd = _try_lock(path)
         if fd is None:
             continue  # a live writer holds it

@@ -68,7 +68,10 @@ class Pose:
     def from_euler_xyz_deg(cls, rotation_xyz_deg=(0.0, 0.0, 0.0), position_m=(0.0, 0.0, 0.0)) -> Pose:
         """Pose from extrinsic x-y-z Euler angles in degrees (the config-file form)."""
         angles = finite_vector("pose.rotation_xyz_deg", rotation_xyz_deg, 3)
-        return cls(rotation=rotation_from_euler_xyz(tuple(math.radians(a) for a in angles)), position_m=position_m)
+        rx, ry, rz = (math.radians(a) for a in angles)
+        rows = rotation_from_euler_xyz((rx, ry, rz))
+        rotation = tuple((float(r[0]), float(r[1]), float(r[2])) for r in rows)
+        return cls(rotation=rotation, position_m=position_m)
 
     @classmethod
     def from_dict(cls, data: dict) -> Pose:

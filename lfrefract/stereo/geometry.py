@@ -58,7 +58,7 @@ _ZERO_DISPARITY = getattr(cv2, "STEREO_ZERO_DISPARITY", cv2.CALIB_ZERO_DISPARITY
 
 
 def _readonly(value: Any, dtype: type = np.float64) -> np.ndarray:
-    out = np.array(value, dtype=dtype, copy=True)
+    out: np.ndarray = np.array(value, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
 

@@ -294,7 +294,7 @@ def sgbm_disparity(
     def to8(a: np.ndarray, bad: np.ndarray) -> np.ndarray:
         return np.where(bad, 128.0, np.clip(np.rint((a - lo) * scale), 0.0, 255.0)).astype(np.uint8)
 
-    matcher = cv2.StereoSGBM_create(
+    matcher = cv2.StereoSGBM.create(
         minDisparity=d0,
         numDisparities=16 * math.ceil(n / 16),
         blockSize=block,
