@@ -39,6 +39,7 @@ from scipy import ndimage
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.outputs import atomic_file
 from lfrefract.validate import non_negative_float, positive_float, positive_int, regular_file
+from simulator import seeds
 
 __all__ = [
     "BLACK",
@@ -75,14 +76,6 @@ TEXTURE_OCTAVES = 6
 # --------------------------------------------------------------------------------------------
 # validation helpers
 # --------------------------------------------------------------------------------------------
-
-
-def _seed(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ParameterError(f"{name} must be an integer, got {value!r}")
-    if value < 0:
-        raise ParameterError(f"{name} must be non-negative, got {value!r}")
-    return int(value)
 
 
 def _int_at_least(name: str, value: Any, minimum: int) -> int:
@@ -153,7 +146,8 @@ def random_texture(*, size_px: int, seed: int, octaves: int = TEXTURE_OCTAVES) -
     size_px : int
         Width and height of the square texture, in texels. At least ``2 ** octaves``.
     seed : int
-        Non-negative seed of the random generator; the same seed gives the same texture.
+        Seed of the random generator, an integer in [0, 2**31) (:func:`simulator.seeds.seed`); the
+        same seed gives the same texture.
     octaves : int, optional
         Number of noise scales (default :data:`TEXTURE_OCTAVES`, 6). Octave ``k`` (0-based) has features of about
         ``2 ** (k + 1)`` texels (Gaussian standard deviation ``2 ** k`` texels).
@@ -167,12 +161,12 @@ def random_texture(*, size_px: int, seed: int, octaves: int = TEXTURE_OCTAVES) -
     Raises
     ------
     ParameterError
-        If ``size_px`` or ``octaves`` is not a positive integer, ``seed`` is not a non-negative
-        integer, or ``size_px < 2 ** octaves``.
+        If ``size_px`` or ``octaves`` is not a positive integer, ``seed`` is not an integer in
+        [0, 2**31), or ``size_px < 2 ** octaves``.
     """
     size = positive_int("size_px", size_px)
     n_oct = positive_int("octaves", octaves)
-    rng = np.random.default_rng(_seed("seed", seed))
+    rng = np.random.default_rng(seeds.seed("seed", seed))
     if n_oct > 30 or 2**n_oct > size:
         raise ParameterError(f"size_px must be at least 2 ** octaves (octaves={n_oct}), got {size_px!r}")
     # Octave k has Gaussian sigma 2**k texels and is drawn on a grid of step 2**max(0, k - 1)
@@ -589,7 +583,8 @@ def figurine_mesh(*, height_m: float, seed: int = 0, resolution: int = 64) -> tu
     height_m : float
         Height of the figurine (its extent along y), metres.
     seed : int, optional
-        Non-negative seed of the shape variations (default 0).
+        Seed of the shape variations, an integer in [0, 2**31) (:func:`simulator.seeds.seed`;
+        default 0).
     resolution : int, optional
         Number of latitude bands of the sphere grid (default 64, at least 40: coarser grids
         cannot resolve the ears, and their smooth normals turn against some faces); there are
@@ -610,10 +605,10 @@ def figurine_mesh(*, height_m: float, seed: int = 0, resolution: int = 64) -> tu
     Raises
     ------
     ParameterError
-        If ``height_m`` is not positive, ``seed`` is negative or ``resolution < 40``.
+        If ``height_m`` is not positive, ``seed`` is not a seed (:func:`simulator.seeds.seed`) or ``resolution < 40``.
     """
     height = positive_float("height_m", height_m)
-    rng = np.random.default_rng(_seed("seed", seed))
+    rng = np.random.default_rng(seeds.seed("seed", seed))
     n_lat = _int_at_least("resolution", resolution, 40)
     n_lon = 2 * n_lat
 

@@ -45,8 +45,8 @@ from lfrefract.synthesis.views import subaperture_view
 from simulator import assets
 from simulator.backend import load_mitsuba
 from simulator.config import Chessboard, SceneConfig, parse_scene
+from simulator.geometry import check_geometry
 from simulator.job import render_raw
-from simulator.scene import check_geometry
 
 __all__ = [
     "CALIBRATION_PX_PER_SQUARE",
@@ -247,7 +247,7 @@ def board_scene(
     Raises
     ------
     ParameterError
-        If the board crosses the port or the camera (:func:`simulator.scene.check_geometry`).
+        If the board crosses the port or the camera (:func:`simulator.geometry.check_geometry`).
     """
     config = _scene(tilt_deg, [board], LIGHTS if lights is None else lights, spp, seed)
     check_geometry(config)
@@ -394,26 +394,35 @@ def board_points_world(board: Chessboard, *, n: int = 21) -> np.ndarray:
     ndarray, float64, shape (n * n, 3)
         World-frame points, metres.
     """
-    w, h = assets.chessboard_size_m(
-        squares=board.squares, square_size_m=board.square_size_m, margin_squares=board.margin_squares
-    )
+    w, h = board.board_size_m
     xx, yy = np.meshgrid(np.linspace(-w / 2, w / 2, n), np.linspace(-h / 2, h / 2, n))
     return board.placement.to_world(np.stack([xx.ravel(), yy.ravel(), np.zeros(n * n)], axis=1))
 
 
-def find_corners(image: np.ndarray) -> np.ndarray | None:
+def find_corners(image: np.ndarray, *, canonical: bool = False) -> np.ndarray | None:
     """The inner corners of the :data:`SQUARES` board that OpenCV finds in an image.
 
     The core's detector (:func:`lfrefract.calibration.approx.detect_chessboard`:
     ``findChessboardCornersSB`` refined by ``cornerSubPix`` within 7 x 7 px, less than a 9 px
     square); NaN counts as black.
 
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+    canonical : bool
+        Put the corners in one order whichever end the detector started from: the first corner
+        the top-left one (smaller ``u + v`` than the last; right for a board turned by less than
+        90 deg), so that two views of one board (a stereo pair) list them alike.
+
     Returns
     -------
     ndarray, float64, shape (24, 2), or None
-        Pixels ``(u, v)`` in the detector's order; None if the board is not found.
+        Pixels ``(u, v)`` in the detector's order (or the canonical one); None if the board is not found.
     """
-    return detect_chessboard(image, PATTERN)
+    found = detect_chessboard(image, PATTERN)
+    if canonical and found is not None and found[0].sum() > found[-1].sum():
+        found = found[::-1].copy()
+    return found
 
 
 def aligned_errors_px(found: np.ndarray, expected: np.ndarray) -> np.ndarray:

@@ -73,8 +73,8 @@ over squared distance, radiance times samples) far inside float32. The bounds an
   (it fails on 4294967297); 65536 samples of every pixel take about 13 minutes for the tiny
   camera and 50 hours for the Illum at the 15 Msample/s measured here: more is a typo.
 - Seeds, ``render.seed``, ``texture_seed``, a figurine's ``seed``: integers in [0, 2**31)
-  (:data:`SEED_LIMIT`), inside Mitsuba's 32-bit sampler seed (from which each band's seed is
-  derived) and numpy's generators, and a non-negative int32 for any reader.
+  (:data:`SEED_LIMIT`), the one rule of every seed of the simulator (:mod:`simulator.seeds`, where
+  the reason is given; a dataset's ``sweep.seed`` follows it too).
 - ``texture_px``: 64 to 8192 (:data:`MIN_TEXTURE_PX`, :data:`MAX_TEXTURE_PX`). The random
   texture's 6 octaves need 64 texels; 8192 texels a side are 0.8 GB and a minute to make.
 - A chessboard's ``squares`` (at least 2 each), ``texels_per_square`` (at least 1) and
@@ -123,7 +123,8 @@ from lfrefract.validate import (
     shown,
     text,
 )
-from simulator import assets
+from simulator import assets, seeds
+from simulator.seeds import SEED_LIMIT
 
 __all__ = [
     "MAX_ABS_PHASE_G",
@@ -182,8 +183,6 @@ MAX_INTENSITY_W_SR = 1e6
 MAX_RADIANCE = 1e8
 #: Largest samples per pixel (Mitsuba's limit is 2**32 - 1).
 MAX_SPP = 2**16
-#: Seeds are integers in [0, SEED_LIMIT).
-SEED_LIMIT = 2**31
 #: Smallest random-texture side: the texture's octaves need ``2 ** octaves`` texels.
 MIN_TEXTURE_PX = 2**assets.TEXTURE_OCTAVES
 #: Largest texture side (random texture, chessboard): 8192^2 RGB float32 texels are 0.8 GB, and
@@ -206,12 +205,6 @@ def _rgb(name: str, value: Any, high: float) -> tuple[float, float, float]:
         raise ParameterError(f"{name} must be one number or a list of 3 numbers (RGB), got {shown(value)}")
     rgb = finite_vector(name, value, 3)
     return tuple(bounded_float(f"{name}[{i}]", c, 0.0, high) for i, c in enumerate(rgb))
-
-
-def _seed(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < SEED_LIMIT:
-        raise ParameterError(f"{name} must be an integer in [0, 2**31), got {shown(value)}")
-    return value
 
 
 def _albedo(name: str, value: Any) -> tuple[float, float, float]:
@@ -280,7 +273,7 @@ class TexturedPlane:
         size = finite_vector("size_m", self.size_m, 2)
         object.__setattr__(self, "size_m", tuple(_size(f"size_m[{i}]", s) for i, s in enumerate(size)))
         _texture_px("texture_px", self.texture_px)
-        _seed("texture_seed", self.texture_seed)
+        object.__setattr__(self, "texture_seed", seeds.seed("texture_seed", self.texture_seed))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -317,6 +310,13 @@ class Chessboard:
                 f"square_size_m={self.square_size_m!r}) would be {board[0]:g} x {board[1]:g} m; at most "
                 f"{MAX_SIZE_M:g} m a side"
             )
+        object.__setattr__(self, "_board_size_m", board)  # not a field: derived, checked once here
+
+    @property
+    def board_size_m(self) -> tuple[float, float]:
+        """``(width_m, height_m)`` of the whole board, margin included
+        (:func:`simulator.assets.chessboard_size_m`, computed once when the board is checked)."""
+        return self._board_size_m
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -342,7 +342,7 @@ def _mesh_texture(obj) -> None:
     and ``texture_px``. With a seed the surface carries the seeded multi-scale colour texture of
     ``textured_plane`` (for stereo), wrapped around the mesh's axis."""
     if obj.texture_seed is not None:
-        _seed("texture_seed", obj.texture_seed)
+        object.__setattr__(obj, "texture_seed", seeds.seed("texture_seed", obj.texture_seed))
     _texture_px("texture_px", obj.texture_px)
 
 
@@ -382,7 +382,7 @@ class Figurine:
 
     def __post_init__(self) -> None:
         _size("height_m", self.height_m)
-        _seed("seed", self.seed)
+        object.__setattr__(self, "seed", seeds.seed("seed", self.seed))
         object.__setattr__(self, "reflectance", _albedo("reflectance", self.reflectance))
         _mesh_texture(self)
 
@@ -456,7 +456,7 @@ class RenderSettings:
     def __post_init__(self) -> None:
         bounded_int("render.spp", self.spp, 1, MAX_SPP)
         one_of("render.port_model", self.port_model, PORT_MODELS)
-        _seed("render.seed", self.seed)
+        object.__setattr__(self, "seed", seeds.seed("render.seed", self.seed))
 
 
 #: Largest difference between an ``n_water`` stated in ``[port]`` (or a rig's ``[wall]``) and the

@@ -1,4 +1,9 @@
-"""Turn a :class:`~simulator.config.SceneConfig` into a Mitsuba scene, and check its geometry.
+"""Turn a :class:`~simulator.config.SceneConfig` into a Mitsuba scene.
+
+Each object type's Mitsuba shape is registered with :func:`functools.singledispatch` (``_shape``),
+from the type's geometry in :mod:`simulator.geometry`; the geometry checks
+(:func:`~simulator.geometry.check_geometry`, re-exported here) are there too, without Mitsuba.
+Mitsuba itself is never imported by this module: :func:`build_scene` takes the module.
 
 The world frame is the config's; the camera frame is OpenCV's (``lfrefract``). The port is
 attached to the camera: its faces are built in the camera frame and moved by the camera pose.
@@ -27,7 +32,7 @@ from types import ModuleType
 
 import numpy as np
 
-from lfrefract import FlatPort, LightFieldCamera, ParameterError
+from lfrefract import FlatPort, ParameterError
 from lfrefract.errors import FileFormatError
 from simulator import assets
 from simulator.config import (
@@ -37,12 +42,21 @@ from simulator.config import (
     ConstantLight,
     Disc,
     Figurine,
+    Light,
     MeshFile,
     PointLight,
     SceneConfig,
     SceneObject,
     TexturedPlane,
     Water,
+)
+from simulator.geometry import (
+    check_geometry,
+    object_sample_points,
+    plane_size_m,
+    require_water_side,
+    world_mesh,
+    wrapped_texcoords,
 )
 from simulator.interface import INTERFACE
 
@@ -58,8 +72,6 @@ __all__ = [
 
 #: Side of the square port faces, metres: far larger than any camera footprint on the port.
 PORT_FACE_SIZE_M = 20.0
-
-_TWO_PI = 2.0 * np.pi
 
 
 def _frame_matrix(origin: np.ndarray, z_axis: np.ndarray, half_size: float) -> np.ndarray:
@@ -157,95 +169,68 @@ def _mesh(
     return mesh
 
 
-def _wrapped_texcoords(local: np.ndarray, axis: int, extent_m: float) -> np.ndarray:
-    """Texture coordinates (N, 2) of mesh vertices (N, 3) in the object's local frame: the angle
-    about local ``axis`` (u, one turn) and the position along it over ``extent_m`` (v). The
-    texture tiles, so u wraps without a seam in the image; the triangles that straddle the
-    wrap get a narrow stripe of compressed texture."""
-    a, b = [i for i in range(3) if i != axis]
-    u = np.arctan2(local[:, a], local[:, b]) / (2.0 * np.pi) + 0.5
-    v = (local[:, axis] - local[:, axis].min()) / extent_m
-    return np.stack([u, v], axis=1)
-
-
 def _plane_matrix(placement_matrix: np.ndarray, width: float, height: float) -> np.ndarray:
     return placement_matrix @ np.diag([width / 2.0, height / 2.0, 1.0, 1.0])
 
 
-def _local_mesh(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    if isinstance(obj, Bowl):
-        return _procedural_mesh("bowl", radius_m=obj.radius_m, depth_m=obj.depth_m, thickness_m=obj.thickness_m)
-    return _procedural_mesh("figurine", height_m=obj.height_m, seed=obj.seed)
+# The Mitsuba shape of each object type: ``_shape(obj, mi=..., config=..., index=..., media=...)``
+# returns a dict for ``mi.load_dict`` or a loaded shape; ``media`` maps ``interior`` and
+# ``exterior`` to the water's medium (empty in clear water). The geometry itself is
+# :mod:`simulator.geometry`'s.
+@functools.singledispatch
+def _shape(obj: SceneObject, *, mi: ModuleType, config: SceneConfig, index: int, media: dict):
+    raise TypeError(f"object[{index}]: no Mitsuba shape registered for {type(obj).__name__} ({obj!r})")
 
 
-@functools.lru_cache(maxsize=64)
-def _procedural_mesh(kind: str, **shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The local mesh of a procedural object, read-only and cached: a dataset sweep checks the
-    geometry of every sample before rendering any (:func:`check_geometry`), and regenerating the
-    meshes was two thirds of that check."""
-    mesh = assets.bowl_mesh(**shape) if kind == "bowl" else assets.figurine_mesh(**shape)
-    for array in mesh:
-        array.setflags(write=False)
-    return mesh
+@_shape.register
+def _(obj: TexturedPlane, *, mi: ModuleType, config: SceneConfig, index: int, media: dict) -> dict:
+    tex = _random_texture(obj.texture_px, obj.texture_seed)
+    return {
+        "type": "rectangle",
+        "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, *plane_size_m(obj)).tolist()),
+        "bsdf": _diffuse(_texture(mi, tex, nearest=False)),
+        **media,
+    }
 
 
-def _mesh_in_world(obj: SceneObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    v, f, n = _local_mesh(obj)
-    rot = obj.placement.matrix[:3, :3]
-    return obj.placement.to_world(v), f, n @ rot.T
+@_shape.register
+def _(obj: Chessboard, *, mi: ModuleType, config: SceneConfig, index: int, media: dict) -> dict:
+    tex = assets.chessboard_texture(
+        squares=obj.squares, margin_squares=obj.margin_squares, texels_per_square=obj.texels_per_square
+    )
+    return {
+        "type": "rectangle",
+        "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, *plane_size_m(obj)).tolist()),
+        "bsdf": _diffuse(_texture(mi, tex, nearest=True)),
+        **media,
+    }
 
 
-def _object_dict(mi: ModuleType, config: SceneConfig, index: int, media: dict):
-    """The Mitsuba shape (dict or loaded mesh) of object ``index``; ``media`` maps ``interior``
-    and ``exterior`` to the water's medium (empty in clear water)."""
-    shape = _object_shape(mi, config, index, media)
-    if isinstance(shape, dict):
-        shape.update(media)
-    return shape
+@_shape.register
+def _(obj: Disc, *, mi: ModuleType, config: SceneConfig, index: int, media: dict) -> dict:
+    # Mitsuba's disk faces +z and area lights emit on that side only: turn it (180 deg about
+    # local x) to face -z, towards a camera with identity pose.
+    m = obj.placement.matrix @ np.diag([obj.radius_m, -obj.radius_m, -1.0, 1.0])
+    out = {"type": "disk", "to_world": mi.ScalarTransform4f(m.tolist()), "bsdf": _diffuse(obj.reflectance), **media}
+    if max(obj.radiance) > 0:
+        out["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(obj.radiance)}}
+    return out
 
 
-def _object_shape(mi: ModuleType, config: SceneConfig, index: int, media: dict):
-    obj = config.objects[index]
-    if isinstance(obj, TexturedPlane):
-        tex = _random_texture(obj.texture_px, obj.texture_seed)
-        return {
-            "type": "rectangle",
-            "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, *obj.size_m).tolist()),
-            "bsdf": _diffuse(_texture(mi, tex, nearest=False)),
-        }
-    if isinstance(obj, Chessboard):
-        kw = {"squares": obj.squares, "margin_squares": obj.margin_squares}
-        tex = assets.chessboard_texture(texels_per_square=obj.texels_per_square, **kw)
-        w, h = assets.chessboard_size_m(square_size_m=obj.square_size_m, **kw)
-        return {
-            "type": "rectangle",
-            "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, w, h).tolist()),
-            "bsdf": _diffuse(_texture(mi, tex, nearest=True)),
-        }
-    if isinstance(obj, Disc):
-        # Mitsuba's disk faces +z and area lights emit on that side only: turn it (180 deg about
-        # local x) to face -z, towards a camera with identity pose.
-        m = obj.placement.matrix @ np.diag([obj.radius_m, -obj.radius_m, -1.0, 1.0])
-        out = {"type": "disk", "to_world": mi.ScalarTransform4f(m.tolist()), "bsdf": _diffuse(obj.reflectance)}
-        if max(obj.radiance) > 0:
-            out["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(obj.radiance)}}
-        return out
-    if isinstance(obj, (Bowl, Figurine)):
-        v, f, n = _mesh_in_world(obj)
-        if obj.texture_seed is None:
-            return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance), media=media)
-        # Bowl: around its axis (z), across its depth; figurine: around its height (y).
-        local = _local_mesh(obj)[0]
-        axis, extent = (2, 2.0 * obj.radius_m) if isinstance(obj, Bowl) else (1, obj.height_m)
-        texcoords = _wrapped_texcoords(local, axis, extent)
-        bsdf = _diffuse(_texture(mi, _random_texture(obj.texture_px, obj.texture_seed), nearest=False))
-        return _mesh(mi, f"object_{index}", v, f, n, bsdf, texcoords, media=media)
-    if isinstance(obj, MeshFile):
-        return _load_mesh_file(mi, config, index, media)
-    raise TypeError(f"unknown scene object {obj!r}")
+def _procedural_shape(obj: Bowl | Figurine, *, mi: ModuleType, config: SceneConfig, index: int, media: dict):
+    v, f, n = world_mesh(obj)
+    if obj.texture_seed is None:
+        return _mesh(mi, f"object_{index}", v, f, n, _diffuse(obj.reflectance), media=media)
+    bsdf = _diffuse(_texture(mi, _random_texture(obj.texture_px, obj.texture_seed), nearest=False))
+    return _mesh(mi, f"object_{index}", v, f, n, bsdf, wrapped_texcoords(obj), media=media)
 
 
-def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict):
+_shape.register(Bowl, _procedural_shape)
+_shape.register(Figurine, _procedural_shape)
+
+
+@_shape.register
+def _load_mesh_file(obj: MeshFile, *, mi: ModuleType, config: SceneConfig, index: int, media: dict):
     """Load a user OBJ/PLY mesh (with ``media`` on its sides) and check every vertex against the
     bound of positions and the port (its extent is only known once loaded).
 
@@ -263,7 +248,6 @@ def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict
     """
     import drjit as dr
 
-    obj = config.objects[index]
     where = f"object[{index}] (mesh)"
     try:
         assets.check_mesh_content(obj.path)
@@ -292,8 +276,26 @@ def _load_mesh_file(mi: ModuleType, config: SceneConfig, index: int, media: dict
             f"{list(obj.placement.position_m)}, a vertex lies at {p.tolist()} m in the world, beyond the "
             f"scene's bound of +-{MAX_COORDINATE_M:g} m per coordinate (simulator.config.MAX_COORDINATE_M)"
         )
-    _require_water_side(config, vertices, f"object[{index}] (mesh {obj.path.name})")
+    require_water_side(config, vertices, f"object[{index}] (mesh {obj.path.name})")
     return shape
+
+
+# The Mitsuba emitter of each light type; ``medium`` is the water's loaded medium or None.
+@functools.singledispatch
+def _emitter(light: Light, *, medium) -> dict:
+    raise TypeError(f"no Mitsuba emitter registered for {type(light).__name__} ({light!r})")
+
+
+@_emitter.register
+def _(light: PointLight, *, medium) -> dict:
+    out = {"type": "point", "position": list(light.position_m)}
+    out["intensity"] = {"type": "rgb", "value": list(light.intensity_w_sr)}
+    return out if medium is None else {**out, "medium": medium}
+
+
+@_emitter.register
+def _(light: ConstantLight, *, medium) -> dict:
+    return {"type": "constant", "radiance": {"type": "rgb", "value": list(light.radiance)}}
 
 
 def water_medium(water: Water | None) -> dict | None:
@@ -387,103 +389,7 @@ def build_scene(mi: ModuleType, config: SceneConfig, *, port_geometry: bool):
             if medium is not None and face["water_side"] is not None:
                 scene[f"port_face_{i}"][face["water_side"]] = medium
     for i, light in enumerate(config.lights):
-        if isinstance(light, PointLight):
-            scene[f"light_{i}"] = {
-                "type": "point",
-                "position": list(light.position_m),
-                "intensity": {"type": "rgb", "value": list(light.intensity_w_sr)},
-            }
-            if medium is not None:
-                scene[f"light_{i}"]["medium"] = medium
-        elif isinstance(light, ConstantLight):
-            scene[f"light_{i}"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(light.radiance)}}
-    for i in range(len(config.objects)):
-        scene[f"object_{i}"] = _object_dict(mi, config, i, media)
-    return mi.load_dict(scene)
-
-
-# --------------------------------------------------------------------------- geometry checks
-def object_sample_points(obj: SceneObject) -> np.ndarray:
-    """World points (N, 3) on an object's extent, used to check which side of the port it is on.
-
-    Planes and discs give their outline, procedural meshes their vertices, and mesh files their
-    placement centre (their vertices are checked when Mitsuba loads them).
-    """
-    if isinstance(obj, (TexturedPlane, Chessboard)):
-        if isinstance(obj, TexturedPlane):
-            w, h = obj.size_m
-        else:
-            w, h = assets.chessboard_size_m(
-                squares=obj.squares, square_size_m=obj.square_size_m, margin_squares=obj.margin_squares
-            )
-        local = np.array([[-w, -h, 0], [w, -h, 0], [w, h, 0], [-w, h, 0]]) / 2.0
-        return obj.placement.to_world(local)
-    if isinstance(obj, Disc):
-        ang = np.linspace(0.0, _TWO_PI, 32, endpoint=False)
-        local = obj.radius_m * np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], axis=1)
-        return obj.placement.to_world(local)
-    if isinstance(obj, (Bowl, Figurine)):
-        return _mesh_in_world(obj)[0]
-    return obj.placement.to_world(np.zeros((1, 3)))
-
-
-def _captured_sample(camera: LightFieldCamera, count: int = 64) -> np.ndarray:
-    w, h = camera.sensor.width_px, camera.sensor.height_px
-    uu, vv = np.meshgrid(np.linspace(0, w - 1, count), np.linspace(0, h - 1, count))
-    return np.stack([uu.ravel(), vv.ravel()], axis=1)
-
-
-def _require_water_side(config: SceneConfig, points_world: np.ndarray, what: str) -> None:
-    """Raise unless every world point lies beyond the port's water face (no port: no-op)."""
-    port = config.port
-    if port is None:
-        return
-    water_face = port.distance_m + port.thickness_m
-    points_cam = config.pose.to_camera(points_world)
-    bad = points_cam @ port.normal <= water_face
-    if np.any(bad):
-        p = points_cam[bad][0]
-        raise ParameterError(
-            f"{what} reaches the camera side of the port: camera-frame point {np.round(p, 4).tolist()} m has "
-            f"n.X = {p @ port.normal:.4f} m <= {water_face:.4f} m (water face); objects and lights must be in the water"
-        )
-
-
-def check_geometry(config: SceneConfig) -> dict:
-    """Check that the scene is physically possible; return figures for the sidecar.
-
-    Raises
-    ------
-    ParameterError
-        If the port cuts the main-lens aperture, an object or light reaches the camera side of
-        the port's water face, or every captured ray is totally internally reflected.
-
-    Returns
-    -------
-    dict
-        ``tir_fraction`` and ``port_clearance_m`` (None without a port).
-    """
-    port, camera = config.port, config.camera
-    if port is None:
-        return {"tir_fraction": None, "port_clearance_m": None}
-    clearance = port.clearance_m(camera.aperture_radius_m)
-    if clearance <= 0.0:
-        raise ParameterError(
-            f"port.distance_m={port.distance_m!r} with tilt {np.degrees(port.total_tilt_rad):.2f} deg cuts the "
-            f"main-lens aperture (radius {camera.aperture_radius_m:.4g} m)"
-        )
-    rays = camera.captured_rays(_captured_sample(camera))
-    trace = port.trace_from_air(rays.origins_cam[rays.in_aperture], rays.directions_cam[rays.in_aperture])
-    if not np.any(trace.valid):
-        why = "totally internally reflected" if np.any(trace.tir) else "turned away from"
-        raise ParameterError(
-            f"every captured ray is {why} by the port (n_air={port.n_air}, n_glass={port.n_glass}, "
-            f"n_water={port.n_water}, tilt {np.degrees(port.total_tilt_rad):.2f} deg): "
-            f"{int(trace.tir.sum())} TIR, {int(trace.misses.sum())} never reach it"
-        )
+        scene[f"light_{i}"] = _emitter(light, medium=medium)
     for i, obj in enumerate(config.objects):
-        _require_water_side(config, object_sample_points(obj), f"object[{i}] ({type(obj).__name__})")
-    for i, light in enumerate(config.lights):
-        if isinstance(light, PointLight):
-            _require_water_side(config, np.asarray([light.position_m]), f"light[{i}] (point)")
-    return {"tir_fraction": float(np.mean(trace.tir)), "port_clearance_m": float(clearance)}
+        scene[f"object_{i}"] = _shape(obj, mi=mi, config=config, index=i, media=media)
+    return mi.load_dict(scene)

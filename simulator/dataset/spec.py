@@ -4,7 +4,7 @@ A sweep spec has three tables::
 
     [sweep]
     name = "tilt"                     # label of the dataset
-    seed = 7                          # one seed for the whole sweep (integer >= 0)
+    seed = 7                          # one seed for the whole sweep (integer in [0, 2**31))
     scene = "default"                 # base scene: an embedded scene name, or a .toml path
                                       #   relative to this file
     repeats = 1                       # samples per grid point (each with its own seed and draws)
@@ -43,7 +43,7 @@ order (the first key varies slowest), each repeated ``repeats`` times; sample ``
 which is also its render seed, and draws the value of random key ``K`` from
 ``numpy.random.default_rng(SeedSequence([seed, i, crc32(K)]))``, so a key's draws do not depend
 on the other keys. Every sample is built with :func:`simulator.config.parse_scene` and checked
-with :func:`simulator.scene.check_geometry` before anything is rendered.
+with :func:`simulator.geometry.check_geometry` before anything is rendered.
 
 Files a sample's scene reads besides its TOML (mesh files: every path in the scene) are its
 *inputs*: their SHA-256 is part of the sample's hash, so an edited mesh makes another sample.
@@ -75,9 +75,10 @@ from tqdm.auto import tqdm
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.synthesis.warp_map import SynthesisOptions
 from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, positive_int, reject_unknown_keys
+from simulator import seeds
 from simulator.config import SceneConfig, embedded_scenes, parse_scene, scene_files, scenes_dir
 from simulator.dataset.manifest import DigestCache
-from simulator.scene import check_geometry
+from simulator.geometry import check_geometry
 
 __all__ = [
     "DISTRIBUTIONS",
@@ -145,7 +146,7 @@ def sample_seed(sweep_seed: int, index: int) -> int:
     ``numpy.random.SeedSequence([sweep_seed, index]).generate_state(1, uint32)[0] % 2**31``.
     """
     state = np.random.SeedSequence([sweep_seed, index]).generate_state(1, dtype=np.uint32)
-    return int(state[0]) % 2**31
+    return int(state[0]) % seeds.SEED_LIMIT
 
 
 def key_rng(sweep_seed: int, index: int, key: str) -> np.random.Generator:
@@ -297,7 +298,7 @@ class SweepSpec:
     ----------
     name : str
     seed : int
-        Sweep seed, >= 0.
+        Sweep seed, in [0, 2**31) (:func:`simulator.seeds.seed`).
     scene : str
         The base scene as given (embedded name or path relative to ``base_dir``).
     repeats : int
@@ -462,9 +463,7 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     name = sweep["name"]
     if not isinstance(name, str) or not name.strip():
         raise ParameterError(f"sweep.name must be a non-empty string, got {name!r}")
-    seed = sweep["seed"]
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ParameterError(f"sweep.seed must be an integer >= 0, got {seed!r}")
+    seed = seeds.seed("sweep.seed", sweep["seed"])
     scene = sweep["scene"]
     _scene_file("sweep.scene", scene, base)
     repeats = positive_int("sweep.repeats", sweep.get("repeats", 1))
