@@ -50,7 +50,7 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract.errors import ParameterError
-from lfrefract.optics.camera import GRID_TYPES, LightFieldCamera, MicrolensArray
+from lfrefract.optics.camera import GRID_TYPES, LightFieldCamera, MicrolensArray, micro_image_scale
 from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, reject_unknown_keys, require_keys
 
 __all__ = ["LATTICE_MODELS", "LENS_STATUS", "MlaCalibration", "calibrate_mla"]
@@ -260,7 +260,7 @@ class MlaCalibration:
         pixel_pitch_m = positive_float("pixel_pitch_m", pixel_pitch_m)
         lens_to_mla_m = positive_float("lens_to_mla_m", lens_to_mla_m)
         mla_focal_length_m = positive_float("mla_focal_length_m", mla_focal_length_m)
-        scale = (lens_to_mla_m + mla_focal_length_m) / lens_to_mla_m
+        scale = micro_image_scale(lens_to_mla_m, mla_focal_length_m)
         width, height = self.image_size_px
         centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
         offset = (self.origin_px - centre) * pixel_pitch_m / scale

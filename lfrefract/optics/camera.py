@@ -48,6 +48,7 @@ __all__ = [
     "LightFieldCamera",
     "MicrolensArray",
     "SensorGeometry",
+    "micro_image_scale",
 ]
 
 GRID_TYPES = ("hex", "square")
@@ -95,6 +96,17 @@ def image_side_px(name: str, value: object) -> int:
     if out > MAX_IMAGE_SIDE_PX:
         raise ParameterError(f"{name} must be at most {MAX_IMAGE_SIDE_PX} px, got {value!r}")
     return out
+
+
+def micro_image_scale(lens_to_mla_m: float, mla_focal_length_m: float) -> float:
+    """Micro-image centre over microlens centre, image plane: ``(f' + f_mla) / f'``.
+
+    A micro-image centre is the image of the main-lens centre (the exit pupil; the stop is at the
+    thin lens) through the microlens centre, projected onto the sensor ``f_mla`` behind the MLA,
+    which lies ``f'`` behind the main lens (metres both); so it lies this factor further from the
+    axis than the microlens centre.
+    """
+    return (lens_to_mla_m + mla_focal_length_m) / lens_to_mla_m
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -346,13 +358,8 @@ class LightFieldCamera:
 
     @property
     def micro_image_scale(self) -> float:
-        """Micro-image centre over lens centre, image-plane: ``(f' + f_mla) / f'``.
-
-        A micro-image centre is the image of the main-lens centre (the exit pupil; the stop
-        is at the thin lens) through the microlens centre, so it lies this factor further from
-        the axis than the lens centre.
-        """
-        return (self.lens_to_mla_m + self.mla.focal_length_m) / self.lens_to_mla_m
+        """Micro-image centre over lens centre, image plane: :func:`micro_image_scale` of f', f_mla."""
+        return micro_image_scale(self.lens_to_mla_m, self.mla.focal_length_m)
 
     @property
     def micro_image_pitch_px(self) -> float:

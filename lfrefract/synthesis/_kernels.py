@@ -7,12 +7,95 @@ kernel is serial and releases the GIL: the caller runs blocks of output pixels o
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 #: Distances below this (metres) count as this, so a candidate exactly on the necessary ray gets a
 #: finite, dominant weight 1 / D_FLOOR instead of a division by zero.
 D_FLOOR_M = 1e-9
+
+
+class CameraScalars(NamedTuple):
+    """The light-field camera as the candidate search sees it (camera frame, metres; raw pixels)."""
+
+    f_m: float  #: main-lens focal length f
+    f_prime_m: float  #: main lens to MLA distance f'
+    f_mla_m: float  #: microlens focal length (the MLA-sensor gap)
+    pixel_pitch_m: float  #: sensor pixel pitch
+    cu_px: float  #: column of the optical axis on the sensor (pixel centres at integers)
+    cv_px: float  #: row of the optical axis on the sensor
+    usable_radius2_m2: float  #: square of the main-lens radius inside which pixels are used
+    width_px: int  #: raw image width
+    height_px: int  #: raw image height
+
+
+class Lattice(NamedTuple):
+    """The microlens lattice: lens (i, j) is centred at ``off + i a1 + j a2``, image plane, metres."""
+
+    a1x_m: float
+    a1y_m: float
+    a2x_m: float
+    a2y_m: float
+    off_x_m: float
+    off_y_m: float
+
+
+class AirFace(NamedTuple):
+    """The port's air-side face, ``n . x = d_m`` in the camera frame (unit normal ``n``)."""
+
+    nx: float
+    ny: float
+    nz: float
+    d_m: float
+
+
+class SearchQuery(NamedTuple):
+    """What the analytic search looks for and where."""
+
+    lens_offsets: np.ndarray  #: (n_off, 2) int64: candidate lenses relative to the nearest lens
+    k: int  #: captured rays kept per necessary ray
+    window: int  #: half-size of the pixel window searched under each candidate lens
+    lam_m_per_rad: float  #: weight of the angle term of D
+
+
+class NecessaryRays(NamedTuple):
+    """The necessary air rays of one block of samples (camera frame, metres)."""
+
+    points: np.ndarray  #: (n, 3) point on the air-side face (D is measured from it)
+    aim_points: np.ndarray  #: (n, 3) point the candidate pixels are predicted from (= points when covered)
+    dirs: np.ndarray  #: (n, 3) unit direction, outwards
+    usable: np.ndarray  #: (n,) bool: the ray reached the air side and is searched analytically
+    lens0: np.ndarray  #: (n, 2) int64: lattice index of the lens nearest the ray's MLA point
+
+
+def angle_from_chord(chord):
+    """Angle (rad) between unit vectors ``chord`` apart: ``2 arcsin(min(1, chord / 2))``.
+
+    Well conditioned for small angles (unlike ``arccos`` of the dot product). Takes a scalar or
+    an array; :func:`angle_from_chord_jit` is the same expression compiled for the kernels.
+    """
+    return 2.0 * np.arcsin(np.minimum(1.0, 0.5 * chord))
+
+
+def sensor_to_plane_scale(z_m, f_m, f_prime_m, f_mla_m):
+    """How far the chief ray of a pixel moves on the plane ``z = z_m`` per unit sensor offset.
+
+    A pixel ``s`` (image plane, relative to its microlens centre) sends its ray through the
+    microlens centre with slope ``-s / f_mla``; through the thin main lens it meets the plane
+    ``z_m`` in front of it (metres, camera frame) displaced by ``beta * s`` with
+    ``beta = f' / f_mla + z (1 / f_mla - f' / (f_mla f))``, i.e.
+    ``beta = (z f' / f_mla) (1 / z + 1 / f' - 1 / f)``: zero where the plane is conjugate to the
+    MLA through the main lens (thin-lens equation ``1 / z + 1 / f' = 1 / f``), where every pixel of
+    a microlens sees the same point. Scalars or arrays; :func:`sensor_to_plane_scale_jit` is the
+    compiled twin for the kernels.
+    """
+    return f_prime_m / f_mla_m + z_m * (1.0 / f_mla_m - f_prime_m / (f_mla_m * f_m))
+
+
+angle_from_chord_jit = numba.njit(cache=True, inline="always")(angle_from_chord)
+sensor_to_plane_scale_jit = numba.njit(cache=True, inline="always")(sensor_to_plane_scale)
 
 
 @numba.njit(cache=True, inline="always")
@@ -65,30 +148,31 @@ def _sort_row(index, weight, first, stop):
 
 
 @numba.njit(cache=True, nogil=True)
-def select_candidates(
-    points,  # (n_samples, 3) necessary air ray: point on the air-side face (D is measured from it)
-    aim_points,  # (n_samples, 3) point the candidate pixels are predicted from (= points when covered)
-    dirs,  # (n_samples, 3) necessary air ray: unit direction, outwards
-    usable,  # (n_samples,) bool: the necessary ray reached the air side
-    lens0,  # (n_samples, 2) int64: lattice index of the lens nearest the ray's MLA hit
-    lens_offsets,  # (n_off, 2) int64: candidate lenses relative to lens0
-    k,
-    window,
-    lam,
-    cam,  # float64 (f, f', f_mla, pixel pitch, cu, cv, usable aperture radius^2), see synthesis
-    lattice,  # float64 (a1x, a1y, a2x, a2y, off_x, off_y): lens (i, j) at off + i a1 + j a2 (image plane)
-    normal,  # (3,) port normal
-    plane_d,  # air-side face offset
-    width,
-    height,
-    sel_index,  # (n_samples, k) int64, filled: raw flat indices of the k best, -1 where fewer
-    sel_dist,  # (n_samples, k) float64, filled: their D (metres)
-):
+def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
     """For every necessary ray (sample): the k captured rays of smallest D among the candidates of
-    the analytic search, under the total order of :func:`_better`."""
-    f, f_prime, f_mla, pitch, cu, cv, r_ok2 = cam[0], cam[1], cam[2], cam[3], cam[4], cam[5], cam[6]
-    a1x, a1y, a2x, a2y, off_x, off_y = lattice[0], lattice[1], lattice[2], lattice[3], lattice[4], lattice[5]
-    nx, ny, nz = normal[0], normal[1], normal[2]
+    the analytic search, under the total order of :func:`_better`.
+
+    Parameters
+    ----------
+    rays : NecessaryRays
+        The samples; those not ``usable`` are skipped (their rows stay empty).
+    query : SearchQuery
+    camera : CameraScalars
+    lattice : Lattice
+    face : AirFace
+    sel_index : ndarray of int64, shape (n_samples, k)
+        Filled: raw flat indices of the k best, -1 where fewer.
+    sel_dist : ndarray of float64, shape (n_samples, k)
+        Filled: their D, metres (inf where -1).
+    """
+    points, aim_points, dirs, usable, lens0 = rays.points, rays.aim_points, rays.dirs, rays.usable, rays.lens0
+    lens_offsets, k, window, lam = query.lens_offsets, query.k, query.window, query.lam_m_per_rad
+    f, f_prime, f_mla, pitch = camera.f_m, camera.f_prime_m, camera.f_mla_m, camera.pixel_pitch_m
+    cu, cv, r_ok2 = camera.cu_px, camera.cv_px, camera.usable_radius2_m2
+    width, height = camera.width_px, camera.height_px
+    a1x, a1y, a2x, a2y = lattice.a1x_m, lattice.a1y_m, lattice.a2x_m, lattice.a2y_m
+    off_x, off_y = lattice.off_x_m, lattice.off_y_m
+    nx, ny, nz, plane_d = face.nx, face.ny, face.nz, face.d_m
     n_samples = usable.shape[0]
     n_off = lens_offsets.shape[0]
     g = 1.0 + f_prime / f_mla
@@ -111,7 +195,7 @@ def select_candidates(
         px, py, pz = points[s, 0], points[s, 1], points[s, 2]
         qx, qy = aim_points[s, 0], aim_points[s, 1]
         rx, ry, rz = dirs[s, 0], dirs[s, 1], dirs[s, 2]
-        beta = f_prime / f_mla + pz * (1.0 / f_mla - f_prime / (f_mla * f))
+        beta = sensor_to_plane_scale_jit(pz, f, f_prime, f_mla)
         n_cand = 0
         for o in range(n_off):
             ci = lens0[s, 0] + lens_offsets[o, 0]
@@ -145,7 +229,7 @@ def select_candidates(
                 if lam != 0.0:
                     norm = np.sqrt(dx0 * dx0 + dy0 * dy0 + 1.0)
                     ex, ey, ez = dx0 / norm - rx, dy0 / norm - ry, 1.0 / norm - rz
-                    lens_angle = 2.0 * np.arcsin(min(1.0, 0.5 * np.sqrt(ex * ex + ey * ey + ez * ez)))
+                    lens_angle = angle_from_chord_jit(np.sqrt(ex * ex + ey * ey + ez * ez))
             for dv in range(-window, window + 1):
                 v = v0 + dv
                 if v < 0 or v >= height:
@@ -189,8 +273,7 @@ def select_candidates(
                         else:
                             norm = np.sqrt(dx * dx + dy * dy + 1.0)
                             ex, ey, ez = dx / norm - rx, dy / norm - ry, 1.0 / norm - rz
-                            chord = np.sqrt(ex * ex + ey * ey + ez * ez)
-                            dist += lam * 2.0 * np.arcsin(min(1.0, 0.5 * chord))
+                            dist += lam * angle_from_chord_jit(np.sqrt(ex * ex + ey * ey + ez * ez))
                     cand_d[n_cand] = dist
                     cand_i[n_cand] = v * width + u
                     n_cand += 1

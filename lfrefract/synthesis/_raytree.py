@@ -18,13 +18,9 @@ from scipy.spatial import cKDTree
 
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis._kernels import angle_from_chord
 
 __all__ = ["LazyRayTree", "RayTree"]
-
-
-def angle_from_chord(chord: np.ndarray) -> np.ndarray:
-    """Angle (rad) between unit vectors ``chord`` apart (well conditioned for small angles)."""
-    return 2.0 * np.arcsin(np.minimum(1.0, 0.5 * chord))
 
 
 class RayTree:

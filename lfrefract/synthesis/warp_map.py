@@ -48,7 +48,17 @@ from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import LightFieldCamera, image_side_px
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
-from lfrefract.synthesis._kernels import gather, merge_rows, select_candidates
+from lfrefract.synthesis._kernels import (
+    AirFace,
+    CameraScalars,
+    Lattice,
+    NecessaryRays,
+    SearchQuery,
+    gather,
+    merge_rows,
+    select_candidates,
+    sensor_to_plane_scale,
+)
 from lfrefract.synthesis._raytree import LazyRayTree
 from lfrefract.validate import non_negative_float, one_of, positive_int
 
@@ -495,24 +505,41 @@ def mla_points_img(hit: np.ndarray, dirs: np.ndarray, f: float, f_prime: float) 
         return -(hit - (dirs[:, :2] / dirs[:, 2:3] + hit / f) * f_prime)
 
 
-def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> np.ndarray:
+def _camera_scalars(camera: LightFieldCamera, rim_margin_px: float) -> CameraScalars:
+    """The camera's scalars for the candidate search (pixels nearer the rim than ``rim_margin_px``
+    are not used)."""
     cu, cv = camera.sensor.centre_px
-    return np.array(
-        [
-            camera.focal_length_m,
-            camera.lens_to_mla_m,
-            camera.mla.focal_length_m,
-            camera.sensor.pixel_pitch_m,
-            cu,
-            cv,
-            camera.usable_aperture_radius_m(rim_margin_px) ** 2,
-        ]
+    return CameraScalars(
+        f_m=float(camera.focal_length_m),
+        f_prime_m=float(camera.lens_to_mla_m),
+        f_mla_m=float(camera.mla.focal_length_m),
+        pixel_pitch_m=float(camera.sensor.pixel_pitch_m),
+        cu_px=float(cu),
+        cv_px=float(cv),
+        usable_radius2_m2=float(camera.usable_aperture_radius_m(rim_margin_px) ** 2),
+        width_px=int(camera.sensor.width_px),
+        height_px=int(camera.sensor.height_px),
     )
 
 
-def _lattice_scalars(camera: LightFieldCamera) -> np.ndarray:
+def _lattice_scalars(camera: LightFieldCamera) -> Lattice:
+    """The camera's microlens lattice: basis columns a1, a2 and lens (0, 0)'s centre, metres."""
     b = camera.mla.basis_m
-    return np.array([b[0, 0], b[1, 0], b[0, 1], b[1, 1], *camera.mla.offset_m])
+    off_x, off_y = camera.mla.offset_m
+    return Lattice(
+        a1x_m=float(b[0, 0]),
+        a1y_m=float(b[1, 0]),
+        a2x_m=float(b[0, 1]),
+        a2y_m=float(b[1, 1]),
+        off_x_m=float(off_x),
+        off_y_m=float(off_y),
+    )
+
+
+def _air_face(port: FlatPort) -> AirFace:
+    """The port's air-side face: unit normal and distance from the main-lens centre."""
+    n = port.normal
+    return AirFace(nx=float(n[0]), ny=float(n[1]), nz=float(n[2]), d_m=float(port.distance_m))
 
 
 @dataclass(frozen=True)
@@ -534,9 +561,10 @@ class _Search:
     port: FlatPort
     output: PinholeCamera
     options: SynthesisOptions
-    lens_offsets: np.ndarray
-    camera_scalars: np.ndarray
-    lattice_scalars: np.ndarray
+    query: SearchQuery
+    camera_scalars: CameraScalars
+    lattice: Lattice
+    face: AirFace
     tree: LazyRayTree
 
 
@@ -585,7 +613,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
 
     # The analytic search predicts, per lens, the pixel whose chief ray passes P: undefined where
     # the air-side face is conjugate to the MLA (beta = 0: all pixels of a lens see one point).
-    beta = f_prime / camera.mla.focal_length_m + points[:, 2] * (1 - f_prime / f) / camera.mla.focal_length_m
+    beta = sensor_to_plane_scale(points[:, 2], f, f_prime, camera.mla.focal_length_m)
     by_tree = usable & (np.abs(beta) < 1e-9 * f_prime / camera.mla.focal_length_m)
     if options.search == "kdtree" or (options.search == "auto" and f_prime != f):
         by_tree = usable
@@ -598,25 +626,14 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     n = stop - first
     sel_index = np.empty((len(uv), options.k), dtype=np.int64)
     sel_dist = np.empty((len(uv), options.k), dtype=np.float64)
-    select_candidates(
-        np.nan_to_num(points),
-        np.nan_to_num(aim_points),
-        np.nan_to_num(dirs),
-        usable & ~by_tree,
-        lens0,
-        search.lens_offsets,
-        options.k,
-        options.window,
-        options.lambda_m_per_rad,
-        search.camera_scalars,
-        search.lattice_scalars,
-        port.normal,
-        port.distance_m,
-        camera.sensor.width_px,
-        camera.sensor.height_px,
-        sel_index,
-        sel_dist,
+    rays = NecessaryRays(
+        points=np.nan_to_num(points),
+        aim_points=np.nan_to_num(aim_points),
+        dirs=np.nan_to_num(dirs),
+        usable=usable & ~by_tree,
+        lens0=lens0,
     )
+    select_candidates(rays, search.query, search.camera_scalars, search.lattice, search.face, sel_index, sel_dist)
     if np.any(by_tree):
         sel_index[by_tree], sel_dist[by_tree] = search.tree.get().nearest(points[by_tree], dirs[by_tree], options.k)
     capacity = n * s * s * options.k
@@ -681,9 +698,15 @@ def build_warp_map(
         port=port,
         output=output,
         options=options,
-        lens_offsets=_lens_offsets(camera, options.lens_rings),
+        query=SearchQuery(
+            lens_offsets=_lens_offsets(camera, options.lens_rings),
+            k=options.k,
+            window=options.window,
+            lam_m_per_rad=float(options.lambda_m_per_rad),
+        ),
         camera_scalars=_camera_scalars(camera, options.rim_margin_px),
-        lattice_scalars=_lattice_scalars(camera),
+        lattice=_lattice_scalars(camera),
+        face=_air_face(port),
         tree=LazyRayTree(
             camera,
             port,
