@@ -142,7 +142,8 @@ def _experiment(args: argparse.Namespace) -> int:
 
 
 def _rig(args: argparse.Namespace) -> int:
-    from simulator.rig import RigCamera, load_rig, render_rig
+    from simulator.rig import RigCamera, load_rig
+    from simulator.rig_render import render_rig
 
     rig = load_rig(args.rig)
     given = {"spp": args.spp, "seed": args.seed}

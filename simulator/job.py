@@ -11,8 +11,7 @@ import numpy as np
 
 import lfrefract
 from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
-from lfrefract.formats.exr import write_exr
-from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.capture import CaptureTruth, write_capture_files
 from lfrefract.formats.outputs import staged_directory
 from simulator import backend, groundtruth, previews
 from simulator.config import SceneConfig, scene_files
@@ -107,13 +106,14 @@ def render_job(
     progress: bool = True,
     write_previews: bool = True,
 ) -> RenderResult:
-    """Render a scene and its ground truth into ``out_dir``.
+    """Render a scene and its ground truth into ``out_dir``, a capture folder of kind ``lfsim.render``.
 
-    Writes ``raw.exr`` (lenslet image, RGB), ``ideal.exr`` (refraction-free pinhole image, RGB),
-    ``depth.exr`` (camera-frame z of the ideal image's pixel centres, metres, +inf where no
-    surface), ``lenses.npz`` (microlens ground truth), ``meta.json`` (every parameter, the seed,
-    versions) and PNG previews. The directory is assembled in a staging directory and appears
-    only when complete; a bad scene raises before anything is rendered.
+    Writes (:func:`lfrefract.formats.capture.write_capture_files`) ``raw.exr`` (lenslet image, RGB),
+    ``ideal.exr`` (refraction-free pinhole image, RGB), ``depth.exr`` (camera-frame z of the ideal
+    image's pixel centres, metres, +inf where no surface), ``lenses.npz`` (microlens ground truth),
+    ``meta.json`` (every parameter, the seed, versions) and PNG previews. The directory is assembled
+    in a staging directory and appears only when complete; a bad scene raises before anything is
+    rendered.
 
     Parameters
     ----------
@@ -148,26 +148,11 @@ def render_job(
         start = time.perf_counter()
         raw = render_raw(mi, config, glass_free_scene=glass_free, max_band_pixels=max_band_pixels, progress=progress)
         raw_seconds = time.perf_counter() - start
-        write_exr(stage / "raw.exr", raw, role="raw")
         start = time.perf_counter()
         truth = groundtruth.compute(mi, glass_free, config, pinhole, spp=spp, seed=seed, progress=progress)
         ideal_seconds = time.perf_counter() - start
-        write_exr(stage / "ideal.exr", truth.ideal, role="ideal")
-        write_exr(stage / "depth.exr", truth.depth_m, role="depth")
-        np.savez_compressed(stage / "lenses.npz", **truth.lenses)
-        metadata = {
-            "kind": RENDER_KIND,
-            "files": {
-                "raw": "raw.exr",
-                "ideal": "ideal.exr",
-                "depth": "depth.exr",
-                "lenses": "lenses.npz",
-            },
+        extra = {
             "scene": {k: v for k, v in config.to_dict().items() if k not in ("camera", "pose", "port")},
-            "camera": camera.to_dict(),
-            "pose": config.pose.to_dict(),
-            "port": None if config.port is None else config.port.to_dict(),
-            "ideal": pinhole.to_dict(),
             "derived": {
                 "micro_image_pitch_px": camera.micro_image_pitch_px,
                 "micro_image_radius_px": camera.micro_image_radius_px,
@@ -194,7 +179,17 @@ def render_job(
             },
             "units": {"length": "m", "angle": "rad", "depth": "camera-frame z, m; +inf where no surface"},
         }
-        write_json(stage / "meta.json", metadata)
+        metadata = write_capture_files(
+            stage,
+            raw=raw,
+            camera=camera,
+            port=config.port,
+            ideal=pinhole,
+            pose=config.pose,
+            ground_truth=CaptureTruth(ideal=truth.ideal, depth_m=truth.depth_m, lenses=truth.lenses),
+            metadata=extra,
+            kind=RENDER_KIND,
+        )
         if write_previews:
             previews.write_all(stage / "previews", raw=raw, ideal=truth.ideal, depth_m=truth.depth_m, camera=camera)
     return RenderResult(Path(out_dir), raw_seconds, ideal_seconds, metadata)

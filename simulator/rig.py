@@ -15,27 +15,24 @@ wall for every camera: its salinity and temperature set the wall's ``n_water`` (
 also states ``n_water`` must agree, as a scene's ``[port]`` must), and its turbidity fills the
 water of every camera's scene.
 
-``lfsim rig [RIG] --out DIR`` renders every camera into ``DIR/<name>/`` (the files of
-``lfsim render``) and writes ``DIR/meta.json`` with the wall, each camera's pose and port, and the
-stereo ground truth: the pose of every camera relative to the first
-(``X_cam = R X_first + t``).
+This module reads rigs; :mod:`simulator.rig_render` renders them: ``lfsim rig [RIG] --out DIR``
+renders every camera into ``DIR/<name>/`` (the capture folders of ``lfsim render``) and writes
+``DIR/meta.json`` with the wall, each camera's pose and port, and the stereo ground truth: the
+pose of every camera relative to the first (``X_cam = R X_first + t``).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lfrefract import FlatPort, ParameterError, Pose
-from lfrefract.formats.jsonio import write_json
-from lfrefract.formats.outputs import staged_directory
 from lfrefract.validate import as_table, finite_vector, positive_float, reject_unknown_keys, require_keys, text
 from simulator.config import SceneConfig, Water, apply_water_index, parse_scene, read_toml, scenes_dir
 
-__all__ = ["RIG_KIND", "RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig", "render_rig"]
+__all__ = ["RigCamera", "RigConfig", "Wall", "embedded_rigs", "load_rig", "parse_rig"]
 
 _WALL_KEYS = {"normal", "distance_m", "thickness_m", "n_air", "n_glass", "n_water"}
 
@@ -218,64 +215,3 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
     if not p.exists():  # a directory or FIFO is refused by read_toml, by its kind
         raise FileNotFoundError(f"rig file {str(p)!r} does not exist (embedded rigs: {sorted(embedded_rigs())})")
     return parse_rig(read_toml(p, "rig"), base_dir=p.parent, source=str(p))
-
-
-#: Kind of a rig output directory (its manifest and ``meta.json``).
-RIG_KIND = "lfsim.rig"
-
-
-def render_rig(
-    rig: RigConfig,
-    out_dir: str | Path,
-    *,
-    overwrite: bool = False,
-    progress: bool = True,
-    write_previews: bool = True,
-    variant: str | None = None,
-    metadata: dict | None = None,
-) -> Path:
-    """Render every camera of ``rig`` with its ground truth into ``out_dir/<name>/``.
-
-    Writes ``meta.json`` (kind ``lfsim.rig``): the wall, the water (None without ``[water]``),
-    each camera's folder, pose and port, and the stereo ground truth (each camera's rotation and
-    translation relative to the first, and the baseline), plus the plain data of ``metadata`` (the
-    caller's own keys, e.g. what the scene holds). The directory appears only when every camera is
-    rendered; ``overwrite`` replaces only an earlier rig output (:func:`lfrefract.formats.outputs.staged_directory`).
-
-    Returns
-    -------
-    Path
-        ``out_dir``.
-    """
-    from simulator.job import render_job
-
-    out = Path(out_dir)
-    with staged_directory(out, kind=RIG_KIND, overwrite=overwrite) as stage:
-        cameras = {}
-        for index, camera in enumerate(rig.cameras):
-            if progress:
-                print(f"camera {index + 1}/{len(rig.cameras)}: {camera.name}")
-            render_job(
-                camera.scene, stage / camera.name, variant=variant, progress=progress, write_previews=write_previews
-            )
-            rotation, translation = rig.relative_pose(index)
-            cameras[camera.name] = {
-                "folder": camera.name,
-                "pose": camera.scene.pose.to_dict(),
-                "port": camera.scene.port.to_dict(),
-                "relative_to_first": {
-                    "rotation": rotation.tolist(),
-                    "translation_m": translation.tolist(),
-                    "baseline_m": float(np.linalg.norm(translation)),
-                    "angle_deg": math.degrees(math.acos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))),
-                },
-            }
-        meta = {
-            "kind": RIG_KIND,
-            "name": rig.name,
-            "source": rig.source,
-            "wall": rig.wall.to_dict(),
-            "water": None if rig.water is None else rig.water.to_dict(),
-        }
-        write_json(stage / "meta.json", {**meta, "cameras": cameras, **(metadata or {})})
-    return out

@@ -23,21 +23,30 @@ report how many were masked.
 
 Every problem is a :class:`lfrefract.errors.FileFormatError` naming the file and the key (a missing
 key, a value of the wrong type or an impossible value), never a KeyError or a traceback.
+
+:func:`write_capture` is the one writer of capture folders (``lfsim render`` writes its renders
+with it): ``raw.exr``, ``meta.json`` with ``kind``, ``files`` (role -> file name of every image
+it wrote), ``camera``, ``pose``, ``port`` and ``ideal`` (null when not given) followed by the
+caller's own keys, and, for a capture with ground truth (:class:`CaptureTruth`), ``ideal.exr``,
+``depth.exr`` and ``lenses.npz``. :func:`read_capture` reads such a folder (or its raw image);
+:func:`read_ground_truth` its ground truth.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
-from lfrefract.formats.exr import read_exr
+from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.flatport import read_flat_port
-from lfrefract.formats.jsonio import read_json
+from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.formats.outputs import atomic_file, staged_directory
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
@@ -46,14 +55,17 @@ from lfrefract.optics.presets import PRESETS, camera_preset
 from lfrefract.validate import one_of
 
 __all__ = [
+    "CAPTURE_KIND",
     "DEPTH_NAME",
     "IDEAL_NAME",
+    "LENSES_NAME",
     "NONFINITE_POLICIES",
     "RAW_NAME",
     "SIDECAR_NAME",
     "Capture",
     "CaptureParameters",
     "CaptureSidecar",
+    "CaptureTruth",
     "UnrecordedValues",
     "camera_from_option",
     "capture_parameters",
@@ -61,7 +73,10 @@ __all__ = [
     "mla_from_file",
     "port_from_file",
     "read_capture",
+    "read_ground_truth",
     "read_sidecar",
+    "write_capture",
+    "write_capture_files",
 ]
 
 #: Name of a capture's sidecar, beside its raw image.
@@ -75,6 +90,17 @@ IDEAL_NAME = "ideal.exr"
 
 #: Name of a rendered capture's depth map along the ideal image's rays (EXR role ``"depth"``; ground truth).
 DEPTH_NAME = "depth.exr"
+
+#: Name of a rendered capture's microlens ground truth (NumPy ``.npz``: ``lens_index``, ``lens_centre_m``,
+#: ``micro_image_centre_px``).
+LENSES_NAME = "lenses.npz"
+
+#: Kind of a capture folder written by :func:`write_capture` unless the caller names another
+#: (``lfsim render`` writes ``"lfsim.render"``).
+CAPTURE_KIND = "lfrefract.capture"
+
+#: Keys of a capture's sidecar that :func:`write_capture` writes itself (``metadata`` may not hold them).
+_SIDECAR_KEYS = ("kind", "files", "camera", "pose", "port", "ideal")
 
 #: What :func:`read_capture` does with NaN, infinite and negative raw values.
 NONFINITE_POLICIES = ("refuse", "mask")
@@ -384,6 +410,8 @@ def capture_parameters(
     if port is not None and not isinstance(port, FlatPort):
         raise ParameterError(f"port must be a FlatPort, got {port!r}")
     raw_path = Path(raw_path)
+    if raw_path.is_dir():  # a capture folder: its raw image
+        raw_path = raw_path / RAW_NAME
     sidecar_path = raw_path.parent / SIDECAR_NAME
     if sidecar_path.exists() and not sidecar_path.is_file():
         raise FileFormatError(f"{str(sidecar_path)!r} (the sidecar beside {str(raw_path)!r}) is not a file")
@@ -432,7 +460,8 @@ def read_capture(
     Parameters
     ----------
     raw_path : path-like
-        The raw lenslet image (OpenEXR, float, (H, W) or (H, W, 3)).
+        The raw lenslet image (OpenEXR, float, (H, W) or (H, W, 3)), or a capture folder (its
+        ``raw.exr``).
     camera : LightFieldCamera, optional
         The camera, replacing the sidecar's (needed when there is no sidecar, or it has no camera).
     port : FlatPort, optional
@@ -571,3 +600,282 @@ def mask_warp_map(warp, recorded: np.ndarray | None):
     return dataclasses.replace(
         warp, indptr=indptr, indices=warp.indices[keep], weights=weights, coverage=coverage, meta=meta
     )
+
+
+# =============================================================================== writing
+@dataclass(frozen=True, kw_only=True, eq=False)
+class CaptureTruth:
+    """The ground truth of a rendered capture, written beside its raw image (:func:`write_capture`).
+
+    Parameters
+    ----------
+    ideal : ndarray, float, shape (h, w, 3) or (h, w)
+        The ideal refraction-free image, of the ``ideal`` pinhole's geometry (radiance in the water).
+    depth_m : ndarray, float, shape (h, w)
+        Camera-frame z of the ideal image's pixel centres, metres; +inf where no surface.
+    lenses : mapping of str to ndarray, optional
+        Microlens ground truth (``lens_index`` (M, 2), ``lens_centre_m`` (M, 2), ``micro_image_centre_px``
+        (M, 2)), stored as ``lenses.npz``; None writes no such file.
+
+    Raises
+    ------
+    ParameterError
+        If an image is not real-valued of those shapes, or the two disagree in size.
+    """
+
+    ideal: np.ndarray
+    depth_m: np.ndarray
+    lenses: Mapping[str, np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        ideal, depth = np.asarray(self.ideal), np.asarray(self.depth_m)
+        if ideal.ndim not in (2, 3) or (ideal.ndim == 3 and ideal.shape[2] != 3) or not _real(ideal):
+            raise ParameterError(
+                f"ground truth ideal must be a real (h, w) or (h, w, 3) image, got {ideal.dtype} {ideal.shape}"
+            )
+        if depth.ndim != 2 or not _real(depth):
+            raise ParameterError(f"ground truth depth_m must be a real (h, w) image, got {depth.dtype} {depth.shape}")
+        if depth.shape != ideal.shape[:2]:
+            raise ParameterError(
+                f"ground truth depth_m is {depth.shape[1]} x {depth.shape[0]} px, its ideal image "
+                f"{ideal.shape[1]} x {ideal.shape[0]} px: they must be of one size"
+            )
+        if self.lenses is not None and (
+            not isinstance(self.lenses, Mapping) or not all(isinstance(k, str) and k for k in self.lenses)
+        ):
+            raise ParameterError(
+                f"ground truth lenses must be a mapping of names to arrays, got {type(self.lenses).__name__}"
+            )
+
+
+def _real(image: np.ndarray) -> bool:
+    return bool(np.issubdtype(image.dtype, np.floating) or np.issubdtype(image.dtype, np.integer))
+
+
+def write_capture_files(
+    folder: str | os.PathLike,
+    *,
+    raw: np.ndarray,
+    camera: LightFieldCamera,
+    port: FlatPort | None = None,
+    ideal: PinholeCamera | None = None,
+    pose: Pose | None = None,
+    ground_truth: CaptureTruth | None = None,
+    metadata: Mapping | None = None,
+    kind: str = CAPTURE_KIND,
+) -> dict:
+    """Write the files of a capture into ``folder``, an existing directory being assembled (the stage
+    of :func:`lfrefract.formats.outputs.staged_directory`); each file is written atomically.
+
+    :func:`write_capture` is this in a staged output directory; call this one to add a capture's files
+    to an output that holds more (a render's previews, a dataset sample's extras).
+
+    Parameters
+    ----------
+    folder : path-like
+        The directory the files go into (created if missing).
+    raw : ndarray, float, shape (H, W) or (H, W, 3)
+        The raw lenslet image, of the camera's sensor (H = ``camera.sensor.height_px``). NaN,
+        infinite and negative values are written as they are (:func:`read_capture` refuses or masks them).
+    camera : LightFieldCamera
+        The camera it was taken with.
+    port : FlatPort, optional
+        Its port (None: in air, or not known; written as null).
+    ideal : PinholeCamera, optional
+        The refraction-free image geometry; required with ``ground_truth`` (the ideal image's).
+    pose : Pose, optional
+        The camera's pose in the world (camera to world).
+    ground_truth : CaptureTruth, optional
+        Writes ``ideal.exr``, ``depth.exr`` and (with lenses) ``lenses.npz``.
+    metadata : mapping, optional
+        The caller's own keys of the sidecar (plain data), after the capture's; it may not hold
+        ``schema_version``, ``kind``, ``files``, ``camera``, ``pose``, ``port`` or ``ideal``.
+    kind : str
+        The sidecar's ``kind`` (and the output's, with :func:`write_capture`).
+
+    Returns
+    -------
+    dict
+        The sidecar as written (without ``schema_version``).
+
+    Raises
+    ------
+    ParameterError
+        If a value has the wrong type, the raw image does not match the camera's sensor, the ground
+        truth does not match ``ideal`` (or comes without it), or ``metadata`` holds a capture key.
+    """
+    sidecar = _capture_sidecar(
+        raw=raw,
+        camera=camera,
+        port=port,
+        ideal=ideal,
+        pose=pose,
+        ground_truth=ground_truth,
+        metadata=metadata,
+        kind=kind,
+    )
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_exr(folder / RAW_NAME, raw, role="raw")
+    if ground_truth is not None:
+        write_exr(folder / IDEAL_NAME, ground_truth.ideal, role="ideal")
+        write_exr(folder / DEPTH_NAME, ground_truth.depth_m, role="depth")
+        if ground_truth.lenses is not None:
+            with atomic_file(folder / LENSES_NAME) as tmp, tmp.open("wb") as fh:
+                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in ground_truth.lenses.items()})
+    write_json(folder / SIDECAR_NAME, sidecar)
+    return sidecar
+
+
+def _capture_sidecar(*, raw, camera, port, ideal, pose, ground_truth, metadata, kind) -> dict:
+    """The sidecar of :func:`write_capture_files`, every argument checked before anything is written."""
+    if not isinstance(kind, str) or not kind:
+        raise ParameterError(f"kind must be a non-empty string, got {kind!r}")
+    for name, value, expected in (
+        ("camera", camera, LightFieldCamera),
+        ("port", port, FlatPort),
+        ("ideal", ideal, PinholeCamera),
+        ("pose", pose, Pose),
+        ("ground_truth", ground_truth, CaptureTruth),
+    ):
+        if (value is not None or name == "camera") and not isinstance(value, expected):
+            raise ParameterError(
+                f"{name} must be a {expected.__name__}{'' if name == 'camera' else ' or None'}, got {value!r}"
+            )
+    image = np.asarray(raw)
+    if (
+        image.ndim not in (2, 3)
+        or (image.ndim == 3 and image.shape[2] != 3)
+        or not np.issubdtype(image.dtype, np.floating)
+    ):
+        raise ParameterError(f"raw must be a float (H, W) or (H, W, 3) image, got {image.dtype} {image.shape}")
+    sensor = (camera.sensor.height_px, camera.sensor.width_px)
+    if image.shape[:2] != sensor:
+        raise ParameterError(
+            f"raw is {image.shape[1]} x {image.shape[0]} px, but the camera has a {sensor[1]} x {sensor[0]} px sensor"
+        )
+    files = {"raw": RAW_NAME}
+    if ground_truth is not None:
+        if ideal is None:
+            raise ParameterError("ground_truth needs ideal, the PinholeCamera of its ideal image")
+        size = np.asarray(ground_truth.depth_m).shape
+        if size != (ideal.height_px, ideal.width_px):
+            raise ParameterError(
+                f"ground truth images are {size[1]} x {size[0]} px, but ideal is "
+                f"{ideal.width_px} x {ideal.height_px} px"
+            )
+        files.update(ideal=IDEAL_NAME, depth=DEPTH_NAME)
+        if ground_truth.lenses is not None:
+            files["lenses"] = LENSES_NAME
+    extra = dict(metadata or {})
+    clash = sorted(set(extra) & {*_SIDECAR_KEYS, "schema_version"})
+    if clash:
+        raise ParameterError(f"metadata may not set {clash} (the capture's own keys, written here)")
+    return {
+        "kind": kind,
+        "files": files,
+        "camera": camera.to_dict(),
+        "pose": None if pose is None else pose.to_dict(),
+        "port": None if port is None else port.to_dict(),
+        "ideal": None if ideal is None else ideal.to_dict(),
+        **extra,
+    }
+
+
+def write_capture(
+    out_dir: str | os.PathLike,
+    *,
+    raw: np.ndarray,
+    camera: LightFieldCamera,
+    port: FlatPort | None = None,
+    ideal: PinholeCamera | None = None,
+    pose: Pose | None = None,
+    ground_truth: CaptureTruth | None = None,
+    metadata: Mapping | None = None,
+    kind: str = CAPTURE_KIND,
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
+) -> Path:
+    """Write a capture folder: ``raw.exr`` and ``meta.json`` (and its ground truth), assembled in a
+    staging directory that takes the place of ``out_dir`` only when complete
+    (:func:`lfrefract.formats.outputs.staged_directory`).
+
+    :func:`read_capture` reads it back (``read_capture(out_dir)``). See :func:`write_capture_files`
+    for the parameters of the capture.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The folder; must be absent or empty unless ``overwrite``.
+    overwrite : bool
+        Replace an earlier output of the same ``kind`` that holds only the files it wrote.
+    inputs : iterable of path-like
+        Files the caller read: ``out_dir`` may not be one of them nor hold one.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    ParameterError
+        For an invalid argument (before anything is written).
+    FileExistsError
+        If ``out_dir`` may not be written or replaced.
+    """
+    _capture_sidecar(
+        raw=raw,
+        camera=camera,
+        port=port,
+        ideal=ideal,
+        pose=pose,
+        ground_truth=ground_truth,
+        metadata=metadata,
+        kind=kind,
+    )
+    with staged_directory(out_dir, kind=kind, overwrite=overwrite, inputs=inputs) as stage:
+        write_capture_files(
+            stage,
+            raw=raw,
+            camera=camera,
+            port=port,
+            ideal=ideal,
+            pose=pose,
+            ground_truth=ground_truth,
+            metadata=metadata,
+            kind=kind,
+        )
+    return Path(out_dir)
+
+
+def read_ground_truth(folder: str | os.PathLike) -> CaptureTruth:
+    """The ground truth of a rendered capture folder: ``ideal.exr``, ``depth.exr`` and ``lenses.npz``
+    (None when absent).
+
+    Returns
+    -------
+    CaptureTruth
+        ``ideal`` float32 (h, w, 3), ``depth_m`` float32 (h, w).
+
+    Raises
+    ------
+    FileFormatError
+        If an image is missing, not an EXR of its role, or the lens table is not a NumPy archive.
+    """
+    folder = Path(folder)
+    ideal = read_exr(folder / IDEAL_NAME, role="ideal")
+    depth = read_exr(folder / DEPTH_NAME, role="depth")
+    lenses = None
+    if (folder / LENSES_NAME).is_file():
+        try:
+            with np.load(folder / LENSES_NAME, allow_pickle=False) as data:
+                lenses = {k: data[k] for k in data.files}
+        except (OSError, ValueError) as exc:
+            raise FileFormatError(
+                f"{str(folder / LENSES_NAME)!r} is not a NumPy .npz archive of arrays: {exc}"
+            ) from None
+    try:
+        return CaptureTruth(ideal=ideal, depth_m=depth, lenses=lenses)
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(folder)!r}: {exc}") from None

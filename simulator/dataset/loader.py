@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, LENSES_NAME, RAW_NAME, SIDECAR_NAME
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.flatport import read_flat_port
 from lfrefract.formats.jsonio import read_json
@@ -64,19 +65,19 @@ class Sample:
     @property
     def raw(self) -> np.ndarray:
         """Raw lenslet image, float32, shape (H, W, 3) (sensor pixels), radiance in the air."""
-        return read_exr(self.path / "raw.exr", role="raw")
+        return read_exr(self.path / RAW_NAME, role="raw")
 
     @property
     def ideal(self) -> np.ndarray:
         """Ideal refraction-free image, float32, shape (h, w, 3) (the ``ideal`` pinhole of
         :attr:`meta`), radiance in the water."""
-        return read_exr(self.path / "ideal.exr", role="ideal")
+        return read_exr(self.path / IDEAL_NAME, role="ideal")
 
     @property
     def depth_m(self) -> np.ndarray:
         """Camera-frame z of the ideal image's pixel centres, metres, float32, shape (h, w);
         +inf where no surface."""
-        return read_exr(self.path / "depth.exr", role="depth")
+        return read_exr(self.path / DEPTH_NAME, role="depth")
 
     @property
     def refraction_free(self) -> np.ndarray | None:
@@ -92,13 +93,13 @@ class Sample:
     @property
     def lenses(self) -> dict[str, np.ndarray]:
         """Microlens ground truth (``lenses.npz``): lattice index, centres, micro-image centres."""
-        with np.load(self.path / "lenses.npz") as data:
+        with np.load(self.path / LENSES_NAME, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
 
     @property
     def meta(self) -> dict:
         """The render's sidecar (``meta.json``): camera, port, pose, scene, ideal pinhole, versions."""
-        return read_json(self.path / "meta.json")
+        return read_json(self.path / SIDECAR_NAME)
 
     @property
     def port(self) -> FlatPort | None:

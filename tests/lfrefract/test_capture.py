@@ -13,17 +13,27 @@ import pytest
 from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose, camera_preset, virtual_camera_for
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
+    CAPTURE_KIND,
+    DEPTH_NAME,
+    IDEAL_NAME,
+    LENSES_NAME,
+    RAW_NAME,
+    SIDECAR_NAME,
     Capture,
+    CaptureTruth,
     UnrecordedValues,
     camera_from_option,
     capture_parameters,
     mask_warp_map,
     port_from_file,
     read_capture,
+    read_ground_truth,
     read_sidecar,
+    write_capture,
 )
 from lfrefract.formats.exr import write_exr
-from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.formats.outputs import MANIFEST_NAME, output_manifest
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from tests.tolerances import FLOAT32_WEIGHT_SUM
 
@@ -36,7 +46,7 @@ def raw_image(seed: int = 0) -> np.ndarray:
     return (0.4 + 0.2 * np.random.default_rng(seed).random((*SHAPE, 3))).astype(np.float32)
 
 
-def write_capture(folder, raw=None, **meta):
+def capture_folder(folder, raw=None, **meta):
     data = {"kind": "lfsim.render", "camera": TINY.to_dict(), "port": PORT.to_dict(), "scene": {"any": "thing"}}
     data.update(meta)
     write_exr(folder / "raw.exr", raw_image() if raw is None else raw, role="raw")
@@ -48,7 +58,7 @@ def write_capture(folder, raw=None, **meta):
 def test_a_capture_folder_gives_its_checked_parameters(tmp_path):
     ideal = PinholeCamera(focal_px=100.0, cx_px=40.0, cy_px=30.0, width_px=81, height_px=61)
     pose = Pose.from_euler_xyz_deg((0.0, 10.0, 0.0), (0.1, 0.0, 0.0))
-    path = write_capture(tmp_path, ideal=ideal.to_dict(), pose=pose.to_dict())
+    path = capture_folder(tmp_path, ideal=ideal.to_dict(), pose=pose.to_dict())
     capture = read_capture(path)
     assert capture.camera == TINY
     assert capture.port == PORT
@@ -64,7 +74,7 @@ def test_a_capture_folder_gives_its_checked_parameters(tmp_path):
     assert capture.unrecorded == UnrecordedValues()
     assert capture.masked_summary() is None
     # Without ideal and pose: the default output geometry, no pose.
-    bare = read_capture(write_capture(tmp_path / "b", ideal=None))
+    bare = read_capture(capture_folder(tmp_path / "b", ideal=None))
     assert bare.ideal is None
     assert bare.pose is None
     assert bare.output == virtual_camera_for(TINY)
@@ -88,7 +98,7 @@ def test_a_bare_raw_image_needs_a_camera_and_takes_a_given_port(tmp_path):
 
 def test_given_parameters_replace_the_sidecars(tmp_path):
     other = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.0, tilt_y_deg=5.0)
-    path = write_capture(tmp_path, camera=camera_preset("tiny-2x").to_dict())
+    path = capture_folder(tmp_path, camera=camera_preset("tiny-2x").to_dict())
     with pytest.raises(FileFormatError, match=re.escape("is 480 x 360 px, but the camera")):
         read_capture(path)
     capture = read_capture(path, camera=TINY, port=other)
@@ -97,11 +107,11 @@ def test_given_parameters_replace_the_sidecars(tmp_path):
 
 
 def test_parameters_are_checked_before_the_raw_image_is_read(tmp_path):
-    path = write_capture(tmp_path, pose={"rotation": "none"})
+    path = capture_folder(tmp_path, pose={"rotation": "none"})
     path.write_bytes(b"not an exr")
     with pytest.raises(FileFormatError, match=r"key 'pose': pose\.rotation must be a finite 3x3 matrix"):
         capture_parameters(path)
-    write_capture(tmp_path)
+    capture_folder(tmp_path)
     path.write_bytes(b"not an exr")
     assert capture_parameters(path).camera == TINY  # and only read_capture reads the image
     with pytest.raises(FileFormatError, match="is not an OpenEXR file"):
@@ -122,14 +132,14 @@ def test_parameters_are_checked_before_the_raw_image_is_read(tmp_path):
     ],
 )
 def test_every_key_of_the_sidecar_is_checked_naming_file_and_key(tmp_path, meta, message):
-    path = write_capture(tmp_path, **meta)
+    path = capture_folder(tmp_path, **meta)
     for read in (read_capture, capture_parameters, lambda p: read_sidecar(p.parent / "meta.json")):
         with pytest.raises(FileFormatError, match=re.escape(f"{str(tmp_path / 'meta.json')!r}: {message}")):
             read(path)
 
 
 def test_null_port_ideal_and_pose_are_absent(tmp_path):
-    sidecar = read_sidecar(write_capture(tmp_path, port=None, ideal=None, pose=None).parent / "meta.json")
+    sidecar = read_sidecar(capture_folder(tmp_path, port=None, ideal=None, pose=None).parent / "meta.json")
     assert (sidecar.port, sidecar.ideal, sidecar.pose) == (None, None, None)
     with pytest.raises(FileFormatError, match=re.escape("has no key 'camera'")):
         read_sidecar(write_json(tmp_path / "x" / "meta.json", {"port": PORT.to_dict()}))
@@ -174,7 +184,7 @@ def test_unrecorded_values_are_refused_or_masked(tmp_path):
     raw = raw_image()
     raw[10, 20, 1] = np.nan
     raw[30, 40] = -1.0
-    path = write_capture(tmp_path, raw=raw)
+    path = capture_folder(tmp_path, raw=raw)
     message = f"{str(path)!r} has 1 NaN and 3 negative pixel values (in 2 pixels); pass --nonfinite mask"
     with pytest.raises(FileFormatError, match=re.escape(message)):
         read_capture(path)
@@ -264,3 +274,111 @@ def test_port_files_need_a_port_table(tmp_path):
         FileFormatError, match=re.escape("bad.json': key 'port': port.distance_m must be a real number")
     ):
         port_from_file(tmp_path / "bad.json")
+
+
+# =============================================================================== writing
+def truth_for(ideal: PinholeCamera) -> CaptureTruth:
+    rng = np.random.default_rng(3)
+    depth = np.full((ideal.height_px, ideal.width_px), 1.5, dtype=np.float32)
+    depth[0, :4] = np.inf  # no surface there
+    lenses = {"lens_index": np.arange(8, dtype=np.int64).reshape(4, 2), "lens_centre_m": rng.random((4, 2))}
+    return CaptureTruth(ideal=rng.random((*depth.shape, 3)).astype(np.float32), depth_m=depth, lenses=lenses)
+
+
+def test_a_written_capture_reads_back_as_it_was_given(tmp_path):
+    ideal = PinholeCamera(focal_px=90.0, cx_px=20.0, cy_px=15.0, width_px=41, height_px=31)
+    pose = Pose.from_euler_xyz_deg((5.0, 0.0, 0.0), (0.0, 0.1, 0.0))
+    raw, truth = raw_image(1), truth_for(ideal)
+    out = tmp_path / "cap"
+    assert (
+        write_capture(
+            out,
+            raw=raw,
+            camera=TINY,
+            port=PORT,
+            ideal=ideal,
+            pose=pose,
+            ground_truth=truth,
+            metadata={"scene": {"a": 1}},
+        )
+        == out
+    )
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [MANIFEST_NAME, RAW_NAME, IDEAL_NAME, DEPTH_NAME, LENSES_NAME, SIDECAR_NAME]
+    )
+    assert output_manifest(out)["kind"] == CAPTURE_KIND
+    capture = read_capture(out)  # the folder, or its raw image
+    assert capture.raw_path == out / RAW_NAME
+    assert (capture.camera, capture.port, capture.ideal, capture.pose) == (TINY, PORT, ideal, pose)
+    np.testing.assert_array_equal(capture.raw, raw)
+    meta = read_json(out / SIDECAR_NAME)
+    assert list(meta)[:7] == ["schema_version", "kind", "files", "camera", "pose", "port", "ideal"]
+    assert meta["files"] == {"raw": RAW_NAME, "ideal": IDEAL_NAME, "depth": DEPTH_NAME, "lenses": LENSES_NAME}
+    assert meta["scene"] == {"a": 1}
+    back = read_ground_truth(out)
+    np.testing.assert_array_equal(back.ideal, truth.ideal)
+    np.testing.assert_array_equal(back.depth_m, truth.depth_m)  # +inf kept
+    assert sorted(back.lenses) == sorted(truth.lenses)
+    np.testing.assert_array_equal(back.lenses["lens_centre_m"], truth.lenses["lens_centre_m"])
+
+
+def test_a_capture_without_ground_truth_or_port_writes_nulls_and_only_its_raw_image(tmp_path):
+    out = write_capture(tmp_path / "cap", raw=raw_image()[..., 0], camera=TINY, kind="my.capture")
+    assert sorted(p.name for p in out.iterdir()) == sorted([MANIFEST_NAME, RAW_NAME, SIDECAR_NAME])
+    meta = read_json(out / SIDECAR_NAME)
+    assert (meta["kind"], meta["files"], meta["port"], meta["pose"], meta["ideal"]) == (
+        "my.capture",
+        {"raw": RAW_NAME},
+        None,
+        None,
+        None,
+    )
+    capture = read_capture(out / RAW_NAME)
+    assert capture.port is None
+    assert capture.output == virtual_camera_for(TINY)
+    assert capture.channels == 1
+    with pytest.raises(FileFormatError, match=re.escape(repr(str(out / IDEAL_NAME)))):
+        read_ground_truth(out)
+
+
+def test_writing_a_capture_replaces_only_an_earlier_capture_when_told(tmp_path):
+    out = write_capture(tmp_path / "cap", raw=raw_image(0), camera=TINY)
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        write_capture(out, raw=raw_image(1), camera=TINY)
+    np.testing.assert_array_equal(read_capture(out).raw, raw_image(0))
+    with pytest.raises(FileExistsError, match="kind"):
+        write_capture(out, raw=raw_image(1), camera=TINY, kind="other.kind", overwrite=True)
+    write_capture(out, raw=raw_image(1), camera=TINY, overwrite=True)
+    np.testing.assert_array_equal(read_capture(out).raw, raw_image(1))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"raw": np.zeros((3, 4), np.float32)}, "4 x 3 px, but the camera has a"),
+        ({"raw": np.zeros((*SHAPE, 3), np.int32)}, "raw must be a float"),
+        ({"raw": np.zeros((*SHAPE, 4), np.float32)}, "raw must be a float"),
+        ({"camera": "tiny"}, "camera must be a LightFieldCamera"),
+        ({"port": {"distance_m": 0.02}}, "port must be a FlatPort"),
+        ({"metadata": {"camera": {}}}, "metadata may not set ['camera']"),
+        ({"metadata": {"schema_version": 2}}, "metadata may not set ['schema_version']"),
+        ({"ground_truth": "truth"}, "ground_truth needs ideal"),
+        ({"kind": ""}, "kind must be a non-empty string"),
+    ],
+)
+def test_bad_captures_are_refused_before_anything_is_written(tmp_path, change, message):
+    args = {"raw": raw_image(), "camera": TINY, **change}
+    if change.get("ground_truth") == "truth":
+        args["ground_truth"] = truth_for(virtual_camera_for(TINY))
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        write_capture(tmp_path / "cap", **args)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ground_truth_must_match_its_ideal_geometry():
+    ideal = PinholeCamera(focal_px=90.0, cx_px=20.0, cy_px=15.0, width_px=41, height_px=31)
+    with pytest.raises(ParameterError, match="must be of one size"):
+        CaptureTruth(ideal=np.zeros((31, 41, 3), np.float32), depth_m=np.zeros((31, 40), np.float32))
+    other = dataclasses.replace(ideal, width_px=40, cx_px=19.5)
+    with pytest.raises(ParameterError, match="ideal is 40 x 31 px"):
+        write_capture("unused", raw=raw_image(), camera=TINY, ideal=other, ground_truth=truth_for(ideal))
