@@ -24,7 +24,8 @@ from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from lfrefract.synthesis.warp_map import WarpMap, build_warp_map
 from simulator.boards import chessboard_corners_world
 from simulator.config import Chessboard, Placement, read_toml
-from simulator.rig import RigConfig, embedded_rigs, parse_rig, render_rig
+from simulator.rig import RigConfig, embedded_rigs, parse_rig
+from simulator.rig_render import render_rig
 
 __all__ = [
     "BOARD_OFFSETS",
