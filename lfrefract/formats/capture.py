@@ -11,8 +11,9 @@ sidecar, and ignores the others:
 * ``pose`` (optional, may be null): the camera's pose in the world, a table, :meth:`Pose.from_dict`.
 
 A bare raw image (no ``meta.json`` beside it) is a capture too when its camera (and, for a
-refraction-free image, its port) is given: a preset name or a JSON file holding a ``camera`` table
-(:func:`camera_from_option`), and a JSON file holding a ``port`` table (:func:`port_from_file`).
+refraction-free image, its port) is given: a preset name or a camera file, TOML or JSON
+(:func:`camera_from_option`), and a port file, TOML, JSON or the flat-port text
+(:func:`port_from_file`; both formats: :mod:`lfrefract.formats.paramfile`).
 A given camera or port replaces the sidecar's.
 
 Raw values that are NaN, infinite or negative record no radiance. :func:`read_capture` refuses a
@@ -44,9 +45,9 @@ import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import read_exr, write_exr
-from lfrefract.formats.flatport import read_flat_port
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.outputs import atomic_file, staged_directory
+from lfrefract.formats.paramfile import read_camera_file, read_port_file
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
@@ -504,39 +505,40 @@ def _json_key(path: Path, key: str, what: str) -> dict:
 
 
 def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
-    """The camera a ``--camera`` option names: an existing JSON file whose ``camera`` table is read
-    (a render's ``meta.json``, ``lfrefract describe PRESET --json`` output, ``lfrefract calibrate mla``
-    output), else a preset name.
+    """The camera a ``--camera`` option names: an existing camera file
+    (:func:`lfrefract.formats.paramfile.read_camera_file`: TOML with a ``[camera]`` table, or JSON
+    whose ``camera`` table is read, such as a render's ``meta.json``, ``lfrefract describe PRESET
+    --json`` output or ``lfrefract calibrate mla`` output), else a preset name.
 
     Raises
     ------
     FileFormatError
-        If the file is not lfrefract JSON or its ``camera`` is missing or invalid.
+        If the file is not a camera file or its ``camera`` is missing or invalid.
     ParameterError
         If ``value`` is neither a file nor a preset.
     """
     path = Path(value)
     if path.is_file():
-        return _parse(path, "camera", _json_key(path, "camera", "a camera file"), LightFieldCamera.from_dict)
+        return read_camera_file(path)
     if str(value) in PRESETS:
         return camera_preset(str(value))
-    raise ParameterError(f"--camera must be a preset ({', '.join(sorted(PRESETS))}) or a JSON file, got {str(value)!r}")
+    raise ParameterError(
+        f"--camera must be a preset ({', '.join(sorted(PRESETS))}) or a JSON or TOML camera file, got {str(value)!r}"
+    )
 
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:
-    """The port of a file: a ``.txt`` in the flat-port layout of Refractive COLMAP / calibmar (what
-    ``lfrefract calibrate port`` writes beside its JSON, :func:`lfrefract.formats.flatport.read_flat_port`), or a
-    JSON file with a ``port`` table (``lfrefract calibrate port`` output, a render's ``meta.json``).
+    """The port of a port file (:func:`lfrefract.formats.paramfile.read_port_file`): TOML with a
+    ``[port]`` table (by tilt angles or by normal), a ``.txt`` in the flat-port layout of Refractive
+    COLMAP / calibmar (what ``lfrefract calibrate port`` writes beside its JSON), or a JSON file with
+    a ``port`` table (``lfrefract calibrate port`` output, a render's ``meta.json``).
 
     Raises
     ------
     FileFormatError
-        If the file is missing, not of either kind, or its port is missing, null or invalid.
+        If the file is missing, not of any of these kinds, or its port is missing, null or invalid.
     """
-    path = Path(path)
-    if path.suffix.lower() == ".txt":
-        return read_flat_port(path)
-    return _parse(path, "port", _json_key(path, "port", "a port file"), FlatPort.from_dict)
+    return read_port_file(path)
 
 
 def mla_from_file(path: str | os.PathLike):

@@ -1,0 +1,270 @@
+"""Camera and port files: the parameters of your own camera and port, written and read in one place.
+
+A camera file or a port file is one of (the format is chosen by the file's suffix):
+
+* ``.toml``: a ``[camera]`` or ``[port]`` table and an optional ``schema_version = 1``, nothing
+  else (``docs/cli.md``, "Camera and port files", lists every key with its unit and range). A port's
+  orientation is given either by its tilt angles (``tilt_x_deg`` / ``tilt_y_deg``, or the ``_rad``
+  pair) or by its ``normal`` (a 3-vector, camera frame, pointing into the water), exactly one of
+  the two;
+* ``.json``: lfrefract JSON (:func:`lfrefract.formats.jsonio.read_json`) holding a ``camera`` or
+  ``port`` table, e.g. a render's ``meta.json``, ``lfrefract describe PRESET --json`` output,
+  ``lfrefract calibrate mla`` / ``calibrate port`` output; other keys are ignored. A file of any
+  other suffix (but ``.txt`` for ports) is read as JSON too;
+* ``.txt`` (ports only): the one-line flat-port layout of Refractive COLMAP / calibmar
+  (:mod:`lfrefract.formats.flatport`).
+
+The writers (:func:`write_camera_file`, :func:`write_port_file`) write exactly what
+:meth:`LightFieldCamera.to_dict` / :meth:`FlatPort.to_dict` hold (ports in TOML by their tilt
+angles in radians, so the values read back are the ones written, bit for bit), atomically; the
+readers give back an equal camera or port.
+
+Every problem of a file (missing, not a regular file, larger than :data:`MAX_PARAMETER_FILE_BYTES`,
+not UTF-8, not valid TOML / JSON, an unknown or missing key, a value of the wrong type or out of
+range) is a :class:`lfrefract.errors.FileFormatError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.flatport import read_flat_port, write_flat_port
+from lfrefract.formats.jsonio import SCHEMA_VERSION, read_json, write_json, write_text_atomically
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.port import FlatPort
+from lfrefract.validate import finite_vector, regular_file, reject_unknown_keys, require_keys, shown
+
+__all__ = [
+    "CAMERA_FILE_KIND",
+    "CAMERA_SUFFIXES",
+    "MAX_PARAMETER_FILE_BYTES",
+    "PORT_FILE_KIND",
+    "PORT_SUFFIXES",
+    "read_camera_file",
+    "read_port_file",
+    "write_camera_file",
+    "write_port_file",
+]
+
+#: Largest camera or port file read, bytes (a camera file is under 1 KiB; a render's ``meta.json`` a few KiB).
+MAX_PARAMETER_FILE_BYTES = 16 * 2**20
+
+#: Suffixes :func:`write_camera_file` writes.
+CAMERA_SUFFIXES = (".toml", ".json")
+#: Suffixes :func:`write_port_file` writes.
+PORT_SUFFIXES = (".toml", ".json", ".txt")
+
+#: ``kind`` of the JSON camera and port files written here.
+CAMERA_FILE_KIND = "lfrefract.camera"
+PORT_FILE_KIND = "lfrefract.port"
+
+_PORT_SCALARS = ("distance_m", "thickness_m", "n_air", "n_glass", "n_water")
+_DEG_ANGLES = ("tilt_x_deg", "tilt_y_deg")
+_RAD_ANGLES = ("tilt_x_rad", "tilt_y_rad")
+
+
+# =============================================================================== cameras
+def read_camera_file(path: str | os.PathLike) -> LightFieldCamera:
+    """The camera of a camera file (``.toml``, else lfrefract JSON with a ``camera`` table).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, too large, not UTF-8 TOML / JSON, has no ``camera`` table, or a
+        key of it is unknown, missing, of the wrong type or out of range (named with the file).
+    """
+    path = Path(path)
+    table = _toml_table(path, "camera") if _is_toml(path) else _json_table(path, "camera")
+    return _parsed(path, "camera", table, LightFieldCamera.from_dict)
+
+
+def write_camera_file(path: str | os.PathLike, camera: LightFieldCamera) -> Path:
+    """Write ``camera`` as a camera file, atomically: TOML or JSON by the suffix of ``path``.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+        If ``camera`` is not a LightFieldCamera, or the suffix is not one of :data:`CAMERA_SUFFIXES`.
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {shown(camera)}")
+    path = Path(path)
+    suffix = _suffix(path, CAMERA_SUFFIXES, "camera file")
+    if suffix == ".json":
+        return write_json(path, {"kind": CAMERA_FILE_KIND, "camera": camera.to_dict()})
+    header = [
+        f"# lfrefract camera file: {camera.name!r}, a plenoptic 1.0 camera (thin main lens, microlens array, sensor).",
+        "# Lengths in metres, angles in radians; keys, units and ranges: docs/cli.md, 'Camera and port files'.",
+        f"# Derived: micro-image pitch {camera.micro_image_pitch_px:.6g} px, main-lens aperture radius "
+        f"{camera.aperture_radius_m * 1e3:.6g} mm.",
+    ]
+    return _write_toml(path, header, {"schema_version": SCHEMA_VERSION, "camera": camera.to_dict()})
+
+
+# =============================================================================== ports
+def read_port_file(path: str | os.PathLike) -> FlatPort:
+    """The port of a port file: ``.toml``, ``.txt`` (flat-port layout), else lfrefract JSON with a
+    ``port`` table.
+
+    A TOML ``[port]`` table holds ``distance_m`` (required), ``thickness_m``, ``n_air``,
+    ``n_glass``, ``n_water``, and the orientation: either tilt angles (``tilt_x_deg`` /
+    ``tilt_y_deg`` or ``tilt_x_rad`` / ``tilt_y_rad``; one absent is 0) or ``normal``, not both.
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, too large, not of its format, has no ``port`` table, gives both
+        or neither of angles and normal, or a key is unknown, of the wrong type or out of range.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".txt":
+        _check_size(path)
+        return read_flat_port(path)
+    if not _is_toml(path):
+        return _parsed(path, "port", _json_table(path, "port"), FlatPort.from_dict)
+    table = dict(_toml_table(path, "port"))
+    angles = sorted(k for k in table if k in _DEG_ANGLES + _RAD_ANGLES)
+    if angles and "normal" in table:
+        raise FileFormatError(
+            f"{str(path)!r}: key 'port' gives its orientation twice, by {angles} and by 'normal': keep one of the two"
+        )
+    if not angles and "normal" not in table:
+        raise FileFormatError(
+            f"{str(path)!r}: key 'port' gives no orientation: add 'tilt_x_deg' and 'tilt_y_deg' (degrees) or "
+            "'normal' (a 3-vector, camera frame, into the water)"
+        )
+    if angles:
+        return _parsed(path, "port", table, _port_from_angles)
+    return _parsed(path, "port", table, _port_from_normal)
+
+
+def _port_from_angles(table: dict) -> FlatPort:
+    reject_unknown_keys("port", table, {*_PORT_SCALARS, *_DEG_ANGLES, *_RAD_ANGLES})
+    return FlatPort.from_dict(table)
+
+
+def _port_from_normal(table: dict) -> FlatPort:
+    reject_unknown_keys("port", table, {*_PORT_SCALARS, "normal"})
+    require_keys("port", table, {"distance_m"})
+    normal = np.asarray(finite_vector("port.normal", table.pop("normal"), 3))
+    return FlatPort.from_normal(normal, **table)
+
+
+def write_port_file(path: str | os.PathLike, port: FlatPort) -> Path:
+    """Write ``port`` as a port file, atomically: TOML, JSON or the flat-port text by the suffix of ``path``.
+
+    TOML gives the orientation by the tilt angles in radians (read back bit for bit); a comment
+    gives them in degrees, with the normal and the total tilt.
+
+    Raises
+    ------
+    ParameterError
+        If ``port`` is not a FlatPort, or the suffix is not one of :data:`PORT_SUFFIXES`.
+    """
+    if not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort, got {shown(port)}")
+    path = Path(path)
+    suffix = _suffix(path, PORT_SUFFIXES, "port file")
+    if suffix == ".txt":
+        return write_flat_port(path, port)
+    if suffix == ".json":
+        return write_json(path, {"kind": PORT_FILE_KIND, "port": port.to_dict()})
+    data = {k: v for k, v in port.to_dict().items() if k in (*_PORT_SCALARS, *_RAD_ANGLES)}
+    normal = ", ".join(f"{v:.9g}" for v in port.normal)
+    header = [
+        "# lfrefract port file: a flat port (glass slab between air and water), camera frame (OpenCV axes).",
+        "# Lengths in metres, angles in radians; keys, units and ranges: docs/cli.md, 'Camera and port files'.",
+        f"# Tilt: x {math.degrees(port.tilt_x_rad):.9g} deg, y {math.degrees(port.tilt_y_rad):.9g} deg "
+        f"(total {math.degrees(port.total_tilt_rad):.9g} deg); normal [{normal}].",
+    ]
+    return _write_toml(path, header, {"schema_version": SCHEMA_VERSION, "port": data})
+
+
+# =============================================================================== common
+def _is_toml(path: Path) -> bool:
+    return path.suffix.lower() == ".toml"
+
+
+def _suffix(path: Path, allowed: tuple[str, ...], what: str) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in allowed:
+        raise ParameterError(f"a {what} must end in {', '.join(allowed)} (the format), got {str(path)!r}")
+    return suffix
+
+
+def _write_toml(path: Path, header: list[str], data: dict) -> Path:
+    return write_text_atomically(path, "\n".join(header) + "\n\n" + tomli_w.dumps(data))
+
+
+def _check_size(path: Path) -> None:
+    """Refuse a path that is not a regular file of at most :data:`MAX_PARAMETER_FILE_BYTES` (by its metadata)."""
+    try:
+        regular_file("parameter file", path, max_bytes=MAX_PARAMETER_FILE_BYTES)
+    except ParameterError as exc:
+        if not path.exists():
+            raise FileFormatError(f"no such file: {str(path)!r}") from None
+        raise FileFormatError(str(exc)) from None
+
+
+def _toml_table(path: Path, key: str) -> dict:
+    """The ``key`` table of the TOML camera or port file ``path``, its top level checked."""
+    _check_size(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{str(path)!r} is not UTF-8 text (TOML files must be UTF-8; byte {exc.start}: {exc.reason})"
+        ) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FileFormatError(f"{str(path)!r} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise FileFormatError(f"{str(path)!r} is nested too deeply to be an lfrefract TOML file") from None
+    unknown = sorted(set(data) - {"schema_version", key})
+    if unknown:
+        raise FileFormatError(
+            f"{str(path)!r} has unknown top-level keys {unknown} (a {key} file holds a [{key}] table and "
+            "schema_version only)"
+        )
+    version = data.get("schema_version", SCHEMA_VERSION)
+    if isinstance(version, bool) or version != SCHEMA_VERSION:
+        raise FileFormatError(
+            f"{str(path)!r}: key 'schema_version' is {shown(version)}, this lfrefract reads {SCHEMA_VERSION}"
+        )
+    if key not in data:
+        raise FileFormatError(f"{str(path)!r} has no key {key!r} (a [{key}] table): it is not a {key} file")
+    if not isinstance(data[key], dict):
+        raise FileFormatError(f"{str(path)!r}: key {key!r} must be a table ([{key}]), got {shown(data[key])}")
+    return data[key]
+
+
+def _json_table(path: Path, key: str) -> dict:
+    """The ``key`` table of the lfrefract JSON file ``path``."""
+    _check_size(path)
+    data = read_json(path)
+    if key not in data:
+        raise FileFormatError(f"{str(path)!r} has no key {key!r}: it is not a {key} file")
+    value = data[key]
+    if not isinstance(value, dict):
+        raise FileFormatError(f"{str(path)!r}: key {key!r} must be a table (a JSON object), got {shown(value)}")
+    return value
+
+
+def _parsed(path: Path, key: str, table: dict, parser):
+    """``parser(table)``, its ParameterError a FileFormatError naming the file and the key."""
+    try:
+        return parser(table)
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r}: key {key!r}: {exc}") from None
