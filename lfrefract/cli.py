@@ -1,7 +1,7 @@
 """``lfrefract``: the core's command line, working on files and presets (no renderer).
 
     lfrefract describe (PRESET | META.json) [--json]
-    lfrefract synth RAW.exr --out OUT.exr [--k 32] [--supersample 2] [--lambda 0.3] [--map-cache DIR]
+    lfrefract synth RAW.exr --out OUT.exr [--k K] [--supersample S] [--lambda L] [--map-cache DIR]
                     [--camera PRESET|FILE] [--port PORT.json] [--mla MLA.json] [--nonfinite refuse|mask] [--overwrite]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full] [--camera PRESET|FILE] [--nonfinite refuse|mask]
                     [--overwrite]
@@ -16,7 +16,9 @@
 Every command refuses an existing output unless ``--overwrite`` is given, and then replaces only an
 output of the same kind (docs/conventions.md, "Outputs and --overwrite"); no output may be one of
 the command's inputs (the raw image, the ``meta.json`` beside it, a ``--camera``, ``--port`` or
-``--mla`` file).
+``--mla`` file). ``lfrefract COMMAND --help`` shows every option with its default (taken from the
+code it configures: :class:`SynthesisOptions`, :func:`naive_view`, ...); ``lfrefract --version``
+the version; ``python -m lfrefract`` is the same command line.
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
@@ -47,11 +49,16 @@ memory exceeds the memory available are refused before anything is allocated.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import inspect
 import json
 import math
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +67,7 @@ from lfrefract import (
     FlatPort,
     LightFieldCamera,
     ParameterError,
+    __version__,
     camera_preset,
     virtual_camera_for,
 )
@@ -87,13 +95,16 @@ from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
 from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.methods import ConventionalView
-from lfrefract.synthesis.views import naive_view, subaperture_stack, view_stack_bytes
+from lfrefract.optics.camera import GRID_TYPES
+from lfrefract.synthesis.views import VIEW_KINDS, naive_view, subaperture_stack, view_stack_bytes
 from lfrefract.synthesis.warp_map import (
     BLOCK_PIXELS,
+    PAPER_K,
     SEARCH_METHODS,
     SynthesisOptions,
     WarpMap,
     build_warp_map,
+    uses_kdtree,
     warp_map_key,
 )
 
@@ -103,10 +114,16 @@ MLA_KIND = "lfrefract.calibrate.mla"
 PORT_KIND = "lfrefract.calibrate.port"
 
 __all__ = [
+    "CALIBRATE_COMMANDS",
+    "COMMANDS",
+    "SYNTHESIS_DEFAULTS",
+    "Command",
+    "build_parser",
     "calibrate_approx_command",
     "calibrate_mla_command",
     "calibrate_port_command",
     "describe",
+    "describe_command",
     "main",
     "naive",
     "synth",
@@ -210,11 +227,7 @@ def synth(args: argparse.Namespace) -> int:
             channels=capture.channels,
             supersample=options.supersample,
             k=options.k,
-            kdtree=building
-            and (
-                options.search == "kdtree"
-                or (options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m)
-            ),
+            kdtree=building and uses_kdtree(camera, options),
             workers=available_cpus() if building else 0,
             block_pixels=BLOCK_PIXELS,
         ),
@@ -468,6 +481,48 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def describe_command(args: argparse.Namespace) -> int:
+    """``lfrefract describe``: a preset's or a ``meta.json``'s camera (and port), as text or JSON."""
+    if args.source in PRESETS:
+        info = describe(camera_preset(args.source))
+    else:
+        sidecar = read_sidecar(args.source)
+        info = describe(sidecar.camera, sidecar.port)
+    if args.json:
+        # A camera file: `lfrefract describe PRESET --json > CAMERA.json` is a --camera of the other commands.
+        print(json.dumps({"schema_version": SCHEMA_VERSION, "kind": "lfrefract.describe", **info}, indent=2))
+        return 0
+    for key, value in info.items():
+        if isinstance(value, dict):
+            print(f"{key}:")
+            for k, v in value.items():
+                print(f"  {k}: {v}")
+        else:
+            print(f"{key}: {value}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- the parser
+#: Defaults of the synthesis options, from :class:`SynthesisOptions` itself (``synth --k`` etc.).
+SYNTHESIS_DEFAULTS = {f.name: f.default for f in dataclasses.fields(SynthesisOptions)}
+
+
+def _default_of(function: Callable, parameter: str) -> Any:
+    """The default value of ``function``'s keyword ``parameter`` (so the CLI cannot drift from it)."""
+    return inspect.signature(function).parameters[parameter].default
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default after its help, unless it has none (None, a flag) or the help
+    already says what it is."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text or action.default is None or isinstance(action.default, bool):
+            return text
+        return super()._get_help_string(action)
+
+
 def _camera_option(
     parser: argparse.ArgumentParser, default: str = "(default: the meta.json beside each raw image)"
 ) -> None:
@@ -484,125 +539,199 @@ def _capture_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--nonfinite",
         choices=NONFINITE_POLICIES,
-        default="refuse",
-        help="raw images with NaN, infinite or negative values: refuse them (default), or mask those pixels "
-        "as unrecorded (no weight in the output; the output says how many)",
+        default=NONFINITE_POLICIES[0],
+        help=f"raw images with NaN, infinite or negative values: {NONFINITE_POLICIES[0]} them (default), or "
+        "mask those pixels as unrecorded (no weight in the output; the output says how many)",
     )
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
-    parser = argparse.ArgumentParser(prog="lfrefract", description="Refraction-free light-field imaging (core).")
-    sub = parser.add_subparsers(dest="command", required=True)
-    desc = sub.add_parser("describe", help="derived optics of a preset camera or a render's meta.json")
-    desc.add_argument("source", help=f"a preset ({', '.join(sorted(PRESETS))}) or a meta.json file")
-    desc.add_argument("--json", action="store_true", help="print JSON")
-    syn = sub.add_parser("synth", help="refraction-free image of a raw capture (meta.json beside it)")
-    syn.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
-    syn.add_argument("--out", required=True, help="output EXR")
-    syn.add_argument("--k", type=int, default=32, help="captured rays averaged per necessary ray")
-    syn.add_argument("--supersample", type=int, default=2, help="necessary rays per pixel along each axis")
-    syn.add_argument("--lambda", dest="lam", type=float, default=0.3, help="angle weight of D, metres per radian")
-    syn.add_argument("--search", choices=SEARCH_METHODS, default="auto", help="candidate search (default: auto)")
-    syn.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
-    syn.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
-    syn.add_argument(
+def _describe_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("source", help=f"a preset ({', '.join(sorted(PRESETS))}) or a meta.json file")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _synth_arguments(parser: argparse.ArgumentParser) -> None:
+    defaults = SYNTHESIS_DEFAULTS
+    parser.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
+    parser.add_argument("--out", required=True, help="output EXR")
+    parser.add_argument(
+        "--k",
+        type=int,
+        default=defaults["k"],
+        help=f"captured rays averaged per necessary ray; {defaults['k']} scored best on the tiny, f01 and illum "
+        f"cameras, the paper used {PAPER_K} (docs/synthesis.md)",
+    )
+    parser.add_argument(
+        "--supersample", type=int, default=defaults["supersample"], help="necessary rays per pixel along each axis"
+    )
+    parser.add_argument(
+        "--lambda",
+        dest="lam",
+        type=float,
+        default=defaults["lambda_m_per_rad"],
+        help="angle weight of D, metres per radian",
+    )
+    parser.add_argument("--search", choices=SEARCH_METHODS, default=defaults["search"], help="candidate search")
+    parser.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
+    parser.add_argument(
         "--port",
         help="port file: PORT.json or the flat-port PORT.txt of `lfrefract calibrate port` (default: the capture's "
         "meta.json)",
     )
-    syn.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
-    syn.add_argument("--overwrite", action="store_true", help="replace an earlier synth output of the same name")
-    cal = sub.add_parser("calibrate", help="estimate the MLA, the port or the approximation baseline")
-    cal_sub = cal.add_subparsers(dest="target", required=True)
-    cal_mla = cal_sub.add_parser("mla", help="microlens lattice and micro-image centres from a white image")
-    cal_mla.add_argument("white", help="white image (EXR)")
-    cal_mla.add_argument("--out", required=True, help="output JSON")
-    cal_mla.add_argument("--grid", choices=["hex", "square"], help="lattice type (default: detected)")
-    _camera_option(cal_mla, "(default: the meta.json beside the white image, if any: its calibrated camera is written)")
-    cal_mla.add_argument("--overwrite", action="store_true", help="replace an earlier MLA calibration in --out")
-    for target, what in (("port", "port normal and distance"), ("approx", "pinhole + distortion at one depth")):
-        board = cal_sub.add_parser(target, help=f"{what} from underwater chessboard captures")
-        board.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
-        board.add_argument(
-            "--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board"
-        )
-        board.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
-        board.add_argument("--out", required=True, help="output JSON")
-        board.add_argument("--overwrite", action="store_true", help=f"replace an earlier {target} calibration in --out")
-        _camera_option(board)
-    cal_port = cal_sub.choices["port"]
-    cal_port.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
-    cal_port.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
-    cal_port.add_argument("--n-water", type=float, help="water index (default: meta.json)")
-    cal_port.add_argument(
+    parser.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier synth output of the same name")
+    _capture_options(parser)
+
+
+def _naive_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
+    parser.add_argument("--out", required=True, help="output EXR")
+    parser.add_argument(
+        "--kind", choices=VIEW_KINDS, default=_default_of(naive_view, "kind"), help="which view (see naive_view)"
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier naive view of this kind in --out")
+    _capture_options(parser)
+
+
+def _views_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--grid", type=int, default=_default_of(subaperture_stack, "grid"), help="views per row and column, odd >= 3"
+    )
+    parser.add_argument(
+        "--spacing-px", type=float, help="sensor offset between neighbouring views (default: the largest that fits)"
+    )
+    parser.add_argument(
+        "--format",
+        choices=VIEW_STACK_FORMATS,
+        default=_default_of(write_view_stack, "image_format"),
+        help="view images",
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier view stack in --out")
+    _capture_options(parser)
+
+
+def _calibrate_mla_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("white", help="white image (EXR)")
+    parser.add_argument("--out", required=True, help="output JSON")
+    parser.add_argument("--grid", choices=GRID_TYPES, help="lattice type (default: detected)")
+    _camera_option(parser, "(default: the meta.json beside the white image, if any: its calibrated camera is written)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier MLA calibration in --out")
+
+
+def _board_arguments(parser: argparse.ArgumentParser, target: str) -> None:
+    parser.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
+    parser.add_argument("--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board")
+    parser.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
+    parser.add_argument("--out", required=True, help="output JSON")
+    parser.add_argument("--overwrite", action="store_true", help=f"replace an earlier {target} calibration in --out")
+    _camera_option(parser)
+
+
+def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
+    _board_arguments(parser, "port")
+    parser.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
+    parser.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
+    parser.add_argument("--n-water", type=float, help="water index (default: meta.json)")
+    corners = _default_of(board_view_from_light_field, "method")
+    parser.add_argument(
         "--corners",
         choices=CORNER_METHODS,
-        default="light-field",
-        help="locate corners on every raw pixel around them (default), or in sub-aperture views",
+        default=corners,
+        help=f"locate corners on every raw pixel around them ({corners}, the default), or in sub-aperture views",
     )
-    cal_port.add_argument(
+    parser.add_argument(
         "--subaperture-offset-px",
         type=float,
         default=0.0,
-        help="with --corners views: also the four sub-aperture views this far from the micro-image centres",
+        help="with --corners views: also the four sub-aperture views this far from the micro-image centres "
+        "(0: the central view only)",
     )
-    nv = sub.add_parser("naive", help="conventional view with no refraction handling")
-    nv.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
-    nv.add_argument("--out", required=True, help="output EXR")
-    nv.add_argument("--kind", choices=["central", "full"], default="central")
-    nv.add_argument("--overwrite", action="store_true", help="replace an earlier naive view of this kind in --out")
-    _capture_options(nv)
-    vw = sub.add_parser("views", help="grid of sub-aperture views in the HCI 4D light field benchmark layout")
-    vw.add_argument("raw", help="raw lenslet image (EXR) with meta.json in its directory")
-    vw.add_argument("--out", required=True, help="output directory")
-    vw.add_argument("--grid", type=int, default=9, help="views per row and column, odd >= 3 (default: 9)")
-    vw.add_argument(
-        "--spacing-px", type=float, help="sensor offset between neighbouring views (default: the largest that fits)"
+
+
+def _calibrate_approx_arguments(parser: argparse.ArgumentParser) -> None:
+    _board_arguments(parser, "approx")
+
+
+@dataclass(frozen=True)
+class Command:
+    """One ``lfrefract`` command: what runs it, what it takes, and its one-line help."""
+
+    handler: Callable[[argparse.Namespace], int]  #: runs the command; returns the exit status
+    arguments: Callable[[argparse.ArgumentParser], None]  #: adds the command's arguments to its parser
+    help: str
+
+
+#: The commands, by name; ``calibrate`` dispatches on :data:`CALIBRATE_COMMANDS`.
+COMMANDS: dict[str, Command] = {
+    "describe": Command(describe_command, _describe_arguments, "derived optics of a preset camera or a meta.json"),
+    "synth": Command(synth, _synth_arguments, "refraction-free image of a raw capture (meta.json beside it)"),
+    "naive": Command(naive, _naive_arguments, "conventional view with no refraction handling"),
+    "views": Command(views, _views_arguments, "grid of sub-aperture views in the HCI 4D light field benchmark layout"),
+}
+
+#: ``lfrefract calibrate TARGET``, by target.
+CALIBRATE_COMMANDS: dict[str, Command] = {
+    "mla": Command(
+        calibrate_mla_command, _calibrate_mla_arguments, "microlens lattice and micro-image centres from a white image"
+    ),
+    "port": Command(
+        calibrate_port_command,
+        _calibrate_port_arguments,
+        "port normal and distance from underwater chessboard captures",
+    ),
+    "approx": Command(
+        calibrate_approx_command,
+        _calibrate_approx_arguments,
+        "pinhole + distortion at one depth from chessboard captures",
+    ),
+}
+
+
+def _add_commands(sub: argparse._SubParsersAction, table: dict[str, Command]) -> None:
+    for name, command in table.items():
+        parser = sub.add_parser(
+            name,
+            help=command.help,
+            description=f"{command.help[0].upper()}{command.help[1:]}.",
+            formatter_class=_HelpFormatter,
+        )
+        command.arguments(parser)
+        parser.set_defaults(handler=command.handler)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``lfrefract`` argument parser (every command, defaults shown in ``--help``)."""
+    parser = argparse.ArgumentParser(
+        prog="lfrefract", description="Refraction-free light-field imaging (core).", formatter_class=_HelpFormatter
     )
-    vw.add_argument("--format", choices=VIEW_STACK_FORMATS, default="png", help="view images (default: png)")
-    vw.add_argument("--overwrite", action="store_true", help="replace an earlier view stack in --out")
-    _capture_options(vw)
-    _capture_options(syn)
-    args = parser.parse_args(argv)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_commands(sub, COMMANDS)
+    cal = sub.add_parser(
+        "calibrate", help="estimate the MLA, the port or the approximation baseline", formatter_class=_HelpFormatter
+    )
+    _add_commands(cal.add_subparsers(dest="target", required=True), CALIBRATE_COMMANDS)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    args = build_parser().parse_args(argv)
     with terminate_cleanly("lfrefract"):
         return _run(args)
 
 
 def _run(args: argparse.Namespace) -> int:
     try:
-        if args.command == "synth":
-            return synth(args)
-        if args.command == "naive":
-            return naive(args)
-        if args.command == "views":
-            return views(args)
-        if args.command == "calibrate":
-            return {"mla": calibrate_mla_command, "port": calibrate_port_command, "approx": calibrate_approx_command}[
-                args.target
-            ](args)
-        if args.source in PRESETS:
-            info = describe(camera_preset(args.source))
-        else:
-            sidecar = read_sidecar(args.source)
-            info = describe(sidecar.camera, sidecar.port)
+        return args.handler(args)
     except (ParameterError, FileFormatError, OSError) as exc:
         # OSError: refusals (FileExistsError), missing files, failed writes (read-only, disk full): one
         # line naming the path; every file is written atomically, so earlier outputs are as they were.
         print(f"lfrefract: error: {exc}", file=sys.stderr)
         return 2
-    if args.json:
-        # A camera file: `lfrefract describe PRESET --json > CAMERA.json` is a --camera of the other commands.
-        print(json.dumps({"schema_version": SCHEMA_VERSION, "kind": "lfrefract.describe", **info}, indent=2))
-    else:
-        for key, value in info.items():
-            if isinstance(value, dict):
-                print(f"{key}:")
-                for k, v in value.items():
-                    print(f"  {k}: {v}")
-            else:
-                print(f"{key}: {value}")
-    return 0
 
 
 if __name__ == "__main__":

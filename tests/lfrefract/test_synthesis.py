@@ -154,7 +154,7 @@ def test_save_load_round_trip_and_stale_key(tmp_path, warp):
     for name in ("indptr", "indices", "weights", "gain", "coverage"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(warp, name))
     assert loaded.output == warp.output
-    other = warp_map_key(TINY, PORT, warp.output, SynthesisOptions(k=8))
+    other = warp_map_key(TINY, PORT, warp.output, SynthesisOptions(k=warp.meta["options"]["k"] + 1))
     with pytest.raises(FileFormatError, match="other parameters"):
         WarpMap.load(path, expected_key=other)
     with pytest.raises(FileFormatError, match="no such file"):
