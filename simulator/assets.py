@@ -30,6 +30,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,7 @@ from scipy import ndimage
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.outputs import atomic_file
-from lfrefract.validate import non_negative_float, positive_float, positive_int, regular_file
+from lfrefract.validate import non_negative_float, positive_float, positive_int, regular_file, shown
 from simulator import seeds
 
 __all__ = [
@@ -46,6 +47,7 @@ __all__ = [
     "MAX_MESH_FILE_BYTES",
     "TEXTURE_OCTAVES",
     "WHITE",
+    "ChessboardLayout",
     "bowl_cap_geometry",
     "bowl_mesh",
     "check_mesh_content",
@@ -86,12 +88,10 @@ def _int_at_least(name: str, value: Any, minimum: int) -> int:
 
 
 def _squares(value: Any) -> tuple[int, int]:
-    try:
-        items = tuple(value)
-    except TypeError:
-        raise ParameterError(f"squares must be a (columns, rows) pair of integers, got {value!r}") from None
-    if len(items) != 2:
-        raise ParameterError(f"squares must be a (columns, rows) pair of integers, got {value!r}")
+    """``(columns, rows)``, two integers of at least 2 (the one check of a chessboard's squares)."""
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ParameterError(f"squares must be (columns, rows), a list of 2 integers, got {shown(value)}")
+    items = tuple(value)
     cols = _int_at_least("squares[0] (columns)", items[0], 2)
     rows = _int_at_least("squares[1] (rows)", items[1], 2)
     return cols, rows
@@ -214,15 +214,87 @@ def _margin_texels(margin_squares: float, texels_per_square: int) -> int:
     return int(rounded)
 
 
+@dataclass(frozen=True, kw_only=True)
+class ChessboardLayout:
+    """A chessboard's squares and margin, checked once (on construction).
+
+    Parameters
+    ----------
+    squares : tuple of int
+        ``(columns, rows)`` of squares, each at least 2. OpenCV's ``findChessboardCorners`` needs
+        at least 4 per side (pattern size ``(columns - 1, rows - 1)``), and a board with one even
+        and one odd count has no 180-degree ambiguity.
+    margin_squares : float, optional
+        Width of the white margin on every side, in squares (default 1.0; OpenCV's detector
+        needs a white border), at least 0.
+
+    Raises
+    ------
+    ParameterError
+        If ``squares`` is not a pair of integers of at least 2 or the margin is negative or not
+        finite; the message names the key and the value.
+    """
+
+    squares: tuple[int, int]
+    margin_squares: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "squares", _squares(self.squares))
+        object.__setattr__(self, "margin_squares", non_negative_float("margin_squares", self.margin_squares))
+
+    def texture_shape(self, texels_per_square: int) -> tuple[int, int]:
+        """``(H, W)`` of :meth:`texture` at ``texels_per_square``, without building it.
+
+        Raises
+        ------
+        ParameterError
+            If ``texels_per_square`` is not a positive integer or the margin is not a whole
+            number of texels at it.
+        """
+        cols, rows = self.squares
+        tps = positive_int("texels_per_square", texels_per_square)
+        m_tex = _margin_texels(self.margin_squares, tps)
+        return rows * tps + 2 * m_tex, cols * tps + 2 * m_tex
+
+    def texture(self, texels_per_square: int) -> np.ndarray:
+        """The board as a texture (see :func:`chessboard_texture`), float32 (H, W, 3)."""
+        height, width = self.texture_shape(texels_per_square)
+        cols, rows = self.squares
+        tps = int(texels_per_square)
+        m_tex = (width - cols * tps) // 2
+        r = np.arange(height) - m_tex
+        c = np.arange(width) - m_tex
+        inside = ((r >= 0) & (r < rows * tps))[:, None] & ((c >= 0) & (c < cols * tps))[None, :]
+        parity = ((r // tps)[:, None] + (c // tps)[None, :]) % 2 == 0
+        grey = np.where(inside & parity, np.float32(BLACK), np.float32(WHITE)).astype(np.float32)
+        return np.repeat(grey[:, :, None], 3, axis=2)
+
+    def size_m(self, square_size_m: float) -> tuple[float, float]:
+        """``(width_m, height_m)`` of the whole board, margin included, for squares of
+        ``square_size_m`` metres (positive)."""
+        cols, rows = self.squares
+        s = positive_float("square_size_m", square_size_m)
+        return (cols + 2.0 * self.margin_squares) * s, (rows + 2.0 * self.margin_squares) * s
+
+    def inner_corners_m(self, square_size_m: float) -> np.ndarray:
+        """Inner-corner positions (N, 2), metres, in the board's plane frame (see
+        :func:`chessboard_inner_corners`)."""
+        cols, rows = self.squares
+        width, height = self.size_m(square_size_m)
+        s, margin = float(square_size_m), self.margin_squares
+        x = (margin + np.arange(1, cols)) * s - 0.5 * width
+        y = (margin + np.arange(1, rows)) * s - 0.5 * height
+        xx, yy = np.meshgrid(x, y, indexing="xy")
+        return np.stack([xx.ravel(), yy.ravel()], axis=1)
+
+
 def chessboard_texture(*, squares: tuple[int, int], texels_per_square: int, margin_squares: float = 1.0) -> np.ndarray:
     """A black/white chessboard with a white margin, as a texture.
 
     Parameters
     ----------
     squares : tuple of int
-        ``(columns, rows)`` of squares, each at least 2. OpenCV's
-        ``findChessboardCorners`` needs at least 4 per side (pattern size ``(columns - 1,
-        rows - 1)``), and a board with one even and one odd count has no 180-degree ambiguity.
+        ``(columns, rows)`` of squares, each at least 2 (:class:`ChessboardLayout`).
     texels_per_square : int
         Edge length of a square in texels. Square edges fall exactly on texel edges.
     margin_squares : float, optional
@@ -243,29 +315,13 @@ def chessboard_texture(*, squares: tuple[int, int], texels_per_square: int, marg
     ParameterError
         If a parameter is out of range, or the margin is not a whole number of texels.
     """
-    height, width = chessboard_texture_shape(
-        squares=squares, texels_per_square=texels_per_square, margin_squares=margin_squares
-    )
-    cols, rows = _squares(squares)
-    tps = int(texels_per_square)
-    m_tex = (width - cols * tps) // 2
-    r = np.arange(height) - m_tex
-    c = np.arange(width) - m_tex
-    inside = ((r >= 0) & (r < rows * tps))[:, None] & ((c >= 0) & (c < cols * tps))[None, :]
-    parity = ((r // tps)[:, None] + (c // tps)[None, :]) % 2 == 0
-    grey = np.where(inside & parity, np.float32(BLACK), np.float32(WHITE)).astype(np.float32)
-    return np.repeat(grey[:, :, None], 3, axis=2)
+    return ChessboardLayout(squares=squares, margin_squares=margin_squares).texture(texels_per_square)
 
 
 def chessboard_texture_shape(
     *, squares: tuple[int, int], texels_per_square: int, margin_squares: float = 1.0
 ) -> tuple[int, int]:
     """``(H, W)`` of :func:`chessboard_texture`, without building it, with the same checks.
-
-    Parameters
-    ----------
-    squares, texels_per_square, margin_squares
-        As for :func:`chessboard_texture`.
 
     Returns
     -------
@@ -278,11 +334,7 @@ def chessboard_texture_shape(
     ParameterError
         As :func:`chessboard_texture`.
     """
-    cols, rows = _squares(squares)
-    tps = positive_int("texels_per_square", texels_per_square)
-    margin = non_negative_float("margin_squares", margin_squares)
-    m_tex = _margin_texels(margin, tps)
-    return rows * tps + 2 * m_tex, cols * tps + 2 * m_tex
+    return ChessboardLayout(squares=squares, margin_squares=margin_squares).texture_shape(texels_per_square)
 
 
 def chessboard_size_m(
@@ -304,10 +356,7 @@ def chessboard_size_m(
     tuple of float
         ``(width_m, height_m)`` = ``((columns + 2 * margin) * s, (rows + 2 * margin) * s)``.
     """
-    cols, rows = _squares(squares)
-    s = positive_float("square_size_m", square_size_m)
-    margin = non_negative_float("margin_squares", margin_squares)
-    return (cols + 2.0 * margin) * s, (rows + 2.0 * margin) * s
+    return ChessboardLayout(squares=squares, margin_squares=margin_squares).size_m(square_size_m)
 
 
 def chessboard_inner_corners(
@@ -333,14 +382,7 @@ def chessboard_inner_corners(
         x varying fastest, as OpenCV's ``findChessboardCorners`` reports them for pattern size
         ``(columns - 1, rows - 1)`` on an upright board.
     """
-    cols, rows = _squares(squares)
-    s = positive_float("square_size_m", square_size_m)
-    margin = non_negative_float("margin_squares", margin_squares)
-    width, height = chessboard_size_m(squares=(cols, rows), square_size_m=s, margin_squares=margin)
-    x = (margin + np.arange(1, cols)) * s - 0.5 * width
-    y = (margin + np.arange(1, rows)) * s - 0.5 * height
-    xx, yy = np.meshgrid(x, y, indexing="xy")
-    return np.stack([xx.ravel(), yy.ravel()], axis=1)
+    return ChessboardLayout(squares=squares, margin_squares=margin_squares).inner_corners_m(square_size_m)
 
 
 # --------------------------------------------------------------------------------------------

@@ -42,7 +42,6 @@ from lfrefract.methods import CalibrationViews
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.synthesis.views import subaperture_view
-from simulator import assets
 from simulator.backend import load_mitsuba
 from simulator.config import Chessboard, SceneConfig, parse_scene
 from simulator.geometry import check_geometry
@@ -380,9 +379,7 @@ def chessboard_corners_world(board: Chessboard) -> np.ndarray:
         top-left corner, x fastest: OpenCV's order for pattern size ``(columns - 1, rows - 1)`` on an
         upright board). With an identity camera pose (every scene here) these are camera-frame points.
     """
-    local = assets.chessboard_inner_corners(
-        squares=board.squares, square_size_m=board.square_size_m, margin_squares=board.margin_squares
-    )
+    local = board.inner_corners_local_m()
     return board.placement.to_world(np.concatenate([local, np.zeros((len(local), 1))], axis=1))
 
 

@@ -287,36 +287,51 @@ class Chessboard:
     texels_per_square: int = 16
 
     def __post_init__(self) -> None:
-        if isinstance(self.squares, (str, bytes, dict)) or not hasattr(self.squares, "__len__"):
-            raise ParameterError(f"squares must be (columns, rows), a list of 2 integers, got {shown(self.squares)}")
-        # The counts, the margin and the texels (a whole number of them in the margin) as the
-        # texture needs them; the texture and the board within their bounds.
         # A margin wider than the largest texture cannot fit (each margin square is a texel or more).
         bounded_float("margin_squares", self.margin_squares, 0.0, MAX_TEXTURE_PX)
-        kw = {"squares": tuple(self.squares), "margin_squares": self.margin_squares}
-        height, width = assets.chessboard_texture_shape(texels_per_square=self.texels_per_square, **kw)
+        # The counts and the margin, checked once (simulator.assets.ChessboardLayout); then the
+        # texels (a whole number of them in the margin) as the texture needs them, and the
+        # texture and the board within their bounds.
+        layout = assets.ChessboardLayout(squares=self.squares, margin_squares=self.margin_squares)
+        height, width = layout.texture_shape(self.texels_per_square)
         if max(height, width) > MAX_TEXTURE_PX:
             raise ParameterError(
                 f"the chessboard's texture (squares={list(self.squares)} with margin_squares={self.margin_squares!r}, "
                 f"texels_per_square={self.texels_per_square!r}) would be {width} x {height} texels; at most "
                 f"{MAX_TEXTURE_PX} a side"
             )
-        object.__setattr__(self, "squares", tuple(int(n) for n in self.squares))
+        object.__setattr__(self, "squares", layout.squares)
         _size("square_size_m", self.square_size_m)
-        board = assets.chessboard_size_m(square_size_m=self.square_size_m, **kw)
+        board = layout.size_m(self.square_size_m)
         if max(board) > MAX_SIZE_M:
             raise ParameterError(
                 f"the chessboard (squares={list(self.squares)}, margin_squares={self.margin_squares!r}, "
                 f"square_size_m={self.square_size_m!r}) would be {board[0]:g} x {board[1]:g} m; at most "
                 f"{MAX_SIZE_M:g} m a side"
             )
-        object.__setattr__(self, "_board_size_m", board)  # not a field: derived, checked once here
+        # Derived values, not fields (not in the sidecar, not compared): later code trusts them.
+        object.__setattr__(self, "_layout", layout)
+        object.__setattr__(self, "_board_size_m", board)
+
+    @property
+    def layout(self) -> assets.ChessboardLayout:
+        """The board's squares and margin as checked (:class:`simulator.assets.ChessboardLayout`)."""
+        return self._layout
 
     @property
     def board_size_m(self) -> tuple[float, float]:
-        """``(width_m, height_m)`` of the whole board, margin included
-        (:func:`simulator.assets.chessboard_size_m`, computed once when the board is checked)."""
+        """``(width_m, height_m)`` of the whole board, margin included, computed once when the
+        board is checked."""
         return self._board_size_m
+
+    def texture(self) -> np.ndarray:
+        """The board's texture, float32 (H, W, 3) (:func:`simulator.assets.chessboard_texture`)."""
+        return self._layout.texture(self.texels_per_square)
+
+    def inner_corners_local_m(self) -> np.ndarray:
+        """Inner corners (N, 2), metres, in the board's plane (local z = 0), in the order of
+        :func:`simulator.assets.chessboard_inner_corners`."""
+        return self._layout.inner_corners_m(self.square_size_m)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -597,7 +612,8 @@ class Water:
 
 
 def apply_water_index(table: dict, water: Water | None, *, where: str) -> dict:
-    """A copy of a port-like table (``[port]``, a rig's ``[wall]``) with the water's ``n_water``.
+    """A copy of a port-like table (a rig's ``[wall]``, a ``[port]`` without an ``n_water``) with
+    the water's ``n_water``.
 
     The water's index is relative to air; the table's ``n_water`` becomes it times the table's
     ``n_air`` (1 unless stated), so that ``n_water / n_air``, the ratio refraction depends on, is
@@ -653,7 +669,13 @@ LIGHT_TYPES: dict[str, type] = {"point": PointLight, "constant": ConstantLight}
 
 @dataclass(frozen=True, kw_only=True)
 class SceneConfig:
-    """A whole scene: camera, pose, optional port, lights, objects and render settings."""
+    """A whole scene: camera, pose, optional port, lights, objects and render settings.
+
+    With a ``water`` whose salinity and temperature give an index, the port's ``n_water`` must be
+    that index times the port's ``n_air`` to within :data:`N_WATER_TOLERANCE` (the one check of a
+    scene's water index, however the config is built); one within the tolerance is replaced by
+    the computed index.
+    """
 
     camera: LightFieldCamera
     pose: Pose = field(default_factory=Pose)
@@ -695,6 +717,8 @@ class SceneConfig:
                     f"water.temperature_c={water.temperature_c!r}, times port.n_air={self.port.n_air!r}); build "
                     "the port with n_water=water.n_water * n_air"
                 )
+            if self.port.n_water != expected:  # within the tolerance: the computed index, exactly
+                object.__setattr__(self, "port", dataclasses.replace(self.port, n_water=expected))
 
     def with_overrides(self, **changes: Any) -> SceneConfig:
         """A copy with some fields replaced (validated again)."""
@@ -798,6 +822,17 @@ def _camera(table: Any) -> tuple[LightFieldCamera, Pose]:
     return LightFieldCamera.from_dict(table), pose
 
 
+def _port(table: Any, water: Water | None) -> FlatPort:
+    """The ``[port]``; without an ``n_water`` of its own it takes the water's index
+    (:func:`apply_water_index`). A stated one is checked against the water once, by
+    :class:`SceneConfig`, which also replaces one within :data:`N_WATER_TOLERANCE` by the computed
+    index."""
+    table = as_table("[port]", table)
+    if "n_water" not in table:
+        table = apply_water_index(table, water, where="port")
+    return FlatPort.from_dict(table)
+
+
 def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>") -> SceneConfig:
     """Build a :class:`SceneConfig` from parsed TOML data.
 
@@ -825,7 +860,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
         raise ParameterError("scene: missing [camera] table")
     camera, pose = _camera(data["camera"])
     water = Water.from_dict(data["water"]) if "water" in data else None
-    port = FlatPort.from_dict(apply_water_index(data["port"], water, where="port")) if "port" in data else None
+    port = _port(data["port"], water) if "port" in data else None
     render = _build(RenderSettings, data.get("render", {}), "render", base)
     return SceneConfig(
         water=water,

@@ -195,9 +195,7 @@ def _(obj: TexturedPlane, *, mi: ModuleType, config: SceneConfig, index: int, me
 
 @_shape.register
 def _(obj: Chessboard, *, mi: ModuleType, config: SceneConfig, index: int, media: dict) -> dict:
-    tex = assets.chessboard_texture(
-        squares=obj.squares, margin_squares=obj.margin_squares, texels_per_square=obj.texels_per_square
-    )
+    tex = obj.texture()
     return {
         "type": "rectangle",
         "to_world": mi.ScalarTransform4f(_plane_matrix(obj.placement.matrix, *plane_size_m(obj)).tolist()),

@@ -398,7 +398,7 @@ def run_dataset(
                     dataset_dir=str(out),
                     outputs=spec.outputs,
                     synthesis=spec.synthesis,
-                    views=dict(spec.views),
+                    views=spec.views,
                     inputs={path: entry["sha256"] for path, entry in s.inputs.items()},
                     threads=threads_per_worker,
                     variant=variant,

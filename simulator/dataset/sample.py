@@ -20,12 +20,14 @@ from typing import Any
 
 from lfrefract import PinholeCamera
 from lfrefract.errors import FileFormatError
+from lfrefract.formats.capture import RAW_NAME
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.flatport import write_flat_port
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import staged_directory
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
+from simulator.dataset.spec import ViewOptions
 
 __all__ = ["SampleTask", "render_sample"]
 
@@ -58,8 +60,8 @@ class SampleTask:
         Extras among :data:`simulator.dataset.spec.OUTPUTS`.
     synthesis : SynthesisOptions or None
         Options of the refraction-free image.
-    views : dict
-        Options of :func:`lfrefract.synthesis.views.subaperture_stack`.
+    views : ViewOptions
+        Options of the view stack (checked when the spec was parsed).
     inputs : dict
         The files the scene reads (mesh files): absolute path -> SHA-256 (hex) when the sample
         was planned. The render fails if one differs once the scene has been read.
@@ -78,7 +80,7 @@ class SampleTask:
     dataset_dir: str
     outputs: tuple[str, ...] = ()
     synthesis: SynthesisOptions | None = None
-    views: dict = field(default_factory=dict)
+    views: ViewOptions = field(default_factory=lambda: ViewOptions())
     inputs: dict = field(default_factory=dict)
     threads: int | None = None
     variant: str | None = None
@@ -149,12 +151,12 @@ def render_sample(task: SampleTask) -> dict:
         raw = None
         if "refraction_free" in task.outputs:
             t0 = time.perf_counter()
-            raw = read_exr(stage / "raw.exr", role="raw")
+            raw = read_exr(stage / RAW_NAME, role="raw")
             extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task)
             seconds["refraction_free"] = time.perf_counter() - t0
         if "views" in task.outputs:
             t0 = time.perf_counter()
-            raw = read_exr(stage / "raw.exr", role="raw") if raw is None else raw
+            raw = read_exr(stage / RAW_NAME, role="raw") if raw is None else raw
             extras["views"] = _views(stage, config, raw, result.metadata, task)
             seconds["views"] = time.perf_counter() - t0
         write_json(
@@ -223,8 +225,9 @@ def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) 
     from lfrefract.formats.viewstack import write_view_stack
     from lfrefract.synthesis.views import subaperture_stack
 
-    options = dict(task.views)
-    writing = {k: options.pop(k) for k in ("image_format", "white_level") if k in options}
-    stack = subaperture_stack(config.camera, raw, output=PinholeCamera.from_dict(meta["ideal"]), **options)
-    write_view_stack(stage / VIEWS_DIR, stack, metadata={"sample": task.id, "source": "raw.exr"}, **writing)
+    views = task.views
+    output = PinholeCamera.from_dict(meta["ideal"])
+    stack = subaperture_stack(config.camera, raw, output=output, **views.stack_options())
+    metadata = {"sample": task.id, "source": RAW_NAME}
+    write_view_stack(stage / VIEWS_DIR, stack, metadata=metadata, **views.write_options())
     return {"dir": VIEWS_DIR, "grid": stack.grid, "spacing_px": stack.spacing_px, "baseline_m": stack.baseline_m}

@@ -87,6 +87,7 @@ __all__ = [
     "Distribution",
     "SweepSample",
     "SweepSpec",
+    "ViewOptions",
     "canonical_json",
     "embedded_sweeps",
     "expand",
@@ -311,8 +312,8 @@ class SweepSpec:
         Dotted keys removed from every base scene before the swept values are set.
     synthesis : SynthesisOptions or None
         Options of the refraction-free image (None unless ``"refraction_free"`` is an output).
-    views : Mapping
-        Keyword options of :func:`lfrefract.synthesis.views.subaperture_stack` (``"views"`` output).
+    views : ViewOptions
+        Options of the view stack (``"views"`` output; empty without it).
     grid : tuple of (str, tuple)
         Grid keys in file order with their values.
     random : tuple of Distribution
@@ -333,7 +334,7 @@ class SweepSpec:
     spp: int | None = None
     unset: tuple[str, ...] = ()
     synthesis: SynthesisOptions | None = None
-    views: Mapping[str, Any] = field(default_factory=dict)
+    views: ViewOptions = field(default_factory=lambda: ViewOptions())
     grid: tuple[tuple[str, tuple], ...] = ()
     random: tuple[Distribution, ...] = ()
     base_dir: Path = Path(".")
@@ -496,11 +497,9 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
             synthesis = SynthesisOptions(**table)
         except ParameterError as exc:
             raise ParameterError(f"[sweep.synthesis]: {exc}") from None
-    views = sweep.get("views", {})
     if "views" in sweep and "views" not in outputs:
         raise ParameterError("[sweep.views] is given but 'views' is not in sweep.outputs")
-    if "views" in outputs:
-        views = _view_options(views)
+    views = ViewOptions.from_table(sweep.get("views", {})) if "views" in outputs else ViewOptions()
 
     grid_table = data.get("grid", {})
     random_table = data.get("random", {})
@@ -548,7 +547,7 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
         spp=spp,
         unset=tuple(unset),
         synthesis=synthesis,
-        views=MappingProxyType(dict(views)),
+        views=views,
         grid=tuple(grid),
         random=tuple(random),
         base_dir=base,
@@ -565,40 +564,94 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
 #: Keys of ``[sweep.views]``: options of :func:`lfrefract.synthesis.views.subaperture_stack` and of
 #: :func:`lfrefract.formats.viewstack.write_view_stack`.
 VIEW_STACK_KEYS = ("grid", "spacing_px", "image_format", "white_level")
+#: Views per side when ``[sweep.views]`` gives no ``grid``: the default of
+#: :func:`lfrefract.synthesis.views.subaperture_stack`.
+DEFAULT_VIEW_GRID = 9
 
 
-def _view_options(table: Any) -> dict:
-    """Validate ``[sweep.views]`` (the checks that do not depend on the camera)."""
-    from lfrefract.formats import viewstack as lfio
+@dataclass(frozen=True, kw_only=True)
+class ViewOptions:
+    """``[sweep.views]``, checked once when the spec is parsed (what does not depend on a camera;
+    :func:`iter_samples` checks ``spacing_px`` against each sample's camera).
 
-    if not isinstance(table, dict):
-        raise ParameterError(f"[sweep.views] must be a table, got {table!r}")
-    reject_unknown_keys("[sweep.views]", table, set(VIEW_STACK_KEYS))
-    grid = table.get("grid", 9)
-    if isinstance(grid, bool) or not isinstance(grid, int) or grid < 3 or grid % 2 != 1:
-        raise ParameterError(f"sweep.views.grid must be an odd integer >= 3, got {grid!r}")
-    if "spacing_px" in table:
-        positive_float("sweep.views.spacing_px", table["spacing_px"])
-    if "white_level" in table:
-        positive_float("sweep.views.white_level", table["white_level"])
-    if "image_format" in table:
-        one_of("sweep.views.image_format", table["image_format"], lfio.VIEW_STACK_FORMATS)
-    return dict(table)
+    Parameters
+    ----------
+    grid : int or None
+        Views per side, odd and at least 3 (None: :data:`DEFAULT_VIEW_GRID`).
+    spacing_px : float or None
+        Pixel step between neighbouring views, positive (None: the stack's own choice).
+    image_format : {"png", "exr"} or None
+        File format of the written views (None: the writer's default).
+    white_level : float or None
+        Linear value written as full scale in PNG views, positive (None: the writer's default).
+
+    Values are kept as given (an integer ``spacing_px`` stays one): :meth:`to_dict`, the table as
+    given, is part of every sample's hash.
+
+    Raises
+    ------
+    ParameterError
+        Naming the key (``sweep.views.<key>``) and the value.
+    """
+
+    grid: int | None = None
+    spacing_px: float | None = None
+    image_format: str | None = None
+    white_level: float | None = None
+
+    def __post_init__(self) -> None:
+        from lfrefract.formats import viewstack
+
+        grid = self.grid
+        if grid is not None and (isinstance(grid, bool) or not isinstance(grid, int) or grid < 3 or grid % 2 != 1):
+            raise ParameterError(f"sweep.views.grid must be an odd integer >= 3, got {grid!r}")
+        if self.spacing_px is not None:
+            positive_float("sweep.views.spacing_px", self.spacing_px)
+        if self.white_level is not None:
+            positive_float("sweep.views.white_level", self.white_level)
+        if self.image_format is not None:
+            one_of("sweep.views.image_format", self.image_format, viewstack.VIEW_STACK_FORMATS)
+
+    @classmethod
+    def from_table(cls, table: Any) -> ViewOptions:
+        """From a ``[sweep.views]`` table; unknown keys are an error."""
+        if not isinstance(table, Mapping):
+            raise ParameterError(f"[sweep.views] must be a table, got {table!r}")
+        reject_unknown_keys("[sweep.views]", dict(table), set(VIEW_STACK_KEYS))
+        return cls(**table)
+
+    @property
+    def grid_size(self) -> int:
+        """Views per side: ``grid``, or :data:`DEFAULT_VIEW_GRID`."""
+        return DEFAULT_VIEW_GRID if self.grid is None else self.grid
+
+    def stack_options(self) -> dict:
+        """Keyword options of :func:`lfrefract.synthesis.views.subaperture_stack` (those given)."""
+        return {k: v for k, v in (("grid", self.grid), ("spacing_px", self.spacing_px)) if v is not None}
+
+    def write_options(self) -> dict:
+        """Keyword options of :func:`lfrefract.formats.viewstack.write_view_stack` (those given)."""
+        pairs = (("image_format", self.image_format), ("white_level", self.white_level))
+        return {k: v for k, v in pairs if v is not None}
+
+    def to_dict(self) -> dict:
+        """The table as given (keys not given left out)."""
+        return self.stack_options() | self.write_options()
 
 
-def _check_views(views: Mapping[str, Any], camera) -> None:
+def _check_views(views: ViewOptions, camera) -> None:
     """Raise unless ``camera``'s micro-images leave room for the view stack of ``views``."""
     from lfrefract.synthesis.views import subaperture_limit_px
 
     limit = subaperture_limit_px(camera)
     if limit <= 0.0:
         raise ParameterError(f"camera {camera.name!r} has micro-images too small for sub-aperture views")
-    if "spacing_px" in views:
-        half = (views.get("grid", 9) - 1) // 2
-        reach = math.hypot(half * views["spacing_px"], half * views["spacing_px"])
+    if views.spacing_px is not None:
+        half = (views.grid_size - 1) // 2
+        reach = math.hypot(half * views.spacing_px, half * views.spacing_px)
         if reach > limit:
             raise ParameterError(
-                f"sweep.views.spacing_px={views['spacing_px']!r} puts the corner views {reach:.4g} px from the "
+                f"sweep.views.spacing_px={views.spacing_px!r} puts the corner views {reach:.4g} px from the "
                 f"micro-image centres of camera {camera.name!r}, beyond its limit of {limit:.4g} px"
             )
 
@@ -909,7 +962,7 @@ def _build_sample(
         content.append([location, sha])
     hashed = {"scene": data, "base_scene": scene_name, "outputs": list(spec.outputs),
               "synthesis": None if spec.synthesis is None else spec.synthesis.to_dict(),
-              "views": dict(spec.views)}  # fmt: skip
+              "views": spec.views.to_dict()}  # fmt: skip
     if content:  # (a sample without input files keeps the hash it had before inputs were hashed)
         hashed["inputs"] = content
     return SweepSample(

@@ -240,7 +240,7 @@ def test_bad_spec_rejected_with_key_and_value(data, pattern, tmp_path):
 
 def test_views_output_options_are_checked():
     data = spec_data(sweep={"outputs": ["views"], "views": {"grid": 3}})
-    assert parse_spec(data).views == {"grid": 3}
+    assert parse_spec(data).views.to_dict() == {"grid": 3}
     for views, pattern in (
         ({"grid": 4}, r"sweep.views.grid must be an odd integer >= 3, got 4"),
         ({"image_format": "tiff"}, r"sweep.views.image_format must be one of \['png', 'exr'\], got 'tiff'"),
@@ -500,3 +500,20 @@ def test_a_malformed_scheduler_address_is_a_parameter_error(tmp_path):
     with pytest.raises(ParameterError, match=r"scheduler='head:port': cannot reach a Dask scheduler there"):
         run_dataset("tilt", out, scheduler="head:port", progress=False)
     assert not out.exists()
+
+
+def test_view_options_are_typed_once_and_keep_the_table_as_given():
+    # [sweep.views] was a dict checked at parse time, and its defaults (grid 9) repeated by the
+    # per-sample check and the worker; now one typed value that later code trusts.
+    from simulator.dataset.spec import DEFAULT_VIEW_GRID, ViewOptions
+
+    views = parse_spec(spec_data(sweep={"outputs": ["views"], "views": {"spacing_px": 2, "white_level": 0.5}})).views
+    assert isinstance(views, ViewOptions)
+    assert views.grid_size == DEFAULT_VIEW_GRID
+    assert views.stack_options() == {"spacing_px": 2}
+    assert views.write_options() == {"white_level": 0.5}
+    assert views.to_dict() == {"spacing_px": 2, "white_level": 0.5}
+    assert type(views.to_dict()["spacing_px"]) is int  # as given: the sample hash covers it
+    assert parse_spec(spec_data()).views == ViewOptions()
+    with pytest.raises(ParameterError, match=r"sweep.views.grid must be an odd integer >= 3, got 4"):
+        ViewOptions(grid=4)

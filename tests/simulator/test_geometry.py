@@ -90,3 +90,27 @@ def test_geometry_needs_no_mitsuba():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_a_chessboards_squares_have_one_check_and_one_message():
+    # The scene's check and the asset generators' were two, with two messages for one mistake.
+    message = r"squares must be \(columns, rows\), a list of 2 integers, got 8"
+    with pytest.raises(ParameterError, match=message):
+        Chessboard(placement=PLACE, squares=8, square_size_m=0.02)
+    for func in (assets.chessboard_size_m, assets.chessboard_inner_corners):
+        with pytest.raises(ParameterError, match=message):
+            func(squares=8, square_size_m=0.02)
+    with pytest.raises(ParameterError, match=message):
+        assets.chessboard_texture(squares=8, texels_per_square=4)
+
+
+def test_a_chessboard_builds_its_texture_and_corners_from_its_checked_layout():
+    board = Chessboard(placement=PLACE, squares=(5, 4), square_size_m=0.02, margin_squares=0.5, texels_per_square=8)
+    assert board.layout == assets.ChessboardLayout(squares=(5, 4), margin_squares=0.5)
+    np.testing.assert_array_equal(
+        board.texture(), assets.chessboard_texture(squares=(5, 4), texels_per_square=8, margin_squares=0.5)
+    )
+    np.testing.assert_array_equal(
+        board.inner_corners_local_m(),
+        assets.chessboard_inner_corners(squares=(5, 4), square_size_m=0.02, margin_squares=0.5),
+    )

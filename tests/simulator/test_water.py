@@ -474,3 +474,14 @@ def test_render_job_records_the_water(tmp_path):
     assert meta["render"]["integrator_raw"] == volpath  # the sensor port model: no glass in the scene
     assert meta["render"]["integrator_ideal"]["type"] == "volpath"
     assert meta["render"]["medium"]["phase"] == {"type": "hg", "g": 0.9}
+
+
+def test_the_water_index_is_checked_once_whichever_way_the_config_is_built():
+    # The parser checked a stated port index against [water], then SceneConfig checked it again;
+    # only a parsed port within the tolerance got the computed index. Now SceneConfig is the one
+    # check, and it gives every port within the tolerance the computed index.
+    n = seawater_index(salinity_psu=35.0, temperature_c=20.0)
+    config = parse_scene(_data(water=SEA))
+    near = dataclasses.replace(config.port, n_water=round(n, 4))
+    assert config.with_overrides(port=near).port.n_water == n
+    assert parse_scene(_data(port=PORT | {"n_water": round(n, 4)}, water=SEA)).port.n_water == n
