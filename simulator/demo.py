@@ -48,19 +48,36 @@ def run_demo(out_dir: str | Path = "demo", *, progress: bool = True, overwrite: 
 
 
 def _checks(rows: list[dict]) -> list[str]:
-    """The regression claims of issue 5, evaluated on this run."""
+    """The regression claims of issue 5, evaluated on this run: the error against the true plane
+    first (what the experiment's ground truth measures), then the paper's plane-fit RMSE."""
     by = {(r["method"], r["depth_m"]): r for r in rows if r["matcher"] == "zncc"}
     depths = PLANE_DEPTHS_M["tiny"]
+    at = f"at {', '.join(f'{d:g}' for d in depths)} m"
+    truth = {m: [by[(m, d)]["truth_error_mm"] for d in depths] for m in ("proposed", "ideal")}
     ratios = [by[("proposed", d)]["plane_rmse_mm"] / by[("ideal", d)]["plane_rmse_mm"] for d in depths]
     near, far = by[("approx near", depths[0])], by[("approx near", depths[-1])]
     growth = far["truth_error_mm"] / near["truth_error_mm"]
     return [
-        f"- Proposed plane RMSE over the ideal images' floor: {', '.join(f'{r:.2f}' for r in ratios)} "
-        f"(at {', '.join(f'{d:g}' for d in depths)} m; {'holds' if max(ratios) <= 1.3 else 'FAILS'} the 1.3 x bound).",
+        f"- Proposed error against the true plane: {', '.join(f'{e:.2f}' for e in truth['proposed'])} mm "
+        f"(ideal images: {', '.join(f'{e:.2f}' for e in truth['ideal'])} mm; {at}).",
         f"- Approximation calibrated at {depths[0]:g} m: error {near['truth_error_mm']:.2f} mm there, "
         f"{far['truth_error_mm']:.2f} mm at {depths[-1]:g} m ({growth:.1f} x; "
         f"{'holds' if growth >= 2 else 'FAILS'} the paper's claim of at least 2 x).",
+        f"- Proposed plane RMSE over the ideal images' floor: {', '.join(f'{r:.2f}' for r in ratios)} "
+        f"({at}; {'holds' if max(ratios) <= 1.3 else 'FAILS'} the 1.3 x bound).",
     ]
+
+
+#: Why the proposed method's plane RMSE can fall below the ideal images' (a ratio under 1 above).
+RMSE_BELOW_IDEAL = (
+    "The plane-fit RMSE measures how much the points scatter about a plane fitted to them, not how "
+    "far they are from the true one. A pixel of the proposed image averages many captured rays (by "
+    "default the 8 nearest for each of its 2 x 2 sub-pixel samples), each with the raw image's render noise, "
+    "so the image is smoother than the ideal pinhole image, rendered with the same samples per pixel; "
+    "less image noise means less matching noise in the disparities, and a smaller scatter. Its RMSE "
+    "can therefore fall below the ideal images' (a ratio under 1) without the reconstruction being "
+    "closer to the truth: the error against the true plane is the measure of that."
+)
 
 
 def _report(rows: list[dict], seconds: float, clouds: list[str]) -> str:
@@ -74,7 +91,7 @@ def _report(rows: list[dict], seconds: float, clouds: list[str]) -> str:
             for d in depths:
                 row = next(r for r in rows if (r["matcher"], r["method"], r["depth_m"]) == (matcher, method, d))
                 rmse, error = row["plane_rmse_mm"], row["truth_error_mm"]
-                cells.append("no match" if math.isnan(rmse) else f"{rmse:.2f} / {error:.2f}")
+                cells.append("no match" if math.isnan(rmse) else f"{error:.2f} / {rmse:.2f}")
             lines.append(f"| {method} | " + " | ".join(cells) + " |")
     return "\n".join(
         [
@@ -87,10 +104,13 @@ def _report(rows: list[dict], seconds: float, clouds: list[str]) -> str:
             "on chessboards, and stereo (ZNCC, the paper's cost, and OpenCV's SGBM) reconstructs the plane "
             "(docs/experiments.md, `planes`).",
             "",
-            "Plane-fit RMSE after outlier removal / mean error against the true plane, mm, by matcher:",
+            *_checks(rows),
+            "",
+            "Mean error against the true plane / plane-fit RMSE after outlier removal (the paper's metric), "
+            "mm, by matcher:",
             *lines,
             "",
-            *_checks(rows),
+            RMSE_BELOW_IDEAL,
             "",
             "![ZNCC disparity maps](planes_disparity_zncc.png)",
             "",
