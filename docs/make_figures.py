@@ -1,6 +1,6 @@
 """Regenerate the figures in docs/figures/ from fresh renders (a few minutes on 2 cores).
 
-    python docs/make_figures.py [--only simulator synthesis diagram mla] [--camera f01] [--spp 16]
+    python docs/make_figures.py [--only readme simulator synthesis diagram mla] [--camera f01] [--spp 16]
                                 [--synthesis-spp 64]
 
 Renders the embedded default scene (and, for the simulator figures, the white scene) with the given
@@ -8,7 +8,10 @@ camera and writes:
 
 * ``simulator``: raw_crop.png (raw lenslet image at native resolution, centre crop), raw_full.png
   (downsampled), ideal.png, depth.png, white_crop.png (white image with the model's micro-image
-  centres), readme.png (the README's banner); figures of docs/simulator.md.
+  centres); figures of docs/simulator.md.
+* ``readme``: readme.png, the README's hero figure: raw crop, naive central view, the refraction-free
+  image ``lfrefract synth`` writes from the same render (default options) and the ground-truth
+  depth with a colour bar; rendered at ``--synthesis-spp``.
 * ``synthesis``: synthesis_panel.png (raw crop, naive central view, synthesized image, ideal image,
   difference, coverage) and synthesis_k.png (k = 1, 8, 64 beside the ideal image, PSNR / SSIM in
   the exact coverage); figures of docs/synthesis.md. Prints the measurements and timings quoted
@@ -47,19 +50,19 @@ from matplotlib.patches import Ellipse, Patch, Polygon
 
 from lfrefract import camera_preset
 from lfrefract.calibration.mla import LENS_STATUS, calibrate_mla
+from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, RAW_NAME
 from lfrefract.formats.exr import read_exr
-from lfrefract.formats.jsonio import read_json
 from lfrefract.metrics import psnr, shift_px, ssim
 from lfrefract.optics.camera import LightFieldCamera, MicrolensArray, SensorGeometry
 from lfrefract.optics.port import FlatPort
 from lfrefract.synthesis.views import naive_view
-from lfrefract.synthesis.warp_map import SynthesisOptions, WarpMap, build_warp_map
+from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, build_warp_map
 from simulator.config import RenderSettings, SceneConfig, embedded_scenes, load_scene
 from simulator.job import render_job
 from simulator.previews import display_rgb, downsample, white_level
 
 FIGURES = Path(__file__).resolve().parent / "figures"
-PARTS = ("simulator", "synthesis", "diagram", "mla", "port", "dataset")
+PARTS = ("readme", "simulator", "synthesis", "diagram", "mla", "port", "dataset")
 
 #: The k of the side-by-side figure (paper Fig. 9).
 K_VALUES = (1, 8, 64)
@@ -109,7 +112,7 @@ def _shown(image: np.ndarray, valid: np.ndarray, white: float) -> np.ndarray:
 
 # ----------------------------------------------------------------------- simulator figures
 def simulator_figures(camera_name: str, spp: int) -> None:
-    """raw_crop, raw_full, ideal, depth, white_crop and readme PNGs (docs/simulator.md, README)."""
+    """raw_crop, raw_full, ideal, depth and white_crop PNGs (docs/simulator.md)."""
     camera = camera_preset(camera_name)
     with tempfile.TemporaryDirectory() as tmp:
         scene = load_scene().with_overrides(camera=camera, render=RenderSettings(spp=spp, seed=0))
@@ -123,7 +126,6 @@ def simulator_figures(camera_name: str, spp: int) -> None:
         depth = read_exr(Path(tmp) / "scene" / "depth.exr", role="depth")
         white_raw = read_exr(Path(tmp) / "white" / "raw.exr", role="raw").mean(axis=2)
         lenses = np.load(Path(tmp) / "white" / "lenses.npz")
-        meta = read_json(Path(tmp) / "scene" / "meta.json")
 
     level = white_level(raw)
     h, w = raw.shape[:2]
@@ -164,18 +166,64 @@ def simulator_figures(camera_name: str, spp: int) -> None:
     fig.savefig(FIGURES / "white_crop.png", bbox_inches="tight")
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, 3, figsize=(12, 4.2), dpi=100)
-    axes[0].imshow(display_rgb(_crop(raw, (h // 2, w // 2), int(6 * camera.micro_image_pitch_px)), white=level))
-    axes[0].set_title("raw lenslet image (centre crop)")
-    axes[1].imshow(display_rgb(ideal))
-    axes[1].set_title("ideal refraction-free image")
-    axes[2].imshow(np.where(np.isfinite(depth), depth, np.nan), cmap="viridis")
-    axes[2].set_title("ground-truth depth")
+
+# ----------------------------------------------------------------------- README hero figure
+def readme_figure(camera_name: str, spp: int) -> None:
+    """readme.png, the README's hero figure: raw crop, naive central view, the refraction-free image
+    that ``lfrefract synth`` writes (default options), and the ground-truth depth with a colour bar."""
+    from lfrefract import cli
+
+    camera = camera_preset(camera_name)
+    scene = load_scene().with_overrides(camera=camera, render=RenderSettings(spp=spp, seed=0))
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "scene"
+        seconds = _render(scene, folder)
+        start = time.perf_counter()
+        out = Path(tmp) / "synth" / "synth.exr"
+        if cli.main(["synth", str(folder / RAW_NAME), "--out", str(out), "--quiet"]) != 0:
+            raise RuntimeError("lfrefract synth failed on the hero render")
+        synth_seconds = time.perf_counter() - start
+        synthesized = read_exr(out, role="refraction_free")
+        coverage = read_exr(out.with_suffix(".coverage.exr"), role="coverage")
+        raw = read_exr(folder / RAW_NAME, role="raw")
+        ideal = read_exr(folder / IDEAL_NAME, role="ideal")
+        depth = read_exr(folder / DEPTH_NAME, role="depth")
+    port = scene.port
+    print(
+        f"readme: {camera_name} camera, {spp} spp, port {math.degrees(port.total_tilt_rad):.0f} deg: rendered in "
+        f"{seconds:.1f} s, lfrefract synth (map build and apply) {synth_seconds:.1f} s"
+    )
+    peak = float(np.percentile(ideal, 99.5))  # one display scale for the three images
+    filled = np.any(synthesized > 0, axis=2)
+    exact = coverage >= 1.0
+    naive = naive_view(camera, raw)
+    naive_ok = np.all(np.isfinite(naive), axis=2)
+    both = exact & naive_ok
+    gain = float(ideal[both].mean() / naive[both].mean())  # radiance in air vs in the water: display only
+    h, w = raw.shape[:2]
+    level = white_level(raw)
+    raw_crop = _crop(raw, (h // 2, w // 2), int(6 * camera.micro_image_pitch_px))
+
+    fig, axes = plt.subplots(1, 4, figsize=(17, 4.6), dpi=100, gridspec_kw={"width_ratios": [1, 1, 1, 1.12]})
+    axes[0].imshow(display_rgb(raw_crop, white=level), interpolation="nearest")
+    axes[0].set_title(f"raw lenslet image, centre crop\n{raw_crop.shape[1]} x {raw_crop.shape[0]} of {w} x {h} px")
+    axes[1].imshow(_shown(naive * gain, naive_ok, peak))
+    axes[1].set_title("naive central view\n(no refraction handling)")
+    axes[2].imshow(_shown(synthesized, filled, peak))
+    axes[2].contour(exact, [0.5], colors="white", linewidths=0.8, linestyles="dashed")
+    axes[2].set_title("lfrefract synth (refraction-free)\ndashed: edge of exact coverage")
+    im = axes[3].imshow(np.where(np.isfinite(depth), depth, np.nan), cmap="viridis")
+    axes[3].set_title("ground-truth depth\n(the output's geometry)")
+    bar = fig.colorbar(im, ax=axes[3], fraction=0.046, pad=0.03)
+    bar.set_label("depth: camera-frame z [m]")
     for ax in axes:
         ax.set_axis_off()
-    fig.suptitle(f"{camera_name} camera behind a {meta['port']['total_tilt_deg']:.0f} deg port, {spp} spp")
-    fig.savefig(FIGURES / "readme.png", bbox_inches="tight")
-    plt.close(fig)
+    fig.suptitle(
+        f"{camera_name} camera behind a flat port tilted {math.degrees(port.total_tilt_rad):.0f} deg "
+        f"({port.thickness_m * 1e3:.0f} mm glass, {port.distance_m * 1e3:.0f} mm from the lens, water n = "
+        f"{port.n_water:g}), {spp} spp"
+    )
+    _save(fig, FIGURES / "readme.png")
 
 
 # ----------------------------------------------------------------------- synthesis figures
@@ -218,9 +266,9 @@ def synthesis_figures(camera_name: str, spp: int) -> None:
     )
     peak = float(np.percentile(ideal, 99.5))
 
-    k_default = SynthesisOptions().k
+    k_panel = PAPER_K  # the panel of docs/synthesis.md shows the paper's k
     images, filled, scores = {}, {}, {}
-    for k in sorted({*K_VALUES, k_default}):
+    for k in sorted({*K_VALUES, k_panel}):
         start = time.perf_counter()
         warp_k = build_warp_map(camera, port, options=SynthesisOptions(k=k))
         built = time.perf_counter() - start
@@ -235,7 +283,7 @@ def synthesis_figures(camera_name: str, spp: int) -> None:
             f"(exact coverage); map build {built:.1f} s, apply {applied * 1e3:.0f} ms, "
             f"{len(warp_k.indices) / 1e6:.1f} M non-zeros"
         )
-        if k == k_default:
+        if k == k_panel:
             warp = warp_k
         del warp_k
     exact = warp.exact
@@ -253,7 +301,7 @@ def synthesis_figures(camera_name: str, spp: int) -> None:
         f"  naive central view x {gain:.3f} (ideal mean / naive mean in the exact coverage): PSNR {p:.2f} dB, "
         f"SSIM {s:.3f} (exact coverage); {naive_seconds:.1f} s"
     )
-    _synthesis_panel(camera, raw, ideal, images[k_default], (naive, naive_ok, gain), warp, peak, camera_name, spp)
+    _synthesis_panel(camera, raw, ideal, images[k_panel], (naive, naive_ok, gain), warp, peak, camera_name, spp)
     _synthesis_k({k: (images[k], filled[k], scores[k]) for k in K_VALUES}, ideal, peak, camera_name, spp)
 
 
@@ -779,6 +827,8 @@ def main() -> None:
     parser.add_argument("--synthesis-spp", type=int, default=64, help="samples per pixel of the synthesis figures")
     args = parser.parse_args()
     FIGURES.mkdir(exist_ok=True)
+    if "readme" in args.only:
+        readme_figure(args.camera, args.synthesis_spp)
     if "simulator" in args.only:
         simulator_figures(args.camera, args.spp)
     if "synthesis" in args.only:
