@@ -74,7 +74,8 @@ def angle_from_chord(chord):
     """Angle (rad) between unit vectors ``chord`` apart: ``2 arcsin(min(1, chord / 2))``.
 
     Well conditioned for small angles (unlike ``arccos`` of the dot product). Takes a scalar or
-    an array; :func:`angle_from_chord_jit` is the same expression compiled for the kernels.
+    an array; :func:`angle_from_chord_jit` is the same expression compiled for the kernels (the C
+    library's arcsin there, numpy's here: they may differ in the last bit).
     """
     return 2.0 * np.arcsin(np.minimum(1.0, 0.5 * chord))
 
