@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from lfrefract.synthesis.views import naive_view
-from lfrefract.synthesis.warp_map import WarpMap, build_warp_map
+from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, build_warp_map
 from simulator import boards
 from simulator.boards import chessboard_corners_world
 from simulator.config import SceneConfig
@@ -45,7 +45,8 @@ def _scene(tilt: tuple[float, float], depth_m: float, focal_px: float) -> SceneC
 @functools.cache
 def _warp_map(tilt: tuple[float, float]) -> WarpMap:
     config = boards.empty_scene(tilt)
-    return build_warp_map(config.camera, config.port)
+    # The paper's k, at which the tolerances were measured (the default is 8).
+    return build_warp_map(config.camera, config.port, options=SynthesisOptions(k=PAPER_K))
 
 
 @pytest.mark.parametrize("depth_m", DEPTHS_M)
