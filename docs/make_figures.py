@@ -792,30 +792,51 @@ def dataset_figure(spp: int) -> None:
         report = run_dataset(spec, Path(tmp) / "tilt", workers=2, progress=True)
         print(f"  dataset: {report.rendered} samples in {report.seconds:.1f} s")
         data = Dataset(Path(tmp) / "tilt")
-        rows = {"raw": [], "raw crop": [], "refraction-free": [], "ideal": []}
+        rows = {"raw": [], "raw crop": [], "refraction-free": [], "coverage": [], "ideal": []}
+        shares = []
         for sample in data:
-            raw, ideal, synth = sample.raw, sample.ideal, sample.refraction_free
+            raw, ideal, synth, coverage = sample.raw, sample.ideal, sample.refraction_free, sample.coverage
             h, w = raw.shape[:2]
             level = white_level(raw)
+            # Coverage is the share of a pixel's sub-pixel necessary rays that the camera records: 1 is
+            # exact; below 1 (0 included) the nearest captured rays stand in, so the pixel has a value
+            # but an approximate one; a pixel without any captured ray stays 0 in the image.
+            filled = np.any(synth > 0, axis=2)
+            exact = coverage >= 1.0
+            classes = np.where(exact, 2, np.where(filled, 1, 0))
+            shares.append((exact.mean(), (filled & ~exact).mean(), (~filled).mean()))
             rows["raw"].append(display_rgb(downsample(raw, 320), white=level))
             rows["raw crop"].append(display_rgb(_crop(raw, (h // 3, w // 2), 40), white=level))
-            rows["refraction-free"].append(_shown(synth, sample.coverage > 0, white_level(ideal)))
+            rows["refraction-free"].append(_shown(synth, filled, white_level(ideal)))
+            rows["coverage"].append(classes)
             rows["ideal"].append(display_rgb(ideal, white=white_level(ideal)))
-    fig, axes = plt.subplots(len(rows), len(tilts), figsize=(2.6 * len(tilts), 2.2 * len(rows)), dpi=100)
+    colours = ["#969696", "#e6a532", "#3c8c50"]  # no captured ray (the grey of the images), approximated, exact
+    fig, axes = plt.subplots(len(rows), len(tilts), figsize=(2.6 * len(tilts), 2.2 * len(rows) + 0.5), dpi=100)
     for r, (label, images) in enumerate(rows.items()):
         for c, image in enumerate(images):
             ax = axes[r, c]
-            ax.imshow(image, interpolation="nearest")
+            if label == "coverage":
+                ax.imshow(image, cmap=ListedColormap(colours), vmin=-0.5, vmax=2.5, interpolation="nearest")
+                ax.set_xlabel("{:.0%} / {:.0%} / {:.0%}".format(*shares[c]), fontsize=9)
+            else:
+                ax.imshow(image, interpolation="nearest")
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
                 ax.set_title(f"port tilt {tilts[c]:.0f} deg", fontsize=10)
             if c == 0:
                 ax.set_ylabel(label, fontsize=10)
+    legend = [
+        Patch(color=colours[2], label="exact: every necessary ray recorded (coverage 1)"),
+        Patch(color=colours[1], label="approximated: nearest captured rays stand in (coverage < 1)"),
+        Patch(color=colours[0], label="no captured ray (grey in the refraction-free row)"),
+    ]
     fig.suptitle(
         f"A tilt sweep as a dataset (tiny-2x camera, {spp} spp): lfsim dataset run, read with Dataset", size=10
     )
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    title = "coverage row (shares below each panel: exact / approximated / no ray)"
+    fig.legend(handles=legend, loc="lower center", fontsize=9, frameon=False, title=title, title_fontsize=9)
     _save(fig, FIGURES / "dataset_tilt.png", dpi=80)
 
 
