@@ -421,6 +421,87 @@ def _reject_non_finite(value: Any, where: str) -> None:
             _reject_non_finite(v, f"{where}[{i}]")
 
 
+def _unset_keys(unset: Any) -> list[str]:
+    """``sweep.unset``: distinct dotted scene keys."""
+    if not isinstance(unset, list):
+        raise ParameterError(f"sweep.unset must be a list of dotted scene keys, got {unset!r}")
+    for key in unset:
+        _check_key("sweep.unset", key)
+    if len(set(unset)) != len(unset):
+        raise ParameterError(f"sweep.unset lists a key twice: {unset!r}")
+    return unset
+
+
+def _outputs(sweep: dict) -> tuple[list[str], SynthesisOptions | None, ViewOptions]:
+    """``sweep.outputs`` and the options of those that have some (``[sweep.synthesis]``,
+    ``[sweep.views]``, each only with its output)."""
+    outputs = sweep.get("outputs", [])
+    if not isinstance(outputs, list) or any(not isinstance(o, str) for o in outputs):
+        raise ParameterError(f"sweep.outputs must be a list of names among {list(OUTPUTS)}, got {outputs!r}")
+    for o in outputs:
+        if o not in OUTPUTS:
+            raise ParameterError(f"sweep.outputs: unknown output {o!r}; one of {list(OUTPUTS)}")
+    if len(set(outputs)) != len(outputs):
+        raise ParameterError(f"sweep.outputs lists an output twice: {outputs!r}")
+    synthesis = None
+    if "synthesis" in sweep and "refraction_free" not in outputs:
+        raise ParameterError("[sweep.synthesis] is given but 'refraction_free' is not in sweep.outputs")
+    if "refraction_free" in outputs:
+        table = sweep.get("synthesis", {})
+        if not isinstance(table, dict):
+            raise ParameterError(f"[sweep.synthesis] must be a table, got {table!r}")
+        reject_unknown_keys("[sweep.synthesis]", table, {f.name for f in dataclasses.fields(SynthesisOptions)})
+        try:
+            synthesis = SynthesisOptions(**table)
+        except ParameterError as exc:
+            raise ParameterError(f"[sweep.synthesis]: {exc}") from None
+    if "views" in sweep and "views" not in outputs:
+        raise ParameterError("[sweep.views] is given but 'views' is not in sweep.outputs")
+    views = ViewOptions.from_table(sweep.get("views", {})) if "views" in outputs else ViewOptions()
+    return outputs, synthesis, views
+
+
+def _grid(grid_table: dict, base: Path) -> list[tuple[str, tuple]]:
+    """``[grid]``: dotted keys in file order with non-empty lists of values (base scenes exist)."""
+    grid: list[tuple[str, tuple]] = []
+    for key, values in grid_table.items():
+        _check_key("[grid]", key)
+        if not isinstance(values, list):
+            raise ParameterError(f"grid {key!r} must be a list of values, got {values!r}")
+        if not values:
+            raise ParameterError(f"grid {key!r} = [] is an empty range; give at least one value")
+        if key == SCENE_KEY:
+            for v in values:
+                _scene_file(f"grid {key!r}", v, base)
+        grid.append((key, tuple(values)))
+    return grid
+
+
+def _random(random_table: dict, grid_table: dict, base: Path) -> list[Distribution]:
+    """``[random]``: one distribution per dotted key not in ``[grid]``, in file order."""
+    random: list[Distribution] = []
+    for key, table in random_table.items():
+        _check_key("[random]", key)
+        if key in grid_table:
+            raise ParameterError(f"key {key!r} is both in [grid] and in [random]")
+        if not isinstance(table, dict) or len(table) != 1:
+            raise ParameterError(
+                f"random {key!r} must be a table with one distribution, one of {sorted(DISTRIBUTIONS)} "
+                f"(e.g. {{ uniform = [0, 10] }}), got {table!r}"
+            )
+        ((kind, args),) = table.items()
+        dist = Distribution(key=key, kind=kind, args=args)
+        if key == SCENE_KEY:
+            if kind != "choice":
+                raise ParameterError(
+                    f"random {key!r} chooses among base scenes: use {{ choice = [...] }}, got {kind!r}"
+                )
+            for v in dist.args:
+                _scene_file(f"random {key!r}", v, base)
+        random.append(dist)
+    return random
+
+
 def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>") -> SweepSpec:
     """Build a :class:`SweepSpec` from a parsed TOML document (structure only).
 
@@ -469,73 +550,14 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     _scene_file("sweep.scene", scene, base)
     repeats = positive_int("sweep.repeats", sweep.get("repeats", 1))
     spp = None if "spp" not in sweep else positive_int("sweep.spp", sweep["spp"])
-    unset = sweep.get("unset", [])
-    if not isinstance(unset, list):
-        raise ParameterError(f"sweep.unset must be a list of dotted scene keys, got {unset!r}")
-    for key in unset:
-        _check_key("sweep.unset", key)
-    if len(set(unset)) != len(unset):
-        raise ParameterError(f"sweep.unset lists a key twice: {unset!r}")
-
-    outputs = sweep.get("outputs", [])
-    if not isinstance(outputs, list) or any(not isinstance(o, str) for o in outputs):
-        raise ParameterError(f"sweep.outputs must be a list of names among {list(OUTPUTS)}, got {outputs!r}")
-    for o in outputs:
-        if o not in OUTPUTS:
-            raise ParameterError(f"sweep.outputs: unknown output {o!r}; one of {list(OUTPUTS)}")
-    if len(set(outputs)) != len(outputs):
-        raise ParameterError(f"sweep.outputs lists an output twice: {outputs!r}")
-    synthesis = None
-    if "synthesis" in sweep and "refraction_free" not in outputs:
-        raise ParameterError("[sweep.synthesis] is given but 'refraction_free' is not in sweep.outputs")
-    if "refraction_free" in outputs:
-        table = sweep.get("synthesis", {})
-        if not isinstance(table, dict):
-            raise ParameterError(f"[sweep.synthesis] must be a table, got {table!r}")
-        reject_unknown_keys("[sweep.synthesis]", table, {f.name for f in dataclasses.fields(SynthesisOptions)})
-        try:
-            synthesis = SynthesisOptions(**table)
-        except ParameterError as exc:
-            raise ParameterError(f"[sweep.synthesis]: {exc}") from None
-    if "views" in sweep and "views" not in outputs:
-        raise ParameterError("[sweep.views] is given but 'views' is not in sweep.outputs")
-    views = ViewOptions.from_table(sweep.get("views", {})) if "views" in outputs else ViewOptions()
-
+    unset = _unset_keys(sweep.get("unset", []))
+    outputs, synthesis, views = _outputs(sweep)
     grid_table = data.get("grid", {})
     random_table = data.get("random", {})
     if not isinstance(grid_table, dict) or not isinstance(random_table, dict):
         raise ParameterError("[grid] and [random] must be tables of dotted keys")
-    grid: list[tuple[str, tuple]] = []
-    for key, values in grid_table.items():
-        _check_key("[grid]", key)
-        if not isinstance(values, list):
-            raise ParameterError(f"grid {key!r} must be a list of values, got {values!r}")
-        if not values:
-            raise ParameterError(f"grid {key!r} = [] is an empty range; give at least one value")
-        if key == SCENE_KEY:
-            for v in values:
-                _scene_file(f"grid {key!r}", v, base)
-        grid.append((key, tuple(values)))
-    random: list[Distribution] = []
-    for key, table in random_table.items():
-        _check_key("[random]", key)
-        if key in grid_table:
-            raise ParameterError(f"key {key!r} is both in [grid] and in [random]")
-        if not isinstance(table, dict) or len(table) != 1:
-            raise ParameterError(
-                f"random {key!r} must be a table with one distribution, one of {sorted(DISTRIBUTIONS)} "
-                f"(e.g. {{ uniform = [0, 10] }}), got {table!r}"
-            )
-        ((kind, args),) = table.items()
-        dist = Distribution(key=key, kind=kind, args=args)
-        if key == SCENE_KEY:
-            if kind != "choice":
-                raise ParameterError(
-                    f"random {key!r} chooses among base scenes: use {{ choice = [...] }}, got {kind!r}"
-                )
-            for v in dist.args:
-                _scene_file(f"random {key!r}", v, base)
-        random.append(dist)
+    grid = _grid(grid_table, base)
+    random = _random(random_table, grid_table, base)
     if spp is not None and "render.spp" in grid_table | random_table:
         raise ParameterError("render.spp is swept and sweep.spp is set: give one of them")
     spec = SweepSpec(
