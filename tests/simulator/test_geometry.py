@@ -114,3 +114,12 @@ def test_a_chessboard_builds_its_texture_and_corners_from_its_checked_layout():
         board.inner_corners_local_m(),
         assets.chessboard_inner_corners(squares=(5, 4), square_size_m=0.02, margin_squares=0.5),
     )
+
+
+def test_every_object_type_registers_a_mitsuba_shape_and_a_mesh_where_it_has_one():
+    from simulator import scene
+
+    assert set(scene._shape.registry) - {object} == set(OBJECT_TYPES.values())
+    assert set(geometry.local_mesh.registry) - {object} == {Bowl, Figurine}
+    assert set(geometry.texture_wrap.registry) - {object} == {Bowl, Figurine}
+    assert set(geometry.plane_size_m.registry) - {object} == {TexturedPlane, Chessboard}
