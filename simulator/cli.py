@@ -2,7 +2,9 @@
 
     lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--seed S] [--overwrite]
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
-    lfsim experiment NAME --out DIR [--scale tiny|illum] [--overwrite]
+    lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA]
+                     [--port-distance-m D] [--thickness-m T] [--tilts-deg T1,T2] [--f-numbers N1,N2]
+                     [--overwrite]
     lfsim demo [--out DIR] [--overwrite]
     lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R]
                           [--variant V] [--quiet]
@@ -14,17 +16,20 @@ embedded default scene is rendered. RIG is a stereo rig file (:mod:`simulator.ri
 an embedded rig (``default``). SPEC is a sweep spec (:mod:`simulator.dataset.spec`) or the name of
 an embedded sweep (``tilt``); ``dataset run`` completes an interrupted run of the same spec in DIR,
 and exits with 1 if a sample failed; ``dataset check`` exits with 1 unless every sample is done and
-intact (docs/datasets.md).
+intact (docs/datasets.md). ``experiment`` runs one of :func:`simulator.experiments.experiment_names`
+(docs/experiments.md); an option that does not apply to it is refused. ``lfsim --version`` prints the
+version; every command's ``--help`` shows its defaults.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.metadata
 import sys
 from pathlib import Path
 
-from lfrefract import PRESETS, ParameterError, camera_preset
+from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.outputs import terminate_cleanly
 from simulator.config import PORT_MODELS, embedded_scenes, load_scene
@@ -42,10 +47,89 @@ def _scene_path(arg: str | None) -> Path | None:
     return Path(arg)
 
 
+class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """``--help`` with every option's default, except those that have none (``None``, off flags)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default in (None, False) or action.default is argparse.SUPPRESS:
+            return action.help or ""
+        return super()._get_help_string(action)
+
+
+def _version() -> str:
+    """The package version, and the installed distribution's if it differs (an older install)."""
+    try:
+        installed = importlib.metadata.version("lfrefract")
+    except importlib.metadata.PackageNotFoundError:
+        return f"{__version__} (not installed as a distribution)"
+    return __version__ if installed == __version__ else f"{__version__} (installed distribution: {installed})"
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """A comma-separated list of names (``--methods``)."""
+    names = tuple(part.strip() for part in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected names separated by commas, got {text!r}")
+    return names
+
+
+def _numbers(text: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers (``--tilts-deg``, ``--f-numbers``)."""
+    try:
+        return tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
+
+
+def _experiment_help() -> str:
+    import textwrap
+
+    from simulator.experiments import OPTION_FLAGS, load_experiments
+
+    lines = ["experiments, and the options each takes:"]
+    for name, experiment in sorted(load_experiments().items()):
+        takes = ", ".join(OPTION_FLAGS[o] for o in experiment.options) or "no options"
+        lines += textwrap.wrap(
+            f"{name}: {experiment.description}", width=78, initial_indent="  ", subsequent_indent="    "
+        )
+        lines += textwrap.wrap(f"options: {takes}", width=76, initial_indent="    ", subsequent_indent="      ")
+    return "\n".join(lines)
+
+
+class _ExperimentFormatter(_DefaultsFormatter, argparse.RawDescriptionHelpFormatter):
+    """Defaults shown, and the list of experiments (the epilog) kept as it is written."""
+
+
+class _ExperimentParser(argparse.ArgumentParser):
+    """The ``experiment`` command: its list of experiments is read from the registry when help is
+    shown (importing every experiment is not needed for the other commands)."""
+
+    def format_help(self) -> str:
+        self.epilog = _experiment_help()
+        return super().format_help()
+
+
+def _command(sub, name: str, *, parser_class: type | None = None, **kwargs) -> argparse.ArgumentParser:
+    """A subcommand of ``sub`` whose ``--help`` shows its defaults (optionally of its own parser class)."""
+    kwargs.setdefault("formatter_class", _DefaultsFormatter)
+    if parser_class is None:
+        return sub.add_parser(name, **kwargs)
+    previous, sub._parser_class = sub._parser_class, parser_class
+    try:
+        return sub.add_parser(name, **kwargs)
+    finally:
+        sub._parser_class = previous
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lfsim", description="Plenoptic camera behind a flat port, in Mitsuba 3.")
+    parser = argparse.ArgumentParser(
+        prog="lfsim",
+        description="Plenoptic camera behind a flat port, in Mitsuba 3.",
+        formatter_class=_DefaultsFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
-    render = sub.add_parser("render", help="render a scene with its ground truth")
+    render = _command(sub, "render", help="render a scene with its ground truth")
     render.add_argument("scene", nargs="?", help="scene TOML file or embedded scene name (default: 'default')")
     render.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
     render.add_argument("--camera", choices=sorted(PRESETS), help="camera preset replacing the scene's")
@@ -59,7 +143,7 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--overwrite", action="store_true", help="replace an earlier render output (only that)")
     render.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     render.add_argument("--quiet", action="store_true", help="no progress bars")
-    rig = sub.add_parser("rig", help="render every camera of a stereo rig behind one wall, with ground truth")
+    rig = _command(sub, "rig", help="render every camera of a stereo rig behind one wall, with ground truth")
     rig.add_argument("rig", nargs="?", help="rig TOML file or embedded rig name (default: 'default')")
     rig.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
     rig.add_argument("--spp", type=int, help="samples per pixel (default: the rig's)")
@@ -67,32 +151,51 @@ def _parser() -> argparse.ArgumentParser:
     rig.add_argument("--overwrite", action="store_true", help="replace an earlier rig output")
     rig.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     rig.add_argument("--quiet", action="store_true", help="no progress bars")
-    exp = sub.add_parser("experiment", help="run one of the paper's experiments (table, figures)")
-    exp.add_argument("name", help="experiment name (see docs/experiments.md)")
-    exp.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
-    exp.add_argument("--scale", choices=["tiny", "illum"], default="tiny", help="problem size (default: tiny)")
+    exp = _command(
+        sub,
+        "experiment",
+        help="run one of the paper's experiments (table, figures)",
+        description="Run one of the paper's experiments; it writes table.csv, table.md, meta.json and its "
+        "figures into --out (docs/experiments.md). An option that does not apply to the experiment is refused.",
+        formatter_class=_ExperimentFormatter,
+        parser_class=_ExperimentParser,
+    )
+    exp.add_argument("name", help="experiment name (listed below)")
+    exp.add_argument("--out", required=True, type=Path, help="output directory (absent or empty; parents are created)")
+    exp.add_argument("--scale", choices=["tiny", "illum"], default="tiny", help="problem size")
+    exp.add_argument(
+        "--methods",
+        type=_names,
+        help="methods to compare, by name, separated by commas, e.g. 'proposed,approx near' "
+        "(default: every registered method)",
+    )
+    exp.add_argument("--camera", help="camera preset or camera JSON file replacing the experiment's")
+    exp.add_argument("--port-distance-m", type=float, help="perpendicular port (wall) distance, metres")
+    exp.add_argument("--thickness-m", type=float, help="port (wall) glass thickness, metres (0: no glass)")
+    exp.add_argument("--tilts-deg", type=_numbers, help="port tilts about x, degrees, separated by commas")
+    exp.add_argument("--f-numbers", type=_numbers, help="main-lens f-numbers, separated by commas")
     exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
     exp.add_argument("--quiet", action="store_true", help="no progress bars")
-    demo = sub.add_parser("demo", help="the main job: stereo behind a glass wall by every method, with a report")
-    demo.add_argument("--out", type=Path, default=Path("demo"), help="output directory (default: demo/)")
+    demo = _command(sub, "demo", help="the main job: stereo behind a glass wall by every method, with a report")
+    demo.add_argument("--out", type=Path, default=Path("demo"), help="output directory")
     demo.add_argument("--overwrite", action="store_true", help="replace an earlier demo output")
     demo.add_argument("--quiet", action="store_true", help="no progress bars")
-    dataset = sub.add_parser("dataset", help="datasets: sweeps over port tilt and conditions, on Dask")
+    dataset = _command(sub, "dataset", help="datasets: sweeps over port tilt and conditions, on Dask")
     dsub = dataset.add_subparsers(dest="dataset_command", required=True)
-    drun = dsub.add_parser("run", help="render every sample of a sweep spec (or complete an interrupted run)")
+    drun = _command(dsub, "run", help="render every sample of a sweep spec (or complete an interrupted run)")
     drun.add_argument("spec", help="sweep spec TOML file or embedded sweep name (e.g. 'tilt')")
     drun.add_argument("--out", required=True, type=Path, help="dataset folder (absent, empty, or a run of SPEC)")
     where = drun.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, help="worker processes of the local Dask cluster (default 1)")
     where.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
     drun.add_argument("--threads", type=int, help="render threads per worker (default: cores / workers locally)")
-    drun.add_argument("--retries", type=int, default=2, help="extra attempts of a failing sample (default 2)")
+    drun.add_argument("--retries", type=int, default=2, help="extra attempts of a failing sample")
     drun.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant of the workers")
     drun.add_argument("--quiet", action="store_true", help="no progress bars")
-    dcheck = dsub.add_parser("check", help="verify every sample of a dataset against its manifest")
+    dcheck = _command(dsub, "check", help="verify every sample of a dataset against its manifest")
     dcheck.add_argument("dir", type=Path, help="dataset folder")
     dcheck.add_argument("--sizes-only", action="store_true", help="compare file sizes, do not re-hash")
-    sub.add_parser("scenes", help="list the embedded scenes, rigs and sweeps")
+    _command(sub, "scenes", help="list the embedded scenes, rigs and sweeps")
     return parser
 
 
@@ -132,9 +235,19 @@ def _dataset(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from simulator.experiments import run_experiment
+    from lfrefract.formats.capture import camera_from_option
+    from simulator.experiments import ExperimentOptions, run_experiment
 
-    result = run_experiment(args.name, args.out, scale=args.scale, progress=not args.quiet, overwrite=args.overwrite)
+    options = ExperimentOptions(
+        scale=args.scale,
+        methods=args.methods,
+        camera=None if args.camera is None else camera_from_option(args.camera),
+        port_distance_m=args.port_distance_m,
+        thickness_m=args.thickness_m,
+        tilts_deg=args.tilts_deg,
+        f_numbers=args.f_numbers,
+    )
+    result = run_experiment(args.name, out=args.out, options=options, progress=not args.quiet, overwrite=args.overwrite)
     if result.summary:
         print(result.summary)
     print(f"wrote {args.out}/: table.csv table.md meta.json {' '.join(p.name for p in result.figures)}")

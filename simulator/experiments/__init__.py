@@ -1,17 +1,28 @@
 """The experiment harness: the paper's evaluation reproduced on the simulator's ground truth.
 
-Each experiment is a function ``run(out_dir, *, scale, progress) -> ExperimentResult`` registered in
-:data:`EXPERIMENTS` under its name; ``lfsim experiment NAME --scale tiny|illum --out DIR`` runs it.
-An experiment writes into ``out_dir`` (assembled in a staging directory, so it appears complete or
-not at all):
+Run an experiment from Python with :func:`run_experiment`, or from the shell with
+``lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods ...] [--camera ...] ...``. An
+experiment writes into its output directory (assembled in a staging directory, so it appears
+complete or not at all; missing parents are created):
 
 - ``table.csv`` and ``table.md``: one row per measured condition, columns with units in their
   names (:func:`write_table`);
 - its figures (PNG), listed in the result;
-- ``meta.json``: the experiment, scale, parameters and timings (kind ``lfsim.experiment``).
+- ``meta.json``: the experiment, scale, options, parameters and timings (kind ``lfsim.experiment``).
 
-Scales (:data:`SCALES`): ``tiny`` runs in CI in seconds to minutes on two cores; ``illum`` is the
-paper's size (the Lytro Illum preset) and takes much longer.
+What can be changed is one frozen :class:`ExperimentOptions`, validated once when it is made;
+each experiment declares which of its fields apply to it (:attr:`Experiment.options`) and a
+field that does not apply is refused before any work. Scales (:data:`SCALES`): ``tiny`` runs in CI
+in seconds to minutes on two cores; ``illum`` is the paper's size (the Lytro Illum preset) and takes
+much longer.
+
+The stereo experiments (``planes``, ``objects``) compare methods by name from the method registry
+(:mod:`simulator.experiments.methods`: :func:`~simulator.experiments.methods.register_method`
+and the ``lfrefract.methods`` entry-point group), read when the experiment runs. A method that
+fails gives table rows with ``status = "failed"`` and its ``error``, not a failed run.
+
+An experiment is registered with :func:`register`; its function is
+``run(out_dir, options, *, progress) -> ExperimentResult``.
 """
 
 from __future__ import annotations
@@ -19,18 +30,144 @@ from __future__ import annotations
 import csv
 import io
 import math
+import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-from lfrefract import ParameterError
-from lfrefract.formats.jsonio import write_text_atomically
-from lfrefract.validate import one_of
+from lfrefract.errors import ParameterError
+from lfrefract.formats.capture import SIDECAR_NAME
+from lfrefract.formats.jsonio import write_json, write_text_atomically
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.port import MAX_DISTANCE_M, MAX_THICKNESS_M
+from lfrefract.optics.presets import camera_preset
+from lfrefract.validate import bounded_float, finite_float, one_of, positive_float, shown
 
-__all__ = ["EXPERIMENTS", "SCALES", "ExperimentResult", "load_experiments", "register", "run_experiment", "write_table"]
+__all__ = [
+    "EXPERIMENTS",
+    "OPTION_FLAGS",
+    "SCALES",
+    "Experiment",
+    "ExperimentOptions",
+    "ExperimentResult",
+    "check_scale",
+    "complete_rows",
+    "experiment_names",
+    "load_experiments",
+    "register",
+    "run_experiment",
+    "write_table",
+]
 
 #: Problem sizes: ``tiny`` (CI) and ``illum`` (the paper's camera).
 SCALES = ("tiny", "illum")
+
+#: Each option of :class:`ExperimentOptions` (but ``scale``) and its ``lfsim experiment`` flag.
+OPTION_FLAGS = {
+    "methods": "--methods",
+    "camera": "--camera",
+    "port_distance_m": "--port-distance-m",
+    "thickness_m": "--thickness-m",
+    "tilts_deg": "--tilts-deg",
+    "f_numbers": "--f-numbers",
+}
+
+
+def _floats(name: str, values, check: Callable[[str, float], float]) -> tuple[float, ...]:
+    if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+        raise ParameterError(f"{name} must be a sequence of numbers, got {shown(values)}")
+    out = tuple(check(f"{name}[{i}]", v) for i, v in enumerate(values))
+    if not out:
+        raise ParameterError(f"{name} must hold at least one value, got {shown(values)}")
+    if len(set(out)) != len(out):
+        raise ParameterError(f"{name} must not repeat a value, got {list(out)}")
+    return out
+
+
+def _tilt_deg(name: str, value) -> float:
+    tilt = finite_float(name, value)
+    if not -90.0 < tilt < 90.0:  # the port must face the camera
+        raise ParameterError(f"{name} must lie in (-90, 90) deg, got {shown(value)}")
+    return tilt
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExperimentOptions:
+    """What a run of an experiment may change; ``None`` keeps the experiment's own choice.
+
+    Validated when made; which fields apply depends on the experiment (:attr:`Experiment.options`,
+    ``lfsim experiment --help``), and :func:`run_experiment` refuses one that does not.
+
+    Attributes
+    ----------
+    scale : str
+        One of :data:`SCALES`.
+    methods : tuple of str, optional
+        Methods to compare, by registered name (:func:`simulator.experiments.methods.method_names`),
+        in table order; default every registered method. ``planes``, ``objects``.
+    camera : LightFieldCamera or str, optional
+        The light-field camera (a preset name is turned into the preset), replacing the scale's:
+        the fov camera, the averaging scene's camera, every camera of a stereo rig.
+    port_distance_m : float, optional
+        Perpendicular distance of the port's air-side face from the main-lens centre, metres
+        (a rig's wall: the offset of its air-side plane, ``normal . X = d``), in (0, 100].
+    thickness_m : float, optional
+        Glass thickness of the port (or wall), metres, in [0, 1] (0: a single air/water interface;
+        a rig's wall needs glass).
+    tilts_deg : tuple of float, optional
+        Port tilts about the camera x axis that ``fov`` sweeps (normal turned up), degrees, each in
+        (-90, 90).
+    f_numbers : tuple of float, optional
+        Main-lens f-numbers that ``fov`` evaluates (each checked against the camera when it runs:
+        the image-side f-number may not fall below the microlenses').
+    """
+
+    scale: str = "tiny"
+    methods: tuple[str, ...] | None = None
+    camera: LightFieldCamera | None = None
+    port_distance_m: float | None = None
+    thickness_m: float | None = None
+    tilts_deg: tuple[float, ...] | None = None
+    f_numbers: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        one_of("scale", self.scale, SCALES)
+        if self.methods is not None:
+            methods = (self.methods,) if isinstance(self.methods, str) else self.methods
+            if not hasattr(methods, "__iter__"):
+                raise ParameterError(f"methods must be a sequence of method names, got {shown(self.methods)}")
+            methods = tuple(methods)
+            if not methods or not all(isinstance(m, str) and m.strip() for m in methods):
+                raise ParameterError(f"methods must be one or more non-empty names, got {shown(self.methods)}")
+            if len(set(methods)) != len(methods):
+                raise ParameterError(f"methods must not repeat a name, got {list(methods)}")
+            object.__setattr__(self, "methods", methods)
+        if isinstance(self.camera, str):
+            object.__setattr__(self, "camera", camera_preset(self.camera))
+        if self.camera is not None and not isinstance(self.camera, LightFieldCamera):
+            raise ParameterError(f"camera must be a LightFieldCamera or a preset name, got {shown(self.camera)}")
+        if self.port_distance_m is not None:
+            distance = bounded_float(
+                "port_distance_m", self.port_distance_m, 0.0, MAX_DISTANCE_M, low_open=True, unit="m"
+            )
+            object.__setattr__(self, "port_distance_m", distance)
+        if self.thickness_m is not None:
+            thickness = bounded_float("thickness_m", self.thickness_m, 0.0, MAX_THICKNESS_M, unit="m")
+            object.__setattr__(self, "thickness_m", thickness)
+        if self.tilts_deg is not None:
+            object.__setattr__(self, "tilts_deg", _floats("tilts_deg", self.tilts_deg, _tilt_deg))
+        if self.f_numbers is not None:
+            object.__setattr__(self, "f_numbers", _floats("f_numbers", self.f_numbers, positive_float))
+
+    def given(self) -> tuple[str, ...]:
+        """Names of the fields set (not ``None``), ``scale`` left out."""
+        return tuple(f.name for f in fields(self) if f.name != "scale" and getattr(self, f.name) is not None)
+
+    def to_dict(self) -> dict:
+        """Plain data for ``meta.json`` (the camera as its table)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["camera"] = None if self.camera is None else self.camera.to_dict()
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
 
 
 @dataclass(frozen=True)
@@ -63,17 +200,61 @@ class ExperimentResult:
 
 ExperimentFunction = Callable[..., ExperimentResult]
 
+
+@dataclass(frozen=True)
+class Experiment:
+    """A registered experiment.
+
+    Attributes
+    ----------
+    name : str
+    run : callable
+        ``run(out_dir, options, *, progress) -> ExperimentResult``.
+    options : tuple of str
+        The :class:`ExperimentOptions` fields (but ``scale``) that apply to it.
+    description : str
+        One line, for ``lfsim experiment --help``.
+    """
+
+    name: str
+    run: ExperimentFunction
+    options: tuple[str, ...]
+    description: str
+
+    def check(self, options: ExperimentOptions) -> None:
+        """Refuse an option that does not apply (:class:`ParameterError` naming it and its flag)."""
+        for name in options.given():
+            if name not in self.options:
+                takes = ", ".join(f"{OPTION_FLAGS[o]}" for o in self.options) or "none"
+                raise ParameterError(
+                    f"option {OPTION_FLAGS[name]} ({name}={shown(getattr(options, name))}) does not apply to "
+                    f"experiment {self.name!r}; its options: {takes}"
+                )
+
+
 #: Registered experiments by name (filled by :func:`register`; see :func:`load_experiments`).
-EXPERIMENTS: dict[str, ExperimentFunction] = {}
+EXPERIMENTS: dict[str, Experiment] = {}
 
 
-def register(name: str) -> Callable[[ExperimentFunction], ExperimentFunction]:
-    """Decorator: register ``run(out_dir, *, scale, progress)`` as experiment ``name``."""
+def register(name: str, *, options: Sequence[str] = ()) -> Callable[[ExperimentFunction], ExperimentFunction]:
+    """Decorator: register ``run(out_dir, options, *, progress)`` as experiment ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The experiment's name (``lfsim experiment NAME``).
+    options : sequence of str
+        The :class:`ExperimentOptions` fields (but ``scale``) it reads; any other one given is refused.
+    """
+    unknown = sorted(set(options) - set(OPTION_FLAGS))
+    if unknown:
+        raise ParameterError(f"experiment {name!r}: unknown options {unknown}; known: {sorted(OPTION_FLAGS)}")
 
     def wrap(function: ExperimentFunction) -> ExperimentFunction:
         if name in EXPERIMENTS:
             raise ValueError(f"experiment {name!r} registered twice")
-        EXPERIMENTS[name] = function
+        doc = (function.__doc__ or "").strip().splitlines()
+        EXPERIMENTS[name] = Experiment(name, function, tuple(options), doc[0] if doc else "")
         return function
 
     return wrap
@@ -88,6 +269,17 @@ def _cell(value) -> str:
     if isinstance(value, float):
         return "nan" if math.isnan(value) else f"{value:.6g}"
     return str(value)
+
+
+def complete_rows(rows: Sequence[dict]) -> tuple[dict, ...]:
+    """Rows with the same keys: those of the longest row first, then any others in order of
+    appearance; a key a row lacks (a failed method's measures) is NaN there."""
+    if not rows:
+        return ()
+    keys = list(max(rows, key=len))
+    for row in rows:
+        keys += [k for k in row if k not in keys]
+    return tuple({k: row.get(k, math.nan) for k in keys} for row in rows)
 
 
 def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tuple[Path, Path]:
@@ -110,61 +302,122 @@ def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tup
     writer.writerows([[_cell(row[k]) for k in keys] for row in rows])
     csv_path = write_text_atomically(Path(out_dir) / f"{stem}.csv", buffer.getvalue())
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(_cell(row[k]) for k in keys) + " |" for row in rows]
+    lines += ["| " + " | ".join(_cell(row[k]).replace("|", "\\|") for k in keys) + " |" for row in rows]
     md_path = write_text_atomically(Path(out_dir) / f"{stem}.md", "\n".join(lines) + "\n")
     return csv_path, md_path
 
 
-def load_experiments() -> dict[str, ExperimentFunction]:
+def load_experiments() -> dict[str, Experiment]:
     """Import the experiment modules (which register themselves) and return :data:`EXPERIMENTS`."""
     from simulator.experiments import averaging, fov, objects, planes  # noqa: F401  (registration)
 
     return EXPERIMENTS
 
 
+def experiment_names() -> tuple[str, ...]:
+    """The registered experiments' names, sorted."""
+    return tuple(sorted(load_experiments()))
+
+
 def run_experiment(
-    name: str, out_dir: str | Path, *, scale: str = "tiny", progress: bool = True, overwrite: bool = False
+    name: str,
+    *,
+    out: str | Path,
+    scale: str = "tiny",
+    methods: Sequence[str] | None = None,
+    camera: LightFieldCamera | str | None = None,
+    port_distance_m: float | None = None,
+    thickness_m: float | None = None,
+    tilts_deg: Sequence[float] | None = None,
+    f_numbers: Sequence[float] | None = None,
+    options: ExperimentOptions | None = None,
+    progress: bool = True,
+    overwrite: bool = False,
 ) -> ExperimentResult:
-    """Run experiment ``name`` at ``scale`` into ``out_dir``: its figures, ``table.csv``, ``table.md``
-    and ``meta.json``, assembled in a staging directory (nothing half-written on failure).
+    """Run experiment ``name`` into ``out``: its figures, ``table.csv``, ``table.md`` and
+    ``meta.json``, assembled in a staging directory (nothing half-written on failure).
+
+    Parameters
+    ----------
+    name : str
+        A registered experiment (:func:`experiment_names`).
+    out : path-like
+        Output directory: absent (it and its missing parents are created) or empty, or an earlier
+        output of the same experiment with ``overwrite``.
+    scale, methods, camera, port_distance_m, thickness_m, tilts_deg, f_numbers
+        The fields of :class:`ExperimentOptions` (one is made of them); or give ``options``.
+    options : ExperimentOptions, optional
+        All of them at once (then none of the separate ones may be given).
+    progress : bool
+        Progress bars on the terminal.
+    overwrite : bool
+        Replace an earlier output of the same experiment (only that: see docs/conventions.md).
+
+    Returns
+    -------
+    ExperimentResult
+        Its figures' paths inside ``out``.
 
     Raises
     ------
     ParameterError
-        For an unknown experiment or scale (before any work).
+        Before any work: for an unknown experiment, scale or method, an invalid option, or one
+        that does not apply to the experiment (naming it).
     FileExistsError
-        If ``out_dir`` is not empty (and not an earlier output with ``overwrite``).
+        If ``out`` is not empty (and not an earlier output with ``overwrite``).
     """
-    import time
-
-    from lfrefract.formats.jsonio import write_json
     from lfrefract.formats.outputs import staged_directory
 
     experiments = load_experiments()
-    function = experiments[one_of("experiment", name, tuple(sorted(experiments)))]
-    check_scale(scale)
+    experiment = experiments[one_of("experiment", name, tuple(sorted(experiments)))]
+    separate = {
+        "scale": scale if scale != "tiny" else None,
+        "methods": methods,
+        "camera": camera,
+        "port_distance_m": port_distance_m,
+        "thickness_m": thickness_m,
+        "tilts_deg": tilts_deg,
+        "f_numbers": f_numbers,
+    }
+    if options is None:
+        options = ExperimentOptions(**{"scale": scale, **{k: v for k, v in separate.items() if k != "scale"}})
+    else:
+        if not isinstance(options, ExperimentOptions):
+            raise ParameterError(f"options must be an ExperimentOptions, got {shown(options)}")
+        both = sorted(k for k, v in separate.items() if v is not None)
+        if both:
+            raise ParameterError(f"give either options or {', '.join(both)}, not both")
+    experiment.check(options)
+    if options.methods is not None:
+        from simulator.experiments.methods import method_names
+
+        registered = method_names()
+        for method in options.methods:
+            one_of("method", method, registered)
     start = time.perf_counter()
-    with staged_directory(out_dir, kind=f"lfsim.experiment.{name}", overwrite=overwrite) as stage:
-        result = function(stage, scale=scale, progress=progress)
-        write_table(result.rows, stage)
+    with staged_directory(out, kind=f"lfsim.experiment.{name}", overwrite=overwrite) as stage:
+        result = experiment.run(stage, options, progress=progress)
+        rows = complete_rows(result.rows)
+        write_table(rows, stage)
         write_json(
-            stage / "meta.json",
+            stage / SIDECAR_NAME,
             {
                 "kind": "lfsim.experiment",
                 "experiment": name,
-                "scale": scale,
+                "scale": options.scale,
+                "options": options.to_dict(),
                 "parameters": result.parameters,
                 "figures": [p.name for p in result.figures],
                 "summary": result.summary,
                 "seconds": time.perf_counter() - start,
             },
         )
-    out = Path(out_dir)
+    out_dir = Path(out)
     return ExperimentResult(
         name=result.name,
         scale=result.scale,
-        rows=result.rows,
-        figures=tuple(out / p.name for p in result.figures),
+        rows=rows,
+        figures=tuple(out_dir / p.name for p in result.figures),
         summary=result.summary,
         parameters=result.parameters,
     )

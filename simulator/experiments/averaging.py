@@ -40,6 +40,7 @@ from the two raw renders, ``G0, G1`` the two ideal renders, ``G = (G0 + G1) / 2`
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import time
@@ -52,7 +53,7 @@ import numpy as np
 from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.metrics import psnr, ssim
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
-from simulator.experiments import ExperimentResult, check_scale, register
+from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
 
 mpl.use("Agg")
 import matplotlib.pyplot as plt
@@ -283,20 +284,29 @@ def _summary(rows: list[dict], exact: np.ndarray) -> str:
     )
 
 
-@register("averaging")
-def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
-    """Render, synthesize with every k of :data:`K_VALUES`, measure, draw (see the module docstring)."""
+@register("averaging", options=("camera", "port_distance_m", "thickness_m"))
+def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+    """How many captured rays to average per necessary ray: k = 1 to 64 against the ideal image (paper Fig. 9)."""
     from simulator import groundtruth
     from simulator.backend import load_mitsuba, versions
     from simulator.config import RenderSettings, load_scene
     from simulator.job import render_raw
     from simulator.scene import build_scene
 
+    scale = options.scale
     setup = SETUPS[check_scale(scale)]
     out = Path(out_dir)
     timings: dict[str, float] = {}
+    scene = load_scene()
+    camera = camera_preset(setup.camera) if options.camera is None else options.camera
+    port_changes = {
+        key: value
+        for key, value in (("distance_m", options.port_distance_m), ("thickness_m", options.thickness_m))
+        if value is not None
+    }
+    port = dataclasses.replace(scene.port, **port_changes) if port_changes else scene.port
+    scene = scene.with_overrides(camera=camera, port=port)
     mi = load_mitsuba()
-    scene = load_scene().with_overrides(camera=camera_preset(setup.camera))
     camera, port = scene.camera, scene.port
     pinhole = virtual_camera_for(camera)
     glass_free = build_scene(mi, scene, port_geometry=False)
@@ -349,7 +359,7 @@ def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
             }
         )
 
-    label = f"default scene, {setup.camera} camera, {setup.spp} spp (ideal {2 * setup.ideal_spp} spp)"
+    label = f"default scene, {camera.name} camera, {setup.spp} spp (ideal {2 * setup.ideal_spp} spp)"
     fig, crop = _crops_figure(
         {k: (results[k][0], results[k][2]) for k in FIGURE_K},
         ideal,
@@ -368,7 +378,7 @@ def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
 
     parameters = {
         "scene": scene.name,
-        "camera": setup.camera,
+        "camera": camera.name,
         "raw_px": [camera.sensor.width_px, camera.sensor.height_px],
         "output": pinhole.to_dict(),
         "port": port.to_dict(),

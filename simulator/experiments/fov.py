@@ -36,9 +36,13 @@ pinhole image; all full angles, degrees):
 
 The grid: port tilts about the camera x axis (``tilt_x_deg``, normal turned up) from 0 to 40 deg,
 main-lens f-numbers from the preset's upwards (larger ones are always allowed: the image-side
-f-number must not fall below the microlenses'); an untilted port at several distances; for scale
-``illum`` also the reference port of the authors' code (59.2 mm, normal proportional to
-(0.0085, 0.5004, 1), 5 mm glass, water 1.33).
+f-number must not fall below the microlenses'); an untilted port at several distances, with the
+usable aperture radius and with twice it (``aperture = "doubled"``: the authors' code tests a
+necessary ray against a radius of ``f / N``, twice the aperture's ``f / (2 N)``); for scale
+``illum`` also the reference port of the authors' code (:func:`reference_port`: 59.2 mm along the
+optical axis, 52.9 mm perpendicular, normal proportional to (-0.0085, -0.5004, 1) in the camera
+frame, a single air/water interface, water 1.33). The camera, port distance and glass, tilts and
+f-numbers can be changed (:class:`~simulator.experiments.ExperimentOptions`).
 """
 
 from __future__ import annotations
@@ -53,9 +57,21 @@ from tqdm import tqdm
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
 from lfrefract.synthesis.warp_map import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
-from simulator.experiments import ExperimentResult, check_scale, register
+from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
 
-__all__ = ["FovSetup", "exact_mask", "fov_measures", "original_fov", "required_aperture_radius", "run", "setup_for"]
+__all__ = [
+    "APERTURES",
+    "REFERENCE_AXIAL_DISTANCE_M",
+    "REFERENCE_NORMAL",
+    "FovSetup",
+    "exact_mask",
+    "fov_measures",
+    "original_fov",
+    "reference_port",
+    "required_aperture_radius",
+    "run",
+    "setup_for",
+]
 
 #: Necessary rays per block of the trace (memory: about 1 kB per ray).
 BLOCK_RAYS = 1 << 18
@@ -65,10 +81,53 @@ PAPER_PERFECT_FOV_DEG = 30.0
 #: Original field of view quoted by the paper for the Lytro Illum, degrees.
 PAPER_ORIGINAL_FOV_DEG = 60.0
 
+#: The reference port's normal as the authors' code gives it, camera frame (OpenCV: +y down, so
+#: the normal is turned up, 26.6 deg), not normalised.
+REFERENCE_NORMAL = (-0.0085, -0.5004, 1.0)
+#: The reference port's distance as the authors' code gives it: along the optical axis, metres.
+REFERENCE_AXIAL_DISTANCE_M = 0.0592
+#: The water index of the authors' code.
+REFERENCE_N_WATER = 1.33
+
+#: The apertures a distance row is evaluated with: the usable radius, and twice it.
+APERTURES = {"usable": 1.0, "doubled": 2.0}
+
+
+def reference_port() -> FlatPort:
+    """The port of the authors' code: normal :data:`REFERENCE_NORMAL` (normalised), its plane
+    :data:`REFERENCE_AXIAL_DISTANCE_M` from the main-lens centre along the optical axis, no glass
+    (a single air/water interface), water :data:`REFERENCE_N_WATER`.
+
+    The plane ``n . X = d`` (unit ``n``) meets the optical axis at ``z = d / n_z``, so the
+    perpendicular distance that :class:`FlatPort` takes is ``d = z_axis * n_z``:
+    59.2 mm x 0.89426 = 52.94 mm.
+    """
+    normal = np.asarray(REFERENCE_NORMAL) / np.linalg.norm(REFERENCE_NORMAL)
+    return FlatPort.from_normal(
+        normal, distance_m=REFERENCE_AXIAL_DISTANCE_M * float(normal[2]), thickness_m=0.0, n_water=REFERENCE_N_WATER
+    )
+
 
 @dataclass(frozen=True)
 class FovSetup:
-    """What one scale of the experiment measures."""
+    """What one run of the experiment measures.
+
+    Attributes
+    ----------
+    camera : LightFieldCamera
+    distance_m, thickness_m, n_water : float
+        The swept port's perpendicular distance and glass (metres) and the water's index.
+    tilts_deg : tuple of float
+        Tilts about the camera x axis of the tilt series, degrees.
+    f_numbers : tuple of float
+        Main-lens f-numbers, ascending; the first is the one of the distance series.
+    distances_m : tuple of float
+        Port distances of the distance series (untilted), metres.
+    mask_tilts_deg : tuple of float
+        Tilts whose masks are drawn.
+    reference_port : FlatPort or None
+        The authors' port (scale ``illum``).
+    """
 
     camera: LightFieldCamera
     distance_m: float
@@ -81,6 +140,7 @@ class FovSetup:
     reference_port: FlatPort | None = None
 
     def port(self, tilt_x_deg: float, distance_m: float | None = None) -> FlatPort:
+        """The swept port, tilted ``tilt_x_deg`` about x, at ``distance_m`` (default :attr:`distance_m`)."""
         return FlatPort.from_degrees(
             distance_m=self.distance_m if distance_m is None else distance_m,
             thickness_m=self.thickness_m,
@@ -88,33 +148,58 @@ class FovSetup:
             n_water=self.n_water,
         )
 
+    @property
+    def title(self) -> str:
+        """Camera, port distance and glass, for figure titles."""
+        glass = "no glass" if self.thickness_m == 0 else f"{self.thickness_m * 1e3:g} mm glass"
+        return f"{self.camera.name} camera, port {self.distance_m * 1e3:.4g} mm away (perpendicular), {glass}"
 
-def setup_for(scale: str) -> FovSetup:
-    """The camera, port and grid of ``scale`` (``tiny``: the tiny preset behind the port of the
-    synthesis renders, 12 mm, 4 mm glass; ``illum``: the Illum preset behind a port at the
-    reference distance and glass, tilted about x, plus the reference port itself)."""
+
+def setup_for(scale: str, options: ExperimentOptions | None = None) -> FovSetup:
+    """The camera, port and grid of ``scale`` with ``options`` applied.
+
+    ``tiny``: the tiny preset behind the port of the synthesis renders (12 mm, 4 mm glass, water
+    1.333). ``illum``: the Illum preset behind an untilted port at the reference port's distance and
+    glass (:func:`reference_port`: 52.9 mm, none), tilted about x, plus the reference port itself.
+    ``options`` may replace the camera (f-numbers: its own, then the scale's larger ones), the
+    port's distance and glass, the tilts and the f-numbers.
+    """
+    options = options if options is not None else ExperimentOptions(scale=scale)
     tilts = tuple(float(t) for t in np.arange(0.0, 40.0 + 1e-9, 2.5))
     if check_scale(scale) == "tiny":
-        return FovSetup(
-            camera=camera_preset("tiny"),
-            distance_m=0.012,
-            thickness_m=0.004,
-            n_water=1.333,
-            tilts_deg=tilts,
-            f_numbers=(2.2, 2.8, 4.0, 5.6),
-            distances_m=(0.004, 0.006, 0.008, 0.012, 0.016, 0.024, 0.032, 0.048),
-            mask_tilts_deg=(0.0, 15.0, 30.0),
-        )
+        camera, distance, thickness, n_water = camera_preset("tiny"), 0.012, 0.004, 1.333
+        f_numbers, mask_tilts = (2.2, 2.8, 4.0, 5.6), (0.0, 15.0, 30.0)
+        distances = (0.004, 0.006, 0.008, 0.012, 0.016, 0.024, 0.032, 0.048)
+        reference = None
+    else:
+        reference = reference_port()
+        camera, distance, thickness, n_water = camera_preset("illum"), reference.distance_m, 0.0, REFERENCE_N_WATER
+        f_numbers, mask_tilts = (2.0, 2.8, 4.0, 5.6), (0.0, 10.0, 20.0)
+        distances = (0.01, 0.015, 0.02, 0.025, 0.03, 0.04, reference.distance_m, 0.08)
+    if options.camera is not None:
+        camera = options.camera
+        f_numbers = (camera.f_number, *(n for n in f_numbers if n > camera.f_number))
+    if options.f_numbers is not None:
+        f_numbers = tuple(sorted(options.f_numbers))
+    if options.port_distance_m is not None:
+        distance = options.port_distance_m
+    if options.thickness_m is not None:
+        thickness = options.thickness_m
+    distances = tuple(sorted({*distances, distance}))
+    if options.tilts_deg is not None:
+        tilts = tuple(sorted(options.tilts_deg))
+        drawn = tuple(t for t in mask_tilts if t in tilts)
+        mask_tilts = drawn if drawn else tuple(sorted({tilts[0], tilts[len(tilts) // 2], tilts[-1]}))
     return FovSetup(
-        camera=camera_preset("illum"),
-        distance_m=0.0592,
-        thickness_m=0.005,
-        n_water=1.33,
+        camera=camera,
+        distance_m=distance,
+        thickness_m=thickness,
+        n_water=n_water,
         tilts_deg=tilts,
-        f_numbers=(2.0, 2.8, 4.0, 5.6),
-        distances_m=(0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.0592, 0.08),
-        mask_tilts_deg=(0.0, 10.0, 20.0),
-        reference_port=FlatPort.from_normal([0.0085, 0.5004, 1.0], distance_m=0.0592, thickness_m=0.005, n_water=1.33),
+        f_numbers=f_numbers,
+        distances_m=distances,
+        mask_tilts_deg=mask_tilts,
+        reference_port=reference,
     )
 
 
@@ -270,12 +355,13 @@ def _rows_for(
     output: PinholeCamera,
     f_numbers: tuple[float, ...],
     options: SynthesisOptions,
+    aperture: str = "usable",
 ) -> tuple[list[dict], dict[float, np.ndarray]]:
     rows, masks = [], {}
     original = original_fov(output, port)
     for n in f_numbers:
         camera = dataclasses.replace(setup.camera, f_number=n)
-        usable = camera.usable_aperture_radius_m(options.rim_margin_px)
+        usable = camera.usable_aperture_radius_m(options.rim_margin_px) * APERTURES[aperture]
         mask = radius <= usable
         masks[n] = mask
         rows.append(
@@ -284,6 +370,7 @@ def _rows_for(
                 "tilt_deg": round(math.degrees(port.total_tilt_rad), 4),
                 "distance_mm": round(port.distance_m * 1e3, 4),
                 "f_number": n,
+                "aperture": aperture,
                 "usable_aperture_radius_mm": usable * 1e3,
                 "exact_share": float(mask.mean()),
                 **fov_measures(mask, output),
@@ -319,14 +406,19 @@ def _radius_for_fov(radius: np.ndarray, output: PinholeCamera, fov_deg: float) -
 def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, reference_mask, output) -> list[Path]:
     from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
 
     tilt_rows = [r for r in rows if r["series"] == "tilt"]
-    colours = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]
+    colours = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:olive", "tab:cyan", "tab:pink"]
+    colours = (colours * (len(setup.f_numbers) // len(colours) + 1))[: len(setup.f_numbers)]
+    n0 = setup.f_numbers[0]
     paths = []
+    first = min(tilt_rows, key=lambda r: abs(r["tilt_deg"]))
+    ref = [r for r in rows if r["series"] == "reference" and r["f_number"] == n0]
 
     fig = Figure(figsize=(6.4, 4.2))
     ax = fig.add_subplot()
-    for colour, n in zip(colours, setup.f_numbers, strict=False):
+    for colour, n in zip(colours, setup.f_numbers, strict=True):
         sel = [r for r in tilt_rows if r["f_number"] == n]
         ax.plot(
             [r["tilt_deg"] for r in sel],
@@ -338,89 +430,121 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
         )
     ax.set_xlabel("port tilt about x [deg]")
     ax.set_ylabel("exact pixels [% of the refraction-free image]")
-    ax.set_title(f"{setup.camera.name}: port {setup.distance_m * 1e3:g} mm away, {setup.thickness_m * 1e3:g} mm glass")
+    ax.set_title(f"exact share: {setup.title}", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(title="main lens")
     paths.append(out_dir / "fov_exact_share.png")
     fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
 
-    fig = Figure(figsize=(11.5, 4.2))
+    fig = Figure(figsize=(11.5, 4.6))
     ax, bx = fig.subplots(1, 2)
-    for colour, n in zip(colours, setup.f_numbers, strict=False):
+    for colour, n in zip(colours, setup.f_numbers, strict=True):
         sel = [r for r in tilt_rows if r["f_number"] == n]
         t = [r["tilt_deg"] for r in sel]
         ax.plot(t, [r["perfect_fov_h_deg"] for r in sel], "o-", ms=3, color=colour, label=f"f/{n:g} horizontal")
         ax.plot(t, [r["perfect_fov_v_deg"] for r in sel], "s--", ms=3, color=colour, label=f"f/{n:g} vertical")
-    first = tilt_rows[0]
-    ax.axhline(first["original_fov_h_deg"], color="k", lw=1, label="original, horizontal (in air)")
-    ax.axhline(first["original_fov_v_deg"], color="k", lw=1, ls="--", label="original, vertical (in air)")
+    ax.axhline(first["original_fov_h_deg"], color="k", lw=1, label="original FOV, horizontal (in air)")
+    ax.axhline(first["original_fov_v_deg"], color="k", lw=1, ls="--", label="original FOV, vertical (in air)")
     ax.axhline(
-        first["original_fov_water_h_deg"], color="grey", lw=1, ls=":", label="original, horizontal (in water, 0 deg)"
+        first["original_fov_water_h_deg"],
+        color="grey",
+        lw=1,
+        ls=":",
+        label=f"original FOV, horizontal (in water, {first['tilt_deg']:g} deg)",
     )
-    ref = [r for r in rows if r["series"] == "reference"]
     if ref:
-        ax.axhline(PAPER_PERFECT_FOV_DEG, color="tab:brown", lw=2, alpha=0.4, label="paper: perfect FOV")
-        ax.plot([ref[0]["tilt_deg"]], [ref[0]["perfect_fov_h_deg"]], "k*", ms=10, label="reference port, f/2 (h)")
+        ax.axhline(PAPER_PERFECT_FOV_DEG, color="tab:brown", lw=2, alpha=0.4, label="paper: perfect FOV, about 30 deg")
+        ax.plot([ref[0]["tilt_deg"]], [ref[0]["perfect_fov_h_deg"]], "k*", ms=10, label=f"reference port, f/{n0:g} (h)")
     ax.set_xlabel("port tilt about x [deg]")
     ax.set_ylabel("field of view [deg]")
-    ax.set_title("perfect (all pixels exact) against original field of view")
+    ax.set_title("perfect (all pixels exact) against original field of view", fontsize=9)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.14))
-    dist_rows = [r for r in rows if r["series"] == "distance"]
-    d = [r["distance_mm"] for r in dist_rows]
-    bx.plot(d, [r["perfect_fov_h_deg"] for r in dist_rows], "o-", ms=3, label="perfect, horizontal")
-    bx.plot(d, [r["perfect_fov_v_deg"] for r in dist_rows], "s--", ms=3, label="perfect, vertical")
-    bx.plot(d, [r["perfect_fov_equiv_deg"] for r in dist_rows], "^:", ms=3, label="perfect, equivalent cone")
-    bx.axhline(first["original_fov_h_deg"], color="k", lw=1, label="original, horizontal (in air)")
-    bx.axhline(first["original_fov_water_h_deg"], color="grey", lw=1, ls=":", label="original, horizontal (in water)")
+    styles = {"usable": ("o-", "s--", "tab:blue"), "doubled": ("^-", "v--", "tab:red")}
+    for aperture, (h_style, v_style, colour) in styles.items():
+        dist_rows = [r for r in rows if r["series"] == "distance" and r["aperture"] == aperture]
+        if not dist_rows:
+            continue
+        d = [r["distance_mm"] for r in dist_rows]
+        radius = dist_rows[0]["usable_aperture_radius_mm"]
+        what = "usable aperture" if aperture == "usable" else "twice the usable aperture (the authors' f/N)"
+        bx.plot(
+            d,
+            [r["perfect_fov_h_deg"] for r in dist_rows],
+            h_style,
+            ms=3,
+            color=colour,
+            label=f"perfect, horizontal: {what}, radius {radius:.2f} mm",
+        )
+        bx.plot(
+            d,
+            [r["perfect_fov_v_deg"] for r in dist_rows],
+            v_style,
+            ms=3,
+            color=colour,
+            alpha=0.6,
+            label=f"perfect, vertical: {what}",
+        )
+    bx.axhline(first["original_fov_h_deg"], color="k", lw=1, label="original FOV, horizontal (in air)")
+    bx.axhline(
+        first["original_fov_water_h_deg"], color="grey", lw=1, ls=":", label="original FOV, horizontal (in water)"
+    )
     if ref:
-        bx.axhline(PAPER_PERFECT_FOV_DEG, color="tab:brown", lw=2, alpha=0.4, label="paper: perfect FOV")
-    bx.axvline(setup.distance_m * 1e3, color="k", lw=0.5, ls="-.")
-    bx.set_xlabel("port distance [mm] (untilted port)")
-    bx.set_title(f"untilted port, f/{setup.camera.f_number:g}")
+        bx.axhline(PAPER_PERFECT_FOV_DEG, color="tab:brown", lw=2, alpha=0.4, label="paper: perfect FOV, about 30 deg")
+    bx.axvline(
+        setup.distance_m * 1e3, color="k", lw=0.5, ls="-.", label=f"this set-up's port: {setup.distance_m * 1e3:.4g} mm"
+    )
+    bx.set_xlabel("port distance [mm] (untilted port, perpendicular)")
+    bx.set_ylabel("field of view [deg]")
+    bx.set_title(f"untilted port, f/{n0:g}", fontsize=9)
     bx.set_ylim(bottom=0)
     bx.grid(alpha=0.3)
-    bx.legend(fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.14))
+    bx.legend(fontsize=7, ncol=1, loc="upper center", bbox_to_anchor=(0.5, -0.14))
+    fig.suptitle(f"perfect field of view: {setup.title}", fontsize=10)
     paths.append(out_dir / "fov_perfect_fov.png")
     fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
 
     panels = [(f"tilt {t:g} deg", masks[t]) for t in setup.mask_tilts_deg]
     if reference_mask is not None:
-        panels.append(("reference port (26.6 deg, down)", reference_mask))
+        tilt = math.degrees(setup.reference_port.total_tilt_rad)
+        way = "up" if setup.reference_port.normal[1] < 0 else "down"
+        panels.append((f"reference port ({tilt:.1f} deg, {way})", reference_mask))
     aspect = output.height_px / output.width_px
-    fig = Figure(figsize=(3.6 * len(panels), 3.6 * aspect + 0.6))
+    fig = Figure(figsize=(3.6 * len(panels), 3.6 * aspect + 0.9))
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
-    cmap = ListedColormap(["0.85", *colours[: len(setup.f_numbers)]])
+    cmap = ListedColormap(["0.85", *colours])
     for ax, (title, by_n) in zip(axes, panels, strict=True):
         level = sum(by_n[n].astype(int) for n in setup.f_numbers)  # nested: exact up to the level-th f-number
         ax.imshow(level, cmap=cmap, vmin=-0.5, vmax=len(setup.f_numbers) + 0.5, interpolation="nearest")
         ax.plot([output.cx_px], [output.cy_px], "k+", ms=8)
-        share = 100 * by_n[setup.f_numbers[0]].mean()
-        ax.set_title(f"{title}: {share:.{1 if share >= 1 else 2}f} % exact at f/{setup.f_numbers[0]:g}", fontsize=8)
+        share = 100 * by_n[n0].mean()
+        ax.set_title(f"{title}: {share:.{1 if share >= 1 else 2}f} % exact at f/{n0:g}", fontsize=8)
         ax.set_xticks([])
         ax.set_yticks([])
-    from matplotlib.patches import Patch
-
-    handles = [Patch(color="0.85", label="not exact")]
-    handles += [Patch(color=colours[i], label=f"exact up to f/{n:g}") for i, n in enumerate(setup.f_numbers)]
+    handles = [
+        Patch(color="0.85", label="not exact"),
+        *[Patch(color=colours[i], label=f"exact up to f/{n:g}") for i, n in enumerate(setup.f_numbers)],
+    ]
     fig.legend(
         handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.08), ncol=len(handles), fontsize=7, frameon=False
     )
+    fig.suptitle(f"exact pixels (+: principal point): {setup.title}", fontsize=9)
     paths.append(out_dir / "fov_masks.png")
     fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
     return paths
 
 
-@register("fov")
-def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
-    """Exact share and perfect field of view against port tilt, f-number and port distance."""
-    setup = setup_for(scale)
+@register("fov", options=("camera", "port_distance_m", "thickness_m", "tilts_deg", "f_numbers"))
+def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+    """Exact share and perfect field of view against port tilt, f-number and port distance (paper section 6)."""
+    setup = setup_for(options.scale, options)
     out_dir = Path(out_dir)
-    options = SynthesisOptions()
+    synthesis = SynthesisOptions()
     output = virtual_camera_for(setup.camera)
     for n in setup.f_numbers:  # the camera validates each f-number (no overlapping micro-images)
         dataclasses.replace(setup.camera, f_number=n)
+    n0 = setup.f_numbers[0]
     jobs = [("tilt", t, setup.distance_m) for t in setup.tilts_deg]
     jobs += [("distance", 0.0, d) for d in setup.distances_m]
     if setup.reference_port is not None:
@@ -431,19 +555,21 @@ def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
     untilted_radius = None
     for series, tilt, distance in tqdm(jobs, desc="fov", unit="port", disable=not progress):
         port = setup.reference_port if series == "reference" else setup.port(tilt, distance)
-        radius = required_aperture_radius(setup.camera, port, output, supersample=options.supersample)
-        f_numbers = setup.f_numbers if series != "distance" else (setup.camera.f_number,)
-        new, by_n = _rows_for(series, setup, port, radius, output, f_numbers, options)
-        rows += new
-        if series == "tilt":
-            if tilt in setup.mask_tilts_deg:
-                masks[tilt] = by_n
-            if tilt == 0.0:
+        radius = required_aperture_radius(setup.camera, port, output, supersample=synthesis.supersample)
+        if series == "distance":
+            for aperture in APERTURES:
+                rows += _rows_for(series, setup, port, radius, output, (n0,), synthesis, aperture)[0]
+            if distance == setup.distance_m:
                 untilted_radius = radius
+            continue
+        new, by_n = _rows_for(series, setup, port, radius, output, setup.f_numbers, synthesis)
+        rows += new
+        if series == "tilt" and tilt in setup.mask_tilts_deg:
+            masks[tilt] = by_n
         elif series == "reference":
             reference_mask = by_n
     figures = _figures(out_dir, setup, rows, masks, reference_mask, output)
-    summary = _summary(setup, rows, untilted_radius, output, options)
+    summary = _summary(setup, rows, untilted_radius, output, synthesis)
     parameters = {
         "camera": setup.camera.to_dict(),
         "port": {"distance_m": setup.distance_m, "thickness_m": setup.thickness_m, "n_water": setup.n_water},
@@ -451,22 +577,36 @@ def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
         "tilt_axis": "x (tilt_x_deg: normal turned up)",
         "f_numbers": list(setup.f_numbers),
         "distances_m": list(setup.distances_m),
+        "apertures": dict(APERTURES),
         "reference_port": None if setup.reference_port is None else setup.reference_port.to_dict(),
+        "reference_port_axial_distance_m": None if setup.reference_port is None else REFERENCE_AXIAL_DISTANCE_M,
         "output": output.to_dict(),
-        "supersample": options.supersample,
-        "rim_margin_px": options.rim_margin_px,
+        "supersample": synthesis.supersample,
+        "rim_margin_px": synthesis.rim_margin_px,
     }
     return ExperimentResult(
-        name="fov", scale=scale, rows=tuple(rows), figures=tuple(figures), summary=summary, parameters=parameters
+        name="fov",
+        scale=options.scale,
+        rows=tuple(rows),
+        figures=tuple(figures),
+        summary=summary,
+        parameters=parameters,
     )
 
 
 def _summary(setup: FovSetup, rows: list[dict], untilted_radius, output: PinholeCamera, options) -> str:
-    n0, n1 = setup.camera.f_number, setup.f_numbers[-1]
+    n0, n1 = setup.f_numbers[0], setup.f_numbers[-1]
+    tilt_rows = [r for r in rows if r["series"] == "tilt"]
+    zero_tilt = min((r["tilt_deg"] for r in tilt_rows), key=abs)
 
-    def row(series: str, tilt: float | None = None, n: float = n0) -> dict:
+    def row(series: str, tilt: float | None = None, n: float = n0, aperture: str = "usable") -> dict:
         return next(
-            r for r in rows if r["series"] == series and r["f_number"] == n and (tilt is None or r["tilt_deg"] == tilt)
+            r
+            for r in rows
+            if r["series"] == series
+            and r["f_number"] == n
+            and r["aperture"] == aperture
+            and (tilt is None or r["tilt_deg"] == tilt)
         )
 
     def fov(r: dict) -> str:
@@ -475,17 +615,21 @@ def _summary(setup: FovSetup, rows: list[dict], untilted_radius, output: Pinhole
             f"{r['perfect_fov_v_deg']:.1f} deg (equivalent cone {r['perfect_fov_equiv_deg']:.1f} deg)"
         )
 
-    zero, slow, mid = row("tilt", 0.0), row("tilt", 0.0, n1), row("tilt", setup.mask_tilts_deg[1])
-    gone = next(
-        (r["tilt_deg"] for r in rows if r["series"] == "tilt" and r["f_number"] == n0 and r["exact_share"] == 0), None
-    )
+    zero, slow = row("tilt", zero_tilt), row("tilt", zero_tilt, n1)
+    mid = row("tilt", setup.mask_tilts_deg[len(setup.mask_tilts_deg) // 2])
+    gone = next((r["tilt_deg"] for r in tilt_rows if r["f_number"] == n0 and r["exact_share"] == 0), None)
     sensor_limited = zero["perfect_fov_h_deg"] >= zero["original_fov_water_h_deg"] - 0.5
+    here = round(setup.distance_m * 1e3, 4)
+    untilted, doubled = (
+        next(r for r in rows if r["series"] == "distance" and r["aperture"] == a and r["distance_mm"] == here)
+        for a in ("usable", "doubled")
+    )
     lines = [
-        f"- {setup.camera.name} camera, port {setup.distance_m * 1e3:g} mm away, {setup.thickness_m * 1e3:g} mm glass, "
-        f"water {setup.n_water:g}; refraction-free image {output.width_px} x {output.height_px} px, original FOV "
-        f"{zero['original_fov_h_deg']:.1f} x {zero['original_fov_v_deg']:.1f} deg in air ("
-        f"{zero['original_fov_water_h_deg']:.1f} x {zero['original_fov_water_v_deg']:.1f} deg in the water, untilted).",
-        f"- Untilted, f/{n0:g}: {fov(zero)}"
+        f"- {setup.title}, water {setup.n_water:g}; refraction-free image {output.width_px} x {output.height_px} px, "
+        f"original FOV {zero['original_fov_h_deg']:.1f} x {zero['original_fov_v_deg']:.1f} deg in air ("
+        f"{zero['original_fov_water_h_deg']:.1f} x {zero['original_fov_water_v_deg']:.1f} deg in the water at "
+        f"{zero_tilt:g} deg).",
+        f"- Tilt {zero_tilt:g} deg, f/{n0:g}: {fov(zero)}"
         + (
             ": the camera's whole field in the water (limited by the sensor, not the aperture)."
             if sensor_limited
@@ -493,39 +637,42 @@ def _summary(setup: FovSetup, rows: list[dict], untilted_radius, output: Pinhole
         )
         + f" At f/{n1:g}: {fov(slow)}. A larger f-number means a smaller usable aperture, so fewer necessary rays "
         "are recorded: the exact region at a larger f-number lies inside the one at a smaller f-number.",
+        f"- Untilted, f/{n0:g}, usable aperture radius {untilted['usable_aperture_radius_mm']:.2f} mm: perfect FOV "
+        f"{untilted['perfect_fov_h_deg']:.1f} deg; with twice that radius ({doubled['usable_aperture_radius_mm']:.2f} "
+        f"mm, as the authors' code tests the aperture: radius f/N): {doubled['perfect_fov_h_deg']:.1f} deg.",
         f"- Tilted {mid['tilt_deg']:g} deg, f/{n0:g}: {fov(mid)}"
         + (f"; no exact pixel from {gone:g} deg on" if gone is not None else "")
         + ". The exact region is a cone of lines of sight about the port normal (undeviated there): tilt hardly "
         "changes its angular size but moves it towards the image edge and out of the image (the pixel share can "
         "first rise a little, as a cone off axis covers more pixels).",
     ]
-    if setup.reference_port is None:
+    if setup.reference_port is None or untilted_radius is None:
         return "\n".join(lines)
     ref = row("reference")
-    dist_rows = sorted((r for r in rows if r["series"] == "distance"), key=lambda r: r["distance_mm"])
+    dist_rows = sorted(
+        (r for r in rows if r["series"] == "distance" and r["aperture"] == "usable"), key=lambda r: r["distance_mm"]
+    )
     d30 = _crossing(
         np.array([r["distance_mm"] for r in dist_rows]),
         np.array([r["perfect_fov_h_deg"] for r in dist_rows]),
         PAPER_PERFECT_FOV_DEG,
     )
-    aperture = setup.camera.aperture_radius_m
-    full = fov_measures(untilted_radius <= aperture, output)["perfect_fov_h_deg"]
-    doubled = fov_measures(untilted_radius <= 2 * aperture, output)["perfect_fov_h_deg"]
+    aperture = dataclasses.replace(setup.camera, f_number=n0).aperture_radius_m
+    whole = fov_measures(untilted_radius <= aperture, output)["perfect_fov_h_deg"]
+    whole2 = fov_measures(untilted_radius <= 2 * aperture, output)["perfect_fov_h_deg"]
     r30 = _radius_for_fov(untilted_radius, output, PAPER_PERFECT_FOV_DEG)
+    way = "up" if setup.reference_port.normal[1] < 0 else "down"
     lines += [
-        f"- Reference port of the authors' code ({ref['tilt_deg']:.1f} deg, normal down), f/{n0:g}: {fov(ref)}; "
-        f"none at f/{setup.f_numbers[1]:g} and above.",
+        f"- Reference port of the authors' code ({ref['tilt_deg']:.1f} deg, normal {way}, "
+        f"{REFERENCE_AXIAL_DISTANCE_M * 1e3:g} mm along the axis = {setup.reference_port.distance_m * 1e3:.1f} mm "
+        f"perpendicular, no glass), f/{n0:g}: {fov(ref)}.",
         f"- Paper (section 6): perfect FOV about {PAPER_PERFECT_FOV_DEG:g} deg against about "
         f"{PAPER_ORIGINAL_FOV_DEG:g} deg original. The original agrees ({zero['original_fov_h_deg']:.1f} deg "
-        f"horizontally in air); the perfect FOV here is much narrower: {zero['perfect_fov_h_deg']:.1f} deg untilted "
-        f"and {ref['perfect_fov_h_deg']:.1f} x {ref['perfect_fov_v_deg']:.1f} deg at the reference tilt, whose exact "
-        f"cone about the port normal ({ref['tilt_deg']:.1f} deg off axis) lies almost entirely outside the "
-        f"{zero['original_fov_v_deg']:.0f} deg tall image. Untilted, {PAPER_PERFECT_FOV_DEG:g} deg would need the port "
-        f"at about {d30:.0f} mm instead of {setup.distance_m * 1e3:g} mm, or a usable aperture radius of "
-        f"{r30 * 1e3:.2f} mm instead of {setup.camera.usable_aperture_radius_m(options.rim_margin_px) * 1e3:.2f} mm "
-        f"(the whole f/{n0:g} aperture, radius {aperture * 1e3:.2f} mm without the rim margin: "
-        f"{full:.1f} deg; its diameter taken as the radius: {doubled:.1f} deg). The paper states neither its port "
-        "distance for this figure nor how it computed it; a port about 2.5 times closer (or an aperture about 2.5 "
-        "times wider) reproduces it.",
+        f"horizontally in air). The perfect FOV untilted at {setup.distance_m * 1e3:.1f} mm: "
+        f"{untilted['perfect_fov_h_deg']:.1f} deg with the usable f/{n0:g} aperture (radius "
+        f"{untilted['usable_aperture_radius_mm']:.2f} mm), {whole:.1f} deg with the whole aperture (radius "
+        f"{aperture * 1e3:.2f} mm, no rim margin); with those radii doubled (the authors' code tests radius f/N): "
+        f"{doubled['perfect_fov_h_deg']:.1f} and {whole2:.1f} deg. {PAPER_PERFECT_FOV_DEG:g} deg would need a usable "
+        f"radius of {r30 * 1e3:.2f} mm, or the port at about {d30:.0f} mm.",
     ]
     return "\n".join(lines)

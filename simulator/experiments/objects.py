@@ -28,6 +28,7 @@ Figures: the depth error maps by matcher and method (``objects_depth_error.png``
 
 from __future__ import annotations
 
+import math
 import re
 import tempfile
 from dataclasses import dataclass
@@ -35,32 +36,36 @@ from pathlib import Path
 
 import numpy as np
 
-from lfrefract import virtual_camera_for
-from lfrefract.formats.exr import read_exr
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import depth_errors, disparity_errors
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.stereo.geometry import disparity_to_points
-from simulator.experiments import ExperimentResult, check_scale, register
+from simulator.config import Bowl, Figurine, Placement, SceneObject, TexturedPlane
+from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
+from simulator.experiments.methods import depth_points
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
     MATCHERS,
-    METHOD_NAMES,
+    PreparedMethod,
     RigSetup,
     aim,
-    calibrated_methods,
     chessboards,
+    describe_error,
     exact_coverage,
+    experiment_rig,
     match,
+    prepare_methods,
     render_captures,
-    rig_data,
     warp_maps,
 )
-from simulator.rig import parse_rig
+from simulator.rig import RigConfig
 
-__all__ = ["BAD_PIXEL_THRESHOLDS_PX", "ObjectsSetup", "run_objects", "setup_for"]
+__all__ = ["BAD_PIXEL_THRESHOLDS_PX", "DEPTH_MATCHER", "ObjectsSetup", "run_objects", "scene_objects", "setup_for"]
 
 #: Disparity error thresholds of the bad-pixel rates, pixels (Middlebury's usual ones).
 BAD_PIXEL_THRESHOLDS_PX = (0.5, 1.0, 2.0)
+#: The ``matcher`` of the rows of a method that estimates depth itself (no stereo matching).
+DEPTH_MATCHER = "none"
 
 
 @dataclass(frozen=True)
@@ -97,50 +102,52 @@ def setup_for(scale: str) -> ObjectsSetup:
     )
 
 
-def _scene_objects(base, size: float) -> list[dict]:
+def scene_objects(base: RigConfig, size: float) -> tuple[SceneObject, ...]:
+    """The bowl (0.31 m), the figurine (0.34 m) and the backdrop (0.7 m), times ``size``, on the rig's
+    line of sight."""
     bowl_at = aim(base, 0.31 * size) + np.array([-0.05, 0.01, 0.0]) * size
     figurine_at = aim(base, 0.34 * size) + np.array([0.05, 0.0, 0.0]) * size
-    return [
-        {
-            "type": "bowl",
-            "position_m": bowl_at.tolist(),
-            "rotation_xyz_deg": [-30.0, 0.0, 0.0],
-            "radius_m": 0.045 * size,
-            "depth_m": 0.03 * size,
-            "texture_seed": 11,
-        },
-        {
-            "type": "figurine",
-            "position_m": figurine_at.tolist(),
-            "height_m": 0.1 * size,
-            "seed": 3,
-            "texture_seed": 12,
-        },
-        {
-            "type": "textured_plane",
-            "position_m": aim(base, 0.7 * size).tolist(),
-            "size_m": [1.0 * size, 0.8 * size],
-            "texture_px": 1024,
-            "texture_seed": 13,
-        },
-    ]
+    return (
+        Bowl(
+            placement=Placement(position_m=tuple(bowl_at), rotation_xyz_deg=(-30.0, 0.0, 0.0)),
+            radius_m=0.045 * size,
+            depth_m=0.03 * size,
+            texture_seed=11,
+        ),
+        Figurine(placement=Placement(position_m=tuple(figurine_at)), height_m=0.1 * size, seed=3, texture_seed=12),
+        TexturedPlane(
+            placement=Placement(position_m=tuple(aim(base, 0.7 * size))),
+            size_m=(1.0 * size, 0.8 * size),
+            texture_px=1024,
+            texture_seed=13,
+        ),
+    )
 
 
-def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) -> ExperimentResult:
-    """Run the experiment (see the module docstring); figures and clouds go to ``out_dir``."""
+def run_objects(
+    out_dir: Path, *, scale: str = "tiny", options: ExperimentOptions | None = None, progress: bool = True
+) -> ExperimentResult:
+    """Run the experiment (see the module docstring); figures and clouds go to ``out_dir``.
+
+    ``options``: the methods, camera and wall of :class:`~simulator.experiments.ExperimentOptions`
+    (its scale replaces ``scale``).
+    """
+    options = options if options is not None else ExperimentOptions(scale=scale)
+    scale = options.scale
     objects_setup = setup_for(scale)
     setup = objects_setup.rig
-    base = parse_rig(rig_data(setup, []))
+    base = experiment_rig(setup, options)
     depths = setup.calibration_depths_m
     nearest, farthest = 0.25 * objects_setup.size, 0.8 * objects_setup.size  # disparity search range
+    first = base.cameras[0].name
     with tempfile.TemporaryDirectory(prefix="lfsim-objects-") as tmp:
         work = Path(tmp)
         jobs = [(f"board-{d}-{i}", [b]) for d in depths for i, b in enumerate(chessboards(base, setup, d))]
-        jobs.append(("objects", _scene_objects(base, objects_setup.size)))
-        captures = render_captures(setup, jobs, work, progress=progress)
+        jobs.append(("objects", scene_objects(base, objects_setup.size)))
+        captures = render_captures(base, jobs, work, progress=progress)
         boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(BOARD_OFFSETS))] for d in depths}
         scene = captures["objects"]
-        truth = read_exr(scene.folder / "left" / "depth.exr", role="depth")
+        truth = scene.depth(first)
         mask = np.isfinite(truth) & (truth < objects_setup.mask_depth_m)
         view = virtual_camera_for(base.cameras[0].scene.camera)
         warps = warp_maps(base)
@@ -148,48 +155,26 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
         surface = directions[mask] * (truth[mask] / directions[mask][:, 2])[:, None]  # left frame, m
         exact = np.zeros_like(mask)
         exact[mask] = exact_coverage(surface, base, warps)
-        rows, errors = [], {}
-        methods = calibrated_methods(base, setup, boards, progress=progress, warps=warps)
-        for method, project, rect, stereo, pairs in methods:
-            left, right = rect.apply(project("left", scene), project("right", scene))
-            focal_baseline = rect.focal_px * rect.baseline_m  # disparity (px) times depth (m)
-            low, high = focal_baseline / farthest, focal_baseline / nearest
-            for matcher in MATCHERS:
-                disparity = match(matcher, left, right, min_disparity_px=int(low), num_disparities=int(high - low) + 3)
-                points = disparity_to_points(disparity, rect)
-                suffix = "" if matcher == MATCHERS[0] else f"_{matcher}"
-                write_ply(Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}{suffix}.ply", points)
-                estimate = _splat(points, view)
-                result = depth_errors(estimate, truth, valid=mask)
-                bad = disparity_errors(
-                    focal_baseline / estimate,
-                    focal_baseline / truth,
-                    thresholds_px=BAD_PIXEL_THRESHOLDS_PX,
-                    valid=mask,
-                )
-                errors[(matcher, method)] = np.where(mask, np.abs(estimate - truth), np.nan)
-                rows.append(
-                    {
-                        "matcher": matcher,
-                        "method": method,
-                        "median_abs_mm": float(np.nanmedian(errors[(matcher, method)][mask])) * 1e3,
-                        "mean_abs_mm": result.mean_abs_m * 1e3,
-                        "rms_mm": result.rms_m * 1e3,
-                        "bias_mm": result.bias_m * 1e3,
-                        **{f"bad_{t:g}px": f for t, f in zip(BAD_PIXEL_THRESHOLDS_PX, bad.bad_fractions, strict=True)},
-                        "completeness": result.completeness,
-                        "exact_share": float(exact.sum() / max(mask.sum(), 1)),
-                        "exact_median_abs_mm": float(np.nanmedian(errors[(matcher, method)][exact])) * 1e3,
-                        "exact_mean_abs_mm": float(np.nanmean(errors[(matcher, method)][exact])) * 1e3,
-                        "stereo_rms_px": stereo.rms_px,
-                        "boards": pairs,
-                    }
-                )
-    figure = _figure(Path(out_dir), errors)
+        measure = _Measure(out_dir=Path(out_dir), view=view, truth=truth, mask=mask, exact=exact)
+        rows, errors, order = [], {}, []
+        prepared = prepare_methods(base, setup, boards, methods=options.methods, progress=progress, warps=warps)
+        for method in prepared:
+            order.append(method.name)
+            if not method.ok:
+                rows += [_failed(method.name, method.error, m) for m in MATCHERS]
+                continue
+            try:
+                rows += measure.rows(method, scene, base, (nearest, farthest), errors)
+            except Exception as exc:  # a method failing on the capture is a row, not a failed run
+                matchers = (DEPTH_MATCHER,) if method.depth is not None else MATCHERS
+                rows += [_failed(method.name, describe_error(exc), m) for m in matchers]
+    figure = _figure(Path(out_dir), errors, order)
     summary = "\n".join(
         f"- {r['matcher']}, {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
         f"{r['rms_mm']:.2f} mm RMS, bad 1 px {r['bad_1px']:.2f}, completeness {r['completeness']:.2f}; "
         f"exact coverage ({r['exact_share']:.2f} of the pixels): {r['exact_median_abs_mm']:.2f} mm median"
+        if r["status"] == "ok"
+        else f"- {r['matcher']}, {r['method']}: failed: {r['error']}"
         for r in rows
     )
     return ExperimentResult(
@@ -199,8 +184,78 @@ def run_objects(out_dir: Path, *, scale: str = "tiny", progress: bool = True) ->
         figures=(figure,),
         summary="depth error on the bowl and the figurine:\n" + summary,
         parameters=dict(setup.__dict__)
-        | {"size": objects_setup.size, "object_mask_depth_m": objects_setup.mask_depth_m},
+        | {"size": objects_setup.size, "object_mask_depth_m": objects_setup.mask_depth_m, "methods": order}
+        | {"wall": base.wall.to_dict(), "camera": base.cameras[0].scene.camera.name},
     )
+
+
+def _failed(method: str, error: str, matcher: str) -> dict:
+    return {"matcher": matcher, "method": method, "status": "failed", "error": error}
+
+
+@dataclass(frozen=True, eq=False)
+class _Measure:
+    """The ground truth of the objects' capture and how a method's points are scored against it."""
+
+    out_dir: Path
+    view: PinholeCamera  # the left ideal image's geometry
+    truth: np.ndarray  # (H, W) true depth, metres
+    mask: np.ndarray  # (H, W) the objects' pixels
+    exact: np.ndarray  # (H, W) those seen through exact pixels of both cameras
+
+    def rows(self, method: PreparedMethod, shot, base: RigConfig, search_m, errors: dict) -> list[dict]:
+        """One row per matcher (one for a depth method), and the error maps into ``errors``."""
+        nearest, farthest = search_m
+        if method.depth is not None:
+            points = depth_points(np.asarray(method.depth.depth(shot)), method.depth.output)
+            # The disparity that each depth implies on a rig of the cameras' true baseline and the view's focal length.
+            baseline = float(np.linalg.norm(base.relative_pose(1)[1]))
+            return [self._row(method, DEPTH_MATCHER, points, self.view.focal_px * baseline, errors, math.nan, 0)]
+        rect = method.rectification
+        first, second = base.cameras[0].name, base.cameras[1].name
+        left, right = rect.apply(method.images.project(first, shot), method.images.project(second, shot))
+        focal_baseline = rect.focal_px * rect.baseline_m  # disparity (px) times depth (m)
+        low, high = focal_baseline / farthest, focal_baseline / nearest
+        out = []
+        for matcher in MATCHERS:
+            disparity = match(matcher, left, right, min_disparity_px=int(low), num_disparities=int(high - low) + 3)
+            points = disparity_to_points(disparity, rect)
+            suffix = "" if matcher == MATCHERS[0] else f"_{matcher}"
+            write_ply(self.out_dir / f"cloud_{re.sub('[^a-z]+', '_', method.name)}{suffix}.ply", points)
+            out.append(self._row(method, matcher, points, focal_baseline, errors, method.stereo.rms_px, method.boards))
+        return out
+
+    def _row(self, method, matcher, points, focal_baseline, errors, stereo_rms_px, boards) -> dict:
+        mask, truth, exact = self.mask, self.truth, self.exact
+        estimate = _splat(points, self.view)
+        result = depth_errors(estimate, truth, valid=mask)
+        bad = disparity_errors(
+            focal_baseline / estimate, focal_baseline / truth, thresholds_px=BAD_PIXEL_THRESHOLDS_PX, valid=mask
+        )
+        error = np.where(mask, np.abs(estimate - truth), np.nan)
+        errors[(matcher, method.name)] = error
+        return {
+            "matcher": matcher,
+            "method": method.name,
+            "median_abs_mm": _mm(np.nanmedian, error[mask]),
+            "mean_abs_mm": result.mean_abs_m * 1e3,
+            "rms_mm": result.rms_m * 1e3,
+            "bias_mm": result.bias_m * 1e3,
+            **{f"bad_{t:g}px": f for t, f in zip(BAD_PIXEL_THRESHOLDS_PX, bad.bad_fractions, strict=True)},
+            "completeness": result.completeness,
+            "exact_share": float(exact.sum() / max(mask.sum(), 1)),
+            "exact_median_abs_mm": _mm(np.nanmedian, error[exact]),
+            "exact_mean_abs_mm": _mm(np.nanmean, error[exact]),
+            "stereo_rms_px": stereo_rms_px,
+            "boards": boards,
+            "status": "ok",
+            "error": "",
+        }
+
+
+def _mm(statistic, errors_m: np.ndarray) -> float:
+    """``statistic`` (nanmedian, nanmean) of errors in metres, in mm; NaN without a finite error."""
+    return float(statistic(errors_m)) * 1e3 if np.isfinite(errors_m).any() else math.nan
 
 
 def _splat(points_cam: np.ndarray, view) -> np.ndarray:
@@ -214,25 +269,32 @@ def _splat(points_cam: np.ndarray, view) -> np.ndarray:
     return depth
 
 
-def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray]) -> Path:
+def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray], order: list[str]) -> Path:
     import matplotlib as mpl
 
     mpl.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(
-        len(MATCHERS), len(METHOD_NAMES), figsize=(2.8 * len(METHOD_NAMES), 2.4 * len(MATCHERS)), squeeze=False
-    )
+    shown = [m for m in order if any((matcher, m) in errors for matcher in (*MATCHERS, DEPTH_MATCHER))]
+    columns = max(len(shown), 1)
+    fig, axes = plt.subplots(len(MATCHERS), columns, figsize=(2.8 * columns, 2.4 * len(MATCHERS)), squeeze=False)
     top = max((float(np.nanpercentile(e, 95)) for e in errors.values() if np.isfinite(e).any()), default=1.0)
+    image = None
     for i, matcher in enumerate(MATCHERS):
-        for ax, method in zip(axes[i], METHOD_NAMES, strict=True):
-            image = ax.imshow(errors[(matcher, method)] * 1e3, cmap="magma", vmin=0, vmax=top * 1e3)
+        for j in range(columns):
+            ax = axes[i, j]
             ax.set_xticks([])
             ax.set_yticks([])
+            if j >= len(shown):
+                continue
+            error = errors.get((matcher, shown[j]), errors.get((DEPTH_MATCHER, shown[j])))
+            if error is not None:
+                image = ax.imshow(error * 1e3, cmap="magma", vmin=0, vmax=top * 1e3)
             if i == 0:
-                ax.set_title(method, fontsize=9)
+                ax.set_title(shown[j], fontsize=9)
         axes[i, 0].set_ylabel(matcher, fontsize=9)
-    fig.colorbar(image, ax=axes, shrink=0.8, label="|depth error| [mm]")
+    if image is not None:
+        fig.colorbar(image, ax=axes, shrink=0.8, label="|depth error| [mm]")
     fig.suptitle("depth error on the objects (left ideal view; no estimate: white)", fontsize=9)
     path = out_dir / "objects_depth_error.png"
     fig.savefig(path, dpi=90, bbox_inches="tight")
@@ -240,7 +302,7 @@ def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray]) -> Path:
     return path
 
 
-@register("objects")
-def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
-    """``lfsim experiment objects``: see :func:`run_objects`."""
-    return run_objects(out_dir, scale=scale, progress=progress)
+@register("objects", options=("methods", "camera", "port_distance_m", "thickness_m"))
+def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+    """A textured bowl and figurine reconstructed by every method (paper Fig. 7)."""
+    return run_objects(out_dir, options=options, progress=progress)

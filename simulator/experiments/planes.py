@@ -1,8 +1,9 @@
 """The ``planes`` experiment (paper Figs. 5-6): stereo on a textured plane at three depths, by method.
 
 A stereo rig (two light-field cameras behind one tilted glass wall, :mod:`simulator.rig`) sees a
-slanted textured plane at a near, a medium and a far depth. Each method turns both raw images into
-central projections (:mod:`lfrefract.methods`):
+slanted textured plane at a near, a medium and a far depth. Each method of the registry
+(:mod:`simulator.experiments.methods`; ``ExperimentOptions.methods`` chooses) turns both raw
+images into central projections or estimates depth itself. Built in:
 
 - ``approx far`` / ``approx near``: the approximation baseline calibrated per camera from
   chessboard captures at the far / near depth (paper conditions (a), (b));
@@ -10,22 +11,27 @@ central projections (:mod:`lfrefract.methods`):
 - ``proposed+distortion``: with a residual distortion fitted on synthesized chessboard images (d);
 - ``ideal``: the simulator's ground-truth refraction-free pinhole images, the floor.
 
-For every method the rig is stereo-calibrated from its own images of all the chessboards (OpenCV,
-intrinsics fixed to the method's ``K``), rectified, matched by each of
+For every method of central images the rig is stereo-calibrated from its own images of all the
+chessboards (OpenCV, intrinsics fixed to the method's ``K``), rectified, matched by each of
 :data:`~simulator.experiments.rigstereo.MATCHERS` (ZNCC, the paper's cost, and OpenCV's SGBM) and
-triangulated into the left camera's frame. Measured per matcher, method and depth:
+triangulated into the left camera's frame; a method's depth maps (left camera frame) are turned
+into points directly (one row per depth, ``matcher = "none"``). Measured per matcher, method and
+depth:
 
 - ``plane_rmse_mm``: the paper's figure, the RMS distance of the points to a plane fitted after
   outlier removal (RANSAC, threshold 1 % of the depth);
 - ``truth_error_mm``: the mean absolute distance of those inlier points to the true plane (left
   camera frame; the experiment's ground truth, which the paper did not have), and
   ``outlier_share``, the share of points RANSAC left out;
-- ``completeness``: the share of the rectified left image's pixels with a disparity;
+- ``completeness``: the share of the rectified left image's pixels with a disparity (of the depth
+  map's pixels with a depth);
 - ``exact_share`` and ``exact_plane_rmse_mm``, ``exact_truth_error_mm``, ``exact_outlier_share``:
   the share of the points inside both cameras' exact coverage
   (:func:`~simulator.experiments.rigstereo.exact_coverage`, where the synthesis's every necessary
   ray is recorded) and the same measures on those points alone. Outside it the synthesis
-  approximates; on the ``illum`` rig the coverage is a fraction of the image.
+  approximates; on the ``illum`` rig the coverage is a fraction of the image;
+- ``status`` (``ok`` or ``failed``) and ``error``: a method that raises (in its set-up, the rig
+  calibration on its images, or on one capture) gives rows with its error and NaN measures.
 """
 
 from __future__ import annotations
@@ -37,32 +43,40 @@ from pathlib import Path
 
 import numpy as np
 
-from lfrefract import Pose
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import fit_plane_ransac
 from lfrefract.stereo.geometry import disparity_to_depth, disparity_to_points
-from simulator.experiments import ExperimentResult, check_scale, register
+from simulator.config import Placement, TexturedPlane
+from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
+from simulator.experiments.methods import depth_points
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
     MATCHERS,
-    METHOD_NAMES,
+    PreparedMethod,
     RigSetup,
     aim,
-    calibrated_methods,
     chessboards,
+    describe_error,
     exact_coverage,
+    experiment_rig,
     grey,
     match,
+    prepare_methods,
     render_captures,
-    rig_data,
     warp_maps,
 )
-from simulator.rig import RigConfig, parse_rig
+from simulator.rig import RigConfig
 
-__all__ = ["PLANE_DEPTHS_M", "run_planes", "setup_for"]
+__all__ = ["DEPTH_MATCHER", "PLANE_DEPTHS_M", "PLANE_ROTATION_XYZ_DEG", "run_planes", "setup_for"]
 
 #: Plane depths (near, medium, far), metres, per scale (world z of the plane's centre).
 PLANE_DEPTHS_M = {"tiny": (0.3, 0.45, 0.6), "illum": (0.4, 0.7, 1.0)}
+#: The plane's rotation (x, y, z Euler angles, degrees): slanted, so that its depth varies across the view.
+PLANE_ROTATION_XYZ_DEG = (10.0, -15.0, 0.0)
+#: The ``matcher`` of the rows of a method that estimates depth itself (no stereo matching).
+DEPTH_MATCHER = "none"
+#: Texture seed of the plane.
+PLANE_TEXTURE_SEED = 7
 
 
 def setup_for(scale: str) -> RigSetup:
@@ -72,97 +86,178 @@ def setup_for(scale: str) -> RigSetup:
     return RigSetup(rig="illum", calibration_depths_m=(0.4, 1.0), px_per_square=30.0, spp=8)
 
 
-def _plane(rig: RigConfig, depth_m: float, seed: int) -> dict:
-    return {
-        "type": "textured_plane",
-        "position_m": aim(rig, depth_m).tolist(),
-        "rotation_xyz_deg": [10.0, -15.0, 0.0],
-        "size_m": [1.4 * depth_m, 1.1 * depth_m],
-        "texture_px": 1024,
-        "texture_seed": seed,
-    }
+def textured_plane(rig: RigConfig, depth_m: float, seed: int = PLANE_TEXTURE_SEED) -> TexturedPlane:
+    """The slanted textured plane centred on the rig's line of sight at ``depth_m`` (it fills the views)."""
+    return TexturedPlane(
+        placement=Placement(position_m=tuple(aim(rig, depth_m)), rotation_xyz_deg=PLANE_ROTATION_XYZ_DEG),
+        size_m=(1.4 * depth_m, 1.1 * depth_m),
+        texture_px=1024,
+        texture_seed=seed,
+    )
 
 
 def run_planes(
     out_dir: Path,
     *,
     scale: str = "tiny",
+    options: ExperimentOptions | None = None,
     progress: bool = True,
     renders_dir: Path | None = None,
     write_clouds: bool = False,
 ) -> ExperimentResult:
     """Run the experiment (see the module docstring); figures go to ``out_dir``.
 
-    ``renders_dir``: keep the rig renders there and reuse those that match on a later run
-    (default: a temporary directory, deleted). ``write_clouds``: also write each method's point
-    cloud of the medium plane, ``cloud_<method>.ply`` (left camera frame, metres, coloured).
+    ``options``: the methods, camera and wall of :class:`~simulator.experiments.ExperimentOptions`
+    (its scale replaces ``scale``). ``renders_dir``: keep the rig renders there and reuse those
+    that match on a later run (default: a temporary directory, deleted). ``write_clouds``: also
+    write each method's point cloud of the medium plane, ``cloud_<method>.ply`` (left camera frame,
+    metres, coloured).
     """
-    setup = setup_for(scale)
-    base = parse_rig(rig_data(setup, []))
+    options = options if options is not None else ExperimentOptions(scale=scale)
+    setup = setup_for(options.scale)
+    base = experiment_rig(setup, options)
     with tempfile.TemporaryDirectory(prefix="lfsim-planes-") as tmp:
         work = Path(tmp) if renders_dir is None else Path(renders_dir)
-        return _run(out_dir, setup, scale, base, work, progress=progress, write_clouds=write_clouds)
+        return _run(out_dir, setup, options, base, work, progress=progress, write_clouds=write_clouds)
+
+
+def _failed(method: str, error: str, depths, matchers) -> list[dict]:
+    return [
+        {"matcher": m, "method": method, "depth_m": d, "status": "failed", "error": error}
+        for m in matchers
+        for d in depths
+    ]
 
 
 def _run(
-    out_dir: Path, setup: RigSetup, scale: str, base: RigConfig, work: Path, *, progress: bool, write_clouds: bool
+    out_dir: Path,
+    setup: RigSetup,
+    options: ExperimentOptions,
+    base: RigConfig,
+    work: Path,
+    *,
+    progress: bool,
+    write_clouds: bool,
 ) -> ExperimentResult:
     """Render (into ``work``) and measure; see :func:`run_planes`."""
+    scale = options.scale
     plane_depths = PLANE_DEPTHS_M[scale]
     near, far = setup.calibration_depths_m
     jobs = [(f"board-{d}-{i}", [b]) for d in (near, far) for i, b in enumerate(chessboards(base, setup, d))]
-    jobs += [(f"plane-{d}", [_plane(base, d, 7)]) for d in plane_depths]
-    captures = render_captures(setup, jobs, work, progress=progress)
+    jobs += [(f"plane-{d}", [textured_plane(base, d)]) for d in plane_depths]
+    captures = render_captures(base, jobs, work, progress=progress)
     boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(BOARD_OFFSETS))] for d in (near, far)}
     planes = {d: captures[f"plane-{d}"] for d in plane_depths}
-    truth = {depth: _plane_in_left(base, _plane(base, depth, 7)) for depth in plane_depths}
+    truth = {depth: _plane_in_left(base, textured_plane(base, depth)) for depth in plane_depths}
 
     warps = warp_maps(base)
-    rows, disparities = [], {}
-    for method, project, rect, stereo, pairs in calibrated_methods(base, setup, boards, progress=progress, warps=warps):
+    rows, disparities, order = [], {}, []
+    prepared = prepare_methods(base, setup, boards, methods=options.methods, progress=progress, warps=warps)
+    for method in prepared:
+        order.append(method.name)
+        if not method.ok:
+            rows += _failed(method.name, method.error, plane_depths, MATCHERS)
+            continue
         for depth in plane_depths:
-            left, right = rect.apply(project("left", planes[depth]), project("right", planes[depth]))
-            expected = rect.focal_px * rect.baseline_m / depth
-            for matcher in MATCHERS:
-                disparity = match(
-                    matcher,
-                    left,
-                    right,
-                    min_disparity_px=max(int(expected * 0.5), 0),
-                    num_disparities=int(expected) + 8,
+            try:
+                new = _measure(
+                    method,
+                    planes[depth],
+                    depth,
+                    truth[depth],
+                    base,
+                    warps,
+                    disparities,
+                    out_dir,
+                    write_clouds=write_clouds and depth == plane_depths[1],
                 )
-                disparities[(matcher, method, depth)] = disparity
-                points = disparity_to_points(disparity, rect)
-                if write_clouds and matcher == MATCHERS[0] and depth == plane_depths[1]:
-                    finite = np.isfinite(disparity_to_depth(disparity, rect))
-                    colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
-                    cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method)}.ply"
-                    write_ply(cloud, points, (colours * 255).astype(np.uint8))
-                exact = exact_coverage(points, base, warps)
-                everywhere = _plane_measures(points, truth[depth], depth)
-                inside = _plane_measures(points[exact], truth[depth], depth)
-                rows.append(
-                    {
-                        "matcher": matcher,
-                        "method": method,
-                        "depth_m": depth,
-                        **everywhere,
-                        "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(grey(left)).sum(), 1)),
-                        "exact_share": float(exact.mean()) if len(exact) else math.nan,
-                        **{f"exact_{k}": v for k, v in inside.items()},
-                        "stereo_rms_px": stereo.rms_px,
-                        "boards": pairs,
-                    }
-                )
-    figures = _figures(out_dir, rows, disparities, plane_depths)
+            except Exception as exc:  # a method failing on one capture is a row, not a failed run
+                matchers = (DEPTH_MATCHER,) if method.depth is not None else MATCHERS
+                new = _failed(method.name, describe_error(exc), (depth,), matchers)
+            rows += new
+    figures = _figures(out_dir, rows, disparities, plane_depths, order)
     return ExperimentResult(
         name="planes",
         scale=scale,
         rows=tuple(rows),
         figures=figures,
-        summary=_summary(rows, plane_depths),
-        parameters=dict(setup.__dict__) | {"plane_depths_m": plane_depths},
+        summary=_summary(rows, plane_depths, order),
+        parameters=dict(setup.__dict__)
+        | {"plane_depths_m": plane_depths, "methods": order, "wall": base.wall.to_dict()}
+        | {"camera": base.cameras[0].scene.camera.name},
     )
+
+
+def _measure(
+    method: PreparedMethod,
+    shot,
+    depth: float,
+    truth: tuple[np.ndarray, float],
+    base: RigConfig,
+    warps,
+    disparities: dict,
+    out_dir: Path,
+    *,
+    write_clouds: bool,
+) -> list[dict]:
+    """The rows of one method on the plane at ``depth``: one per matcher, or one for a depth method."""
+    if method.depth is not None:
+        estimate = np.asarray(method.depth.depth(shot), dtype=np.float64)
+        points = depth_points(estimate, method.depth.output)
+        exact = exact_coverage(points, base, warps)
+        return [
+            {
+                "matcher": DEPTH_MATCHER,
+                "method": method.name,
+                "depth_m": depth,
+                **_plane_measures(points, truth, depth),
+                "completeness": float(np.isfinite(estimate).mean()),
+                "exact_share": float(exact.mean()) if len(exact) else math.nan,
+                **{f"exact_{k}": v for k, v in _plane_measures(points[exact], truth, depth).items()},
+                "stereo_rms_px": math.nan,
+                "boards": 0,
+                "status": "ok",
+                "error": "",
+            }
+        ]
+    rect = method.rectification
+    first, second = base.cameras[0].name, base.cameras[1].name
+    left, right = rect.apply(method.images.project(first, shot), method.images.project(second, shot))
+    expected = rect.focal_px * rect.baseline_m / depth
+    rows = []
+    for matcher in MATCHERS:
+        disparity = match(
+            matcher,
+            left,
+            right,
+            min_disparity_px=max(int(expected * 0.5), 0),
+            num_disparities=int(expected) + 8,
+        )
+        disparities[(matcher, method.name, depth)] = disparity
+        points = disparity_to_points(disparity, rect)
+        if write_clouds and matcher == MATCHERS[0]:
+            finite = np.isfinite(disparity_to_depth(disparity, rect))
+            colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
+            cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method.name)}.ply"
+            write_ply(cloud, points, (colours * 255).astype(np.uint8))
+        exact = exact_coverage(points, base, warps)
+        inside = _plane_measures(points[exact], truth, depth)
+        rows.append(
+            {
+                "matcher": matcher,
+                "method": method.name,
+                "depth_m": depth,
+                **_plane_measures(points, truth, depth),
+                "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(grey(left)).sum(), 1)),
+                "exact_share": float(exact.mean()) if len(exact) else math.nan,
+                **{f"exact_{k}": v for k, v in inside.items()},
+                "stereo_rms_px": method.stereo.rms_px,
+                "boards": method.boards,
+                "status": "ok",
+                "error": "",
+            }
+        )
+    return rows
 
 
 def _plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m: float) -> dict[str, float]:
@@ -178,54 +273,80 @@ def _plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m
     }
 
 
-def _plane_in_left(rig: RigConfig, table: dict) -> tuple[np.ndarray, float]:
-    """The plane object's normal and offset (``normal . X = offset``) in the left camera frame."""
-    placement = Pose.from_euler_xyz_deg(table["rotation_xyz_deg"], table["position_m"])
+def _plane_in_left(rig: RigConfig, plane: TexturedPlane) -> tuple[np.ndarray, float]:
+    """The plane's normal and offset (``normal . X = offset``) in the left camera frame."""
     local = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) * 0.1
-    points = rig.cameras[0].scene.pose.to_camera(placement.to_world(local))
+    points = rig.cameras[0].scene.pose.to_camera(plane.placement.to_world(local))
     normal = np.cross(points[1] - points[0], points[2] - points[0])
     normal /= np.linalg.norm(normal)
     return normal, float(normal @ points[0])
 
 
-def _summary(rows: list[dict], plane_depths: tuple[float, ...]) -> str:
+def _cell(rows: list[dict], method: str, matcher: str, depth: float, prefix: str) -> str:
+    row = next(
+        (
+            r
+            for r in rows
+            if r["method"] == method and r["depth_m"] == depth and r["matcher"] in (matcher, DEPTH_MATCHER)
+        ),
+        None,
+    )
+    if row is None or row["status"] != "ok":
+        return "failed"
+    return f"{row[prefix + 'plane_rmse_mm']:.2f} / {row[prefix + 'truth_error_mm']:.2f}"
+
+
+def _summary(rows: list[dict], plane_depths: tuple[float, ...], order: list[str]) -> str:
     parts = []
     for matcher in MATCHERS:
         for prefix, what in (("", "all points"), ("exact_", "points in the exact coverage")):
             lines = ["| method | " + " | ".join(f"{d:g} m" for d in plane_depths) + " |"]
             lines.append("|---|" + "---|" * len(plane_depths))
-            for method in METHOD_NAMES:
-                ours = [r for r in rows if r["method"] == method and r["matcher"] == matcher]
-                cells = [f"{r[prefix + 'plane_rmse_mm']:.2f} / {r[prefix + 'truth_error_mm']:.2f}" for r in ours]
+            for method in order:
+                cells = [_cell(rows, method, matcher, d, prefix) for d in plane_depths]
                 lines.append(f"| {method} | " + " | ".join(cells) + " |")
             title = f"{matcher}, {what}: plane RMSE / error against the true plane, mm"
             if prefix:
-                shares = [r["exact_share"] for r in rows if r["matcher"] == matcher and r["method"] == "ideal"]
-                title += " (share of the ideal images' points: " + ", ".join(f"{x:.2f}" for x in shares) + ")"
+                shares = [
+                    r["exact_share"]
+                    for r in rows
+                    if r["matcher"] == matcher and r["method"] == "ideal" and r["status"] == "ok"
+                ]
+                if shares:
+                    title += " (share of the ideal images' points: " + ", ".join(f"{x:.2f}" for x in shares) + ")"
             parts.append(title + ":\n" + "\n".join(lines))
+    failed = sorted({(r["method"], r["error"]) for r in rows if r["status"] != "ok"})
+    if failed:
+        parts.append("failed methods:\n" + "\n".join(f"- {m}: {e}" for m, e in failed))
+    if any(r["matcher"] == DEPTH_MATCHER for r in rows):
+        parts.append("methods that estimate depth themselves (no stereo matching) appear under every matcher")
     return "\n\n".join(parts)
 
 
-def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...]) -> tuple[Path, ...]:
+def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...], order: list[str]) -> tuple[Path, ...]:
     import matplotlib as mpl
 
     mpl.use("Agg")
     import matplotlib.pyplot as plt
 
     depths, paths = plane_depths, []
+    shown = [m for m in order if any((matcher, m, d) in disparities for matcher in MATCHERS for d in depths)]
     for matcher in MATCHERS:
-        fig, axes = plt.subplots(len(depths), len(METHOD_NAMES), figsize=(2.6 * len(METHOD_NAMES), 2.2 * len(depths)))
+        columns = max(len(shown), 1)
+        fig, axes = plt.subplots(len(depths), columns, figsize=(2.6 * columns, 2.2 * len(depths)), squeeze=False)
         for i, depth in enumerate(depths):
-            values = [disparities[(matcher, m, depth)] for m in METHOD_NAMES]
-            finite = np.concatenate([v[np.isfinite(v)] for v in values])
+            values = [disparities.get((matcher, m, depth)) for m in shown]
+            finite = [v[np.isfinite(v)] for v in values if v is not None]
+            finite = np.concatenate(finite) if finite else np.zeros(0)
             lo, hi = np.percentile(finite, [2, 98]) if len(finite) else (0.0, 1.0)
-            for j, method in enumerate(METHOD_NAMES):
+            for j in range(columns):
                 ax = axes[i, j]
-                ax.imshow(values[j], cmap="viridis", vmin=lo, vmax=hi)
                 ax.set_xticks([])
                 ax.set_yticks([])
-                if i == 0:
-                    ax.set_title(method, fontsize=9)
+                if j < len(shown) and values[j] is not None:
+                    ax.imshow(values[j], cmap="viridis", vmin=lo, vmax=hi)
+                if i == 0 and j < len(shown):
+                    ax.set_title(shown[j], fontsize=9)
                 if j == 0:
                     ax.set_ylabel(f"{depth:g} m", fontsize=9)
         fig.suptitle(f"{matcher} disparity maps (rectified left view; NaN white)", fontsize=9)
@@ -239,13 +360,18 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...]) 
         ("exact_truth_error_mm", "same, exact coverage only"),
     )
     fig, axes = plt.subplots(len(MATCHERS), len(keys), figsize=(15, 3.4 * len(MATCHERS)), squeeze=False)
-    width = 0.8 / len(METHOD_NAMES)
+    width = 0.8 / max(len(order), 1)
     x = np.arange(len(depths))
     for i, matcher in enumerate(MATCHERS):
-        for j, method in enumerate(METHOD_NAMES):
-            ours = [r for r in rows if r["method"] == method and r["matcher"] == matcher]
+        for j, method in enumerate(order):
+            ours = {
+                r["depth_m"]: r
+                for r in rows
+                if r["method"] == method and r["matcher"] in (matcher, DEPTH_MATCHER) and r["status"] == "ok"
+            }
             for ax, (key, _) in zip(axes[i], keys, strict=True):
-                ax.bar(x + (j - len(METHOD_NAMES) / 2 + 0.5) * width, [r[key] for r in ours], width, label=method)
+                heights = [ours[d][key] if d in ours else math.nan for d in depths]
+                ax.bar(x + (j - len(order) / 2 + 0.5) * width, heights, width, label=method)
         for ax, (_, title) in zip(axes[i], keys, strict=True):
             ax.set(xticks=x, xticklabels=[f"{d:g} m" for d in depths], ylabel="mm", title=f"{matcher}: {title}")
             ax.grid(alpha=0.3, axis="y")
@@ -256,7 +382,7 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...]) 
     return tuple(paths)
 
 
-@register("planes")
-def run(out_dir: Path, *, scale: str, progress: bool) -> ExperimentResult:
-    """``lfsim experiment planes``: see :func:`run_planes`."""
-    return run_planes(out_dir, scale=scale, progress=progress)
+@register("planes", options=("methods", "camera", "port_distance_m", "thickness_m"))
+def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+    """Stereo on a slanted textured plane at three depths, by method (paper Figs. 5-6)."""
+    return run_planes(out_dir, options=options, progress=progress)

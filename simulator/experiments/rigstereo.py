@@ -1,58 +1,96 @@
-"""Stereo rig experiments' common parts: captures, chessboards and the methods' calibrated rigs.
+"""Stereo rig experiments' common parts: the rig, its captures, the chessboards and the methods' rigs.
 
 ``planes`` and ``objects`` render a rig (:mod:`simulator.rig`) in front of chessboards and their
-objects, turn every capture into central projections by each method of :data:`METHOD_NAMES`, and
-calibrate and rectify the rig on each method's own images (:func:`calibrated_methods`).
+objects, hand the captures to each method of the registry (:mod:`simulator.experiments.methods`)
+and, for the methods that make central images, calibrate and rectify the rig on each method's own
+images (:func:`prepare_methods`).
+
+Scenes are built from the typed scene objects of :mod:`simulator.config` (:class:`Chessboard`,
+:class:`TexturedPlane`, ...): :func:`experiment_rig` is the embedded rig with the experiment's
+lights, render settings and options, :func:`with_objects` puts objects in front of it. Frames and
+units: metres; the world frame of the rig file; a camera's frame is OpenCV's (docs/conventions.md).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import dataclasses
+import json
+import traceback
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from lfrefract import ParameterError, virtual_camera_for
-from lfrefract.calibration.approx import detect_chessboard
+from lfrefract.errors import ParameterError
+from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, RAW_NAME, SIDECAR_NAME
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json
-from lfrefract.methods import CalibrationViews, build_projector
+from lfrefract.methods import CalibrationViews
+from lfrefract.optics.pinhole import virtual_camera_for
 from lfrefract.stereo.geometry import Rectification, StereoCalibration, calibrate_stereo, rectify
 from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from lfrefract.synthesis.warp_map import WarpMap, build_warp_map
-from simulator.boards import chessboard_corners_world
-from simulator.config import Chessboard, Placement, read_toml
-from simulator.rig import RigConfig, embedded_rigs, parse_rig
+from simulator.boards import CALIBRATION_ROTATIONS_DEG, PATTERN, SQUARES, chessboard_corners_world, find_corners
+from simulator.config import Chessboard, Placement, PointLight, RenderSettings, SceneObject
+from simulator.experiments import ExperimentOptions
+from simulator.experiments.methods import (
+    BUILTIN_METHODS,
+    CentralImages,
+    DepthMaps,
+    MethodCamera,
+    MethodRig,
+    check_result,
+    method_factories,
+)
+from simulator.rig import RigCamera, RigConfig, load_rig
 from simulator.rig_render import render_rig
 
 __all__ = [
     "BOARD_OFFSETS",
+    "LIGHTS",
     "MATCHERS",
     "METHOD_NAMES",
-    "SQUARES",
     "Capture",
+    "PreparedMethod",
     "RigSetup",
     "aim",
-    "calibrated_methods",
+    "board_points_m",
     "chessboards",
     "exact_coverage",
+    "experiment_rig",
     "grey",
     "match",
+    "prepare_methods",
     "render_capture",
     "render_captures",
-    "rig_data",
+    "square_size_m",
     "warp_maps",
+    "with_objects",
 ]
 
-#: Methods compared, in table order.
-METHOD_NAMES = ("approx far", "approx near", "proposed", "proposed+distortion", "ideal")
+#: The built-in methods, in table order (the registry, :func:`~simulator.experiments.methods.method_names`,
+#: is what an experiment runs).
+METHOD_NAMES = tuple(BUILTIN_METHODS)
 
 #: Stereo matchers run on every method's rectified pair: the paper's NCC cost
 #: (:func:`lfrefract.stereo.matching.zncc_disparity`) and OpenCV's semi-global matcher
 #: (:func:`lfrefract.stereo.matching.sgbm_disparity`), whose smoothness terms hold up better at depth edges.
 MATCHERS = ("zncc", "sgbm")
+
+#: Where the calibration boards sit: offsets of their centres from the rig's line of sight as
+#: fractions of the depth (their rotations are :data:`simulator.boards.CALIBRATION_ROTATIONS_DEG`:
+#: the perspective that fixes the focal length).
+BOARD_OFFSETS = ((-0.07, -0.05), (0.07, -0.05), (-0.07, 0.05), (0.07, 0.05), (0.0, 0.0), (0.0, -0.06))
+
+#: The rig experiments' lights: two point lights in the water, in front of the rig and off its axis
+#: (world frame, metres; W/sr), brighter than the single-camera board scenes' (the rig's objects
+#: are up to 1.5 m away).
+LIGHTS = (
+    PointLight(position_m=(-0.2, -0.25, 0.1), intensity_w_sr=(0.4, 0.4, 0.4)),
+    PointLight(position_m=(0.25, -0.1, 0.08), intensity_w_sr=(0.35, 0.35, 0.35)),
+)
 
 
 @dataclass(frozen=True)
@@ -78,22 +116,48 @@ class RigSetup:
     spp: int
 
 
-#: Chessboard squares (columns, rows) and where the calibration boards sit: offsets from the rig's
-#: line of sight as fractions of the depth, and their rotations (perspective fixes the focal length).
-SQUARES = (7, 5)
-BOARD_OFFSETS = ((-0.07, -0.05), (0.07, -0.05), (-0.07, 0.05), (0.07, 0.05), (0.0, 0.0), (0.0, -0.06))
-BOARD_ROTATIONS_DEG = ((-20, 15, 5), (15, -20, -5), (20, 20, 10), (-15, -15, 0), (0, 0, 20), (25, 0, -10))
-LIGHTS = [
-    {"type": "point", "position_m": [-0.2, -0.25, 0.1], "intensity_w_sr": 0.4},
-    {"type": "point", "position_m": [0.25, -0.1, 0.08], "intensity_w_sr": 0.35},
-]
+def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) -> RigConfig:
+    """The embedded rig ``setup.rig`` with the experiment's lights (:data:`LIGHTS`), render settings
+    (``setup.spp``, seed 0), no objects, and the options that apply: ``camera`` replaces every
+    camera's optics; ``port_distance_m`` / ``thickness_m`` move the wall's air-side plane / change
+    its glass (each camera's port follows from its pose).
+
+    Raises
+    ------
+    ParameterError
+        If the options make an impossible rig (a camera on the water side of the moved wall, a
+        wall without glass).
+    """
+    rig = load_rig(setup.rig)
+    options = options if options is not None else ExperimentOptions()
+    wall = rig.wall
+    changes = {
+        key: value
+        for key, value in (("distance_m", options.port_distance_m), ("thickness_m", options.thickness_m))
+        if value is not None
+    }
+    if changes:
+        wall = dataclasses.replace(wall, **changes)
+    cameras = []
+    for camera in rig.cameras:
+        scene = camera.scene
+        scene = scene.with_overrides(
+            name=f"experiment-{setup.rig}-{camera.name}",
+            camera=scene.camera if options.camera is None else options.camera,
+            port=wall.port_for(scene.pose) if changes else scene.port,
+            lights=LIGHTS,
+            objects=(),
+            render=RenderSettings(spp=setup.spp, seed=0),
+        )
+        cameras.append(RigCamera(camera.name, scene))
+    return dataclasses.replace(rig, name=f"experiment-{setup.rig}", wall=wall, cameras=tuple(cameras))
 
 
-def rig_data(setup: RigSetup, objects: list[dict]) -> dict:
-    """The rig file's wall and cameras with the experiment's lights, render settings and ``objects``."""
-    data = read_toml(embedded_rigs()[setup.rig], "rig")
-    data.update(name=f"experiment-{setup.rig}", render={"spp": setup.spp, "seed": 0}, light=LIGHTS, object=objects)
-    return data
+def with_objects(rig: RigConfig, objects: Sequence[SceneObject]) -> RigConfig:
+    """``rig`` with ``objects`` (typed scene objects, world frame) in front of every camera."""
+    objects = tuple(objects)
+    cameras = tuple(RigCamera(c.name, c.scene.with_overrides(objects=objects)) for c in rig.cameras)
+    return dataclasses.replace(rig, cameras=cameras)
 
 
 def aim(rig: RigConfig, depth_m: float) -> np.ndarray:
@@ -110,73 +174,88 @@ def aim(rig: RigConfig, depth_m: float) -> np.ndarray:
 
 
 def square_size_m(rig: RigConfig, setup: RigSetup, depth_m: float) -> float:
+    """Edge of a chessboard square at ``depth_m`` that appears ``setup.px_per_square`` px wide (about)."""
     view = virtual_camera_for(rig.cameras[0].scene.camera)
     water = rig.wall.n_water / rig.wall.n_air
     return setup.px_per_square * depth_m / (water * view.focal_px)
 
 
-def chessboards(rig: RigConfig, setup: RigSetup, depth_m: float) -> list[dict]:
+def chessboards(rig: RigConfig, setup: RigSetup, depth_m: float) -> tuple[Chessboard, ...]:
+    """The six calibration boards at ``depth_m`` (:data:`BOARD_OFFSETS`, :data:`SQUARES` squares)."""
     centre = aim(rig, depth_m)
     square = square_size_m(rig, setup, depth_m)
-    return [
-        {
-            "type": "chessboard",
-            "position_m": (centre + depth_m * np.array([dx, dy, 0.0])).tolist(),
-            "rotation_xyz_deg": list(rotation),
-            "squares": list(SQUARES),
-            "square_size_m": square,
-        }
-        for (dx, dy), rotation in zip(BOARD_OFFSETS, BOARD_ROTATIONS_DEG, strict=True)
-    ]
+    return tuple(
+        Chessboard(
+            placement=Placement(
+                position_m=tuple(centre + depth_m * np.array([dx, dy, 0.0])),
+                rotation_xyz_deg=tuple(float(a) for a in rotation),
+            ),
+            squares=SQUARES,
+            square_size_m=square,
+        )
+        for (dx, dy), rotation in zip(BOARD_OFFSETS, CALIBRATION_ROTATIONS_DEG, strict=True)
+    )
 
 
 @dataclass(frozen=True)
 class Capture:
-    """One rendered rig capture on disk; images are read when asked for (an Illum raw image is
-    0.5 GB, and the experiment has thirty)."""
+    """One rendered rig capture on disk (a :class:`~simulator.experiments.methods.Shot`); images
+    are read when asked for (an Illum raw image is 0.5 GB, and the experiment has thirty)."""
 
     folder: Path
 
     def raw(self, camera: str) -> np.ndarray:
-        return read_exr(self.folder / camera / "raw.exr", role="raw")
+        """Camera ``camera``'s raw lenslet image."""
+        return read_exr(self.folder / camera / RAW_NAME, role="raw")
 
     def ideal(self, camera: str) -> np.ndarray:
-        return read_exr(self.folder / camera / "ideal.exr", role="ideal")
+        """Ground truth: its refraction-free image."""
+        return read_exr(self.folder / camera / IDEAL_NAME, role="ideal")
+
+    def depth(self, camera: str) -> np.ndarray:
+        """Ground truth: camera z along each pixel of its ideal image, metres (``inf``: no surface)."""
+        return read_exr(self.folder / camera / DEPTH_NAME, role="depth")
 
 
-def render_capture(setup: RigSetup, objects: list[dict], folder: Path) -> Capture:
-    """Render the rig with ``objects`` into ``folder`` (kept if it already holds this very rig)."""
-    rig = parse_rig(rig_data(setup, objects))
-    meta = folder / "meta.json"
-    if not (meta.is_file() and read_json(meta).get("objects") == objects):
-        render_rig(rig, folder, progress=False, write_previews=False, overwrite=True, metadata={"objects": objects})
+def _signature(rig: RigConfig) -> list:
+    """What a capture of ``rig`` depends on, as plain JSON data (each camera's whole scene)."""
+    scenes = [{k: v for k, v in c.scene.to_dict().items() if k != "source"} for c in rig.cameras]
+    return json.loads(json.dumps({"wall": rig.wall.to_dict(), "scenes": scenes}))
+
+
+def render_capture(rig: RigConfig, folder: Path) -> Capture:
+    """Render ``rig`` into ``folder``, kept if it already holds a render of this very rig (the same
+    wall and scenes: cameras, ports, objects, lights, render settings)."""
+    signature = _signature(rig)
+    meta = folder / SIDECAR_NAME
+    if not (meta.is_file() and read_json(meta).get("experiment_rig") == signature):
+        render_rig(
+            rig, folder, progress=False, write_previews=False, overwrite=True, metadata={"experiment_rig": signature}
+        )
     return Capture(folder)
 
 
-def inner_corners_world(table: dict) -> np.ndarray:
-    """Inner corners (N, 3) of a chessboard table of :func:`chessboards` in the world frame, in the
-    board's order (:func:`simulator.boards.chessboard_corners_world`)."""
-    placement = Placement(position_m=table["position_m"], rotation_xyz_deg=table["rotation_xyz_deg"])
-    board = Chessboard(placement=placement, squares=table["squares"], square_size_m=table["square_size_m"])
-    return chessboard_corners_world(board)
+def render_captures(
+    rig: RigConfig, jobs: Sequence[tuple[str, Sequence[SceneObject]]], work: Path, *, progress: bool
+) -> dict[str, Capture]:
+    """Render ``rig`` with each ``(name, objects)`` of ``jobs`` into ``work / name`` (reusing
+    matching renders); ``{name: Capture}``."""
+    return {
+        name: render_capture(with_objects(rig, objects), Path(work) / name)
+        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
+    }
 
 
 def board_points_m(square: float) -> np.ndarray:
-    cols, rows = SQUARES[0] - 1, SQUARES[1] - 1
+    """The board's inner corners in its own plane, ``(x, y)`` (N, 2), metres, in the canonical order of
+    :func:`simulator.boards.find_corners`."""
+    cols, rows = PATTERN
     jj, ii = np.mgrid[0:rows, 0:cols]
     return np.stack([ii.ravel(), jj.ravel()], axis=1) * square
 
 
-def find_corners(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
-    """The detector's corners in a canonical order: the first one the top-left one (the board is
-    turned by less than 90 deg in every view), so that both cameras list them alike."""
-    found = detect_chessboard(image, pattern)
-    if found is not None and found[0].sum() > found[-1].sum():
-        found = found[::-1].copy()
-    return found
-
-
 def grey(image: np.ndarray) -> np.ndarray:
+    """Channel mean of an (H, W, C) image; an (H, W) image as it is."""
     return image.mean(axis=2) if image.ndim == 3 else image
 
 
@@ -221,91 +300,137 @@ def exact_coverage(points_left: np.ndarray, rig: RigConfig, warps: dict[str, War
     return inside
 
 
-def calibrated_methods(
+@dataclass(frozen=True, eq=False)
+class PreparedMethod:
+    """A method set up for the rig: its images and calibrated rig, its depth maps, or its error.
+
+    Attributes
+    ----------
+    name : str
+    images : CentralImages or None
+        For a method of central images, with the rig calibrated on them (:attr:`stereo`) and
+        rectified (:attr:`rectification`).
+    depth : DepthMaps or None
+        For a method that estimates depth itself.
+    stereo : StereoCalibration or None
+    rectification : Rectification or None
+    boards : int
+        Board views found in both cameras' images (0 for a depth method).
+    error : str or None
+        Why the method failed (its set-up or the rig calibration on its images), else None.
+    """
+
+    name: str
+    images: CentralImages | None = None
+    depth: DepthMaps | None = None
+    stereo: StereoCalibration | None = None
+    rectification: Rectification | None = None
+    boards: int = 0
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """Whether the method is ready to measure."""
+        return self.error is None
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for a failed method's ``error`` column: the exception's type and message, and
+    where in the method it was raised."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
+    message = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {message}{where}"
+
+
+def method_rig(base: RigConfig, setup: RigSetup, boards: dict[float, list[Capture]], warps) -> MethodRig:
+    """What the method factories are given (:class:`~simulator.experiments.methods.MethodRig`)."""
+    depths = sorted(boards)
+
+    def calibration(name: str, depth_m: float) -> CalibrationViews:
+        if depth_m not in boards:
+            raise ParameterError(f"no chessboards were rendered at depth_m={depth_m!r}; there are some at {depths}")
+        scene = next(c.scene for c in base.cameras if c.name == name)
+        tables = chessboards(base, setup, depth_m)
+        return CalibrationViews(
+            raws=[b.raw(name) for b in boards[depth_m]],
+            pattern=PATTERN,
+            square_size_m=tables[0].square_size_m,
+            corners_cam=[scene.pose.to_camera(chessboard_corners_world(board)) for board in tables],
+        )
+
+    cameras = tuple(
+        MethodCamera(name=c.name, camera=c.scene.camera, port=c.scene.port, pose=c.scene.pose, warp=warps[c.name])
+        for c in base.cameras
+    )
+    return MethodRig(cameras=cameras, calibration_depths_m=(depths[0], depths[-1]), calibration=calibration)
+
+
+def prepare_methods(
     base: RigConfig,
     setup: RigSetup,
     boards: dict[float, list[Capture]],
     *,
+    methods: Sequence[str] | None = None,
     progress: bool,
     warps: dict[str, WarpMap] | None = None,
-) -> Iterator[tuple[str, Callable, Rectification, StereoCalibration, int]]:
-    """For each method of :data:`METHOD_NAMES`: its projection ``project(camera, capture)`` of a
-    capture into a central image, and the rig calibrated and rectified on its own images of the
-    chessboard captures ``boards`` (depth -> six captures of :func:`chessboards`), with the number of
-    board views found in both images.
+) -> Iterator[PreparedMethod]:
+    """Set up each method (``methods``, default every registered one, in the registry's order).
 
-    The approximation's camera model is calibrated per camera on the boards at one depth
-    (``approx far`` / ``approx near``), with the boards' true corners fixing the model's frame (as
+    A method of central images gets the rig calibrated and rectified on its own images of the
+    chessboard captures ``boards`` (depth -> the six captures of :func:`chessboards`), with the
+    number of board views found in both images. The approximation's camera model belongs to one
+    depth (its calibration boards), the rig's pose to none: the rig is calibrated on every board
+    given (boards at one depth left the baseline a few per cent off on the small rig's 188 px
+    images). The approximation is fitted with the boards' true corners fixing the model's frame (as
     tests/simulator/test_approx_baseline.py does: a free OpenCV fit of boards at one depth trades
     the focal length against the board distances and the principal point against the port's
-    deflection, and its undistorted images leave the frame); ``proposed+distortion`` fits its
-    residual distortion on the farthest boards. The rig is calibrated on every board given: the
-    approximation's camera model belongs to one depth, the rig's pose to none (boards at one depth
-    left the baseline a few per cent off on the small rig's 188 px images). ``warps``: the cameras'
-    warp maps if already built (:func:`warp_maps`).
+    deflection). A factory, a projection or a rig calibration that raises gives a
+    :class:`PreparedMethod` with its error. ``warps``: the cameras' warp maps if already built
+    (:func:`warp_maps`).
     """
-    names = [c.name for c in base.cameras]
-    pattern = (SQUARES[0] - 1, SQUARES[1] - 1)
-    depths = sorted(boards)
-    near, far = depths[0], depths[-1]
-    squares = {d: square_size_m(base, setup, d) for d in depths}
-    cameras = {c.name: c.scene for c in base.cameras}
+    factories = method_factories()
+    names = tuple(factories) if methods is None else tuple(methods)
     warps = warp_maps(base) if warps is None else warps
-
-    def calibration(name: str, depth: float) -> CalibrationViews:
-        pose = cameras[name].pose
-        corners = [pose.to_camera(inner_corners_world(table)) for table in chessboards(base, setup, depth)]
-        return CalibrationViews(
-            raws=[b.raw(name) for b in boards[depth]],
-            pattern=pattern,
-            square_size_m=squares[depth],
-            corners_cam=corners,
-        )
-
-    for method in tqdm(METHOD_NAMES, desc="methods (synthesis, stereo)", disable=not progress):
-        if method == "ideal":
-            outputs = {n: warps[n].output for n in names}
-
-            def project(name, capture):
-                return capture.ideal(name)
-        else:
-            projectors = {}
-            for n in names:
-                scene = cameras[n]
-                if method.startswith("approx"):
-                    depth = far if method.endswith("far") else near
-                    projectors[n] = build_projector("approx", scene.camera, calibration=calibration(n, depth))
-                elif method == "proposed":
-                    projectors[n] = build_projector("proposed", scene.camera, scene.port, warp=warps[n])
-                else:
-                    projectors[n] = build_projector(
-                        method, scene.camera, scene.port, warp=warps[n], calibration=calibration(n, far)
-                    )
-            outputs = {n: projectors[n].output for n in names}
-
-            def project(name, capture, projectors=projectors):
-                return projectors[name].apply(capture.raw(name))
-
-        found = [
-            (find_corners(project("left", b), pattern), find_corners(project("right", b), pattern), squares[depth])
-            for depth in depths
-            for b in boards[depth]
-        ]
-        pairs = [(lft, rgt, square) for lft, rgt, square in found if lft is not None and rgt is not None]
-        stereo = calibrate_stereo(
-            [p[0] for p in pairs],
-            [p[1] for p in pairs],
-            [board_points_m(p[2]) for p in pairs],
-            left=outputs["left"],
-            right=outputs["right"],
-        )
-        yield method, project, rectify(stereo), stereo, len(pairs)
-
-
-def render_captures(setup: RigSetup, jobs: list[tuple[str, list[dict]]], work: Path, *, progress: bool) -> dict:
-    """Render each ``(name, objects)`` of ``jobs`` into ``work / name`` (reusing matching renders);
-    ``{name: Capture}``."""
-    return {
-        name: render_capture(setup, objects, work / name)
-        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
-    }
+    rig = method_rig(base, setup, boards, warps)
+    depths = sorted(boards)
+    squares = {d: square_size_m(base, setup, d) for d in depths}
+    first, second = base.cameras[0].name, base.cameras[1].name
+    for name in tqdm(names, desc="methods (set-up, rig calibration)", disable=not progress):
+        try:
+            if name not in factories:
+                raise ParameterError(f"method {name!r} is not registered; registered: {list(factories)}")
+            result = check_result(name, factories[name](rig))
+            if isinstance(result, DepthMaps):
+                yield PreparedMethod(name=name, depth=result)
+                continue
+            for camera in (first, second):
+                if camera not in result.outputs:
+                    raise ParameterError(f"method {name!r} gave no output geometry for camera {camera!r}")
+            found = [
+                (
+                    find_corners(result.project(first, b), canonical=True),
+                    find_corners(result.project(second, b), canonical=True),
+                    squares[depth],
+                )
+                for depth in depths
+                for b in boards[depth]
+            ]
+            pairs = [(lft, rgt, square) for lft, rgt, square in found if lft is not None and rgt is not None]
+            if len(pairs) < 3:
+                raise ParameterError(
+                    f"the chessboard was found in both images of {len(pairs)} of {len(found)} board captures; "
+                    "the rig calibration needs 3 or more"
+                )
+            stereo = calibrate_stereo(
+                [p[0] for p in pairs],
+                [p[1] for p in pairs],
+                [board_points_m(p[2]) for p in pairs],
+                left=result.outputs[first],
+                right=result.outputs[second],
+            )
+            yield PreparedMethod(
+                name=name, images=result, stereo=stereo, rectification=rectify(stereo), boards=len(pairs)
+            )
+        except Exception as exc:  # a failing method is a table row, not a failed run
+            yield PreparedMethod(name=name, error=describe_error(exc))

@@ -46,7 +46,7 @@ COLUMNS = [
 def averaging(tmp_path_factory):
     """The tiny scale run once: (output directory, result, rows by k)."""
     out = tmp_path_factory.mktemp("experiment") / "avg"
-    result = run_experiment("averaging", out, scale="tiny", progress=False)
+    result = run_experiment("averaging", out=out, scale="tiny", progress=False)
     return out, result, {row["k"]: row for row in result.rows}
 
 

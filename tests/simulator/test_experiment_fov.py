@@ -13,9 +13,19 @@ import pytest
 
 from lfrefract import FlatPort, ParameterError, camera_preset, virtual_camera_for
 from lfrefract.formats.outputs import MANIFEST_NAME
-from lfrefract.synthesis.warp_map import build_warp_map
+from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.experiments import run_experiment
-from simulator.experiments.fov import exact_mask, fov_measures, original_fov
+from simulator.experiments.fov import (
+    REFERENCE_AXIAL_DISTANCE_M,
+    REFERENCE_NORMAL,
+    _rows_for,
+    exact_mask,
+    fov_measures,
+    original_fov,
+    reference_port,
+    required_aperture_radius,
+    setup_for,
+)
 from tests.tolerances import (
     FLOAT64_ANGLE_DEG,
     FOV_CENTRED_CONE_PX,
@@ -31,7 +41,7 @@ FIGURES = ("fov_exact_share.png", "fov_perfect_fov.png", "fov_masks.png")
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("experiment") / "fov"
-    result = run_experiment("fov", out, scale="tiny", progress=False)
+    result = run_experiment("fov", out=out, scale="tiny", progress=False)
     with open(out / "table.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     return out, result, rows
@@ -156,5 +166,82 @@ def test_original_fov():
 
 def test_unknown_scale(tmp_path):
     with pytest.raises(ParameterError, match="scale"):
-        run_experiment("fov", tmp_path / "fov", scale="huge", progress=False)
+        run_experiment("fov", out=tmp_path / "fov", scale="huge", progress=False)
     assert not (tmp_path / "fov").exists()
+
+
+# The paper's reference port and its perfect field of view (docs/experiments.md, fov).
+#: Perpendicular distance of the reference port, metres: 59.2 mm along the axis times the unit
+#: normal's z, 1 / |(-0.0085, -0.5004, 1)| = 0.894258.
+REFERENCE_PERPENDICULAR_M = 0.0592 / math.sqrt(0.0085**2 + 0.5004**2 + 1.0)
+#: The perfect horizontal field (degrees) of an untilted port at the reference distance, no glass,
+#: Illum at f/2, and the band the numbers must stay in: one Illum output pixel is 0.056 deg at the
+#: centre, and a change of model (rim margin, sub-pixel sampling) moves the figure by several.
+ILLUM_PERFECT_FOV_DEG = {"usable": 14.15, "doubled": 26.36}
+ILLUM_PERFECT_FOV_BAND_DEG = 0.3
+
+
+def test_reference_port_is_the_authors():
+    """59.2 mm along the optical axis with normal (-0.0085, -0.5004, 1): 52.94 mm perpendicular,
+    normal turned up (-y), a single interface."""
+    port = reference_port()
+    normal = np.array(REFERENCE_NORMAL) / np.linalg.norm(REFERENCE_NORMAL)
+    np.testing.assert_allclose(port.normal, normal, atol=1e-12)
+    assert port.normal[1] < 0  # up: OpenCV's +y is down
+    assert port.distance_m == pytest.approx(REFERENCE_PERPENDICULAR_M, rel=1e-12)
+    assert port.distance_m == pytest.approx(0.0529, abs=5e-5)  # the 52.9 mm of the authors' code
+    assert port.distance_m / port.normal[2] == pytest.approx(REFERENCE_AXIAL_DISTANCE_M, rel=1e-12)
+    assert port.thickness_m == 0.0
+    assert math.degrees(port.total_tilt_rad) == pytest.approx(26.58, abs=0.01)
+    setup = setup_for("illum")
+    assert (setup.distance_m, setup.thickness_m, setup.n_water) == (port.distance_m, 0.0, port.n_water)
+    assert setup.reference_port == port
+
+
+def test_illum_perfect_fov_with_the_aperture_and_twice_it():
+    """About 14 deg with the Illum's f/2 aperture, about 26 deg with the radius doubled as the
+    authors' code has it: the two rows of the distance series at the reference distance."""
+    setup = setup_for("illum")
+    camera, port = setup.camera, setup.port(0.0)
+    output = virtual_camera_for(camera)
+    radius = required_aperture_radius(camera, port, output)
+    rows, _ = _rows_for("distance", setup, port, radius, output, (2.0,), SynthesisOptions(), "usable")
+    doubled, _ = _rows_for("distance", setup, port, radius, output, (2.0,), SynthesisOptions(), "doubled")
+    for aperture, row in (("usable", rows[0]), ("doubled", doubled[0])):
+        expected = ILLUM_PERFECT_FOV_DEG[aperture]
+        assert row["perfect_fov_h_deg"] == pytest.approx(expected, abs=ILLUM_PERFECT_FOV_BAND_DEG), aperture
+        assert row["perfect_fov_v_deg"] == pytest.approx(expected, abs=ILLUM_PERFECT_FOV_BAND_DEG), aperture
+    assert doubled[0]["usable_aperture_radius_mm"] == pytest.approx(2 * rows[0]["usable_aperture_radius_mm"])
+
+
+def test_doubled_aperture_rows(tiny_run):
+    """Every distance has a row per aperture; twice the radius never sees fewer exact pixels."""
+    _, _, rows = tiny_run
+    distance = _series(rows, "distance")
+    by = {(float(r["distance_mm"]), r["aperture"]): r for r in distance}
+    assert {a for _, a in by} == {"usable", "doubled"}
+    assert len(by) == len(distance)
+    for (mm, aperture), row in by.items():
+        if aperture == "doubled":
+            usable = by[(mm, "usable")]
+            assert float(row["exact_share"]) >= float(usable["exact_share"])
+            assert float(row["perfect_fov_h_deg"]) >= float(usable["perfect_fov_h_deg"])
+    assert {r["aperture"] for r in _series(rows, "tilt")} == {"usable"}
+
+
+def test_options_change_the_grid(tmp_path):
+    result = run_experiment(
+        "fov",
+        out=tmp_path / "fov",
+        camera="tiny",
+        port_distance_m=0.02,
+        thickness_m=0.0,
+        tilts_deg=(12.0, 0.0),
+        f_numbers=(4.0, 2.2),
+        progress=False,
+    )
+    tilt = [r for r in result.rows if r["series"] == "tilt"]
+    assert [(r["tilt_deg"], r["f_number"]) for r in tilt] == [(0.0, 2.2), (0.0, 4.0), (12.0, 2.2), (12.0, 4.0)]
+    assert {r["distance_mm"] for r in tilt} == {20.0}
+    assert 20.0 in {r["distance_mm"] for r in result.rows if r["series"] == "distance"}
+    assert "tiny camera, port 20 mm away (perpendicular), no glass" in result.summary

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.render
 
 def test_objects_by_method(tmp_path):
     out = tmp_path / "objects"
-    result = run_experiment("objects", out, scale="tiny", progress=False)
+    result = run_experiment("objects", out=out, scale="tiny", progress=False)
     rows = {row["method"]: row for row in result.rows if row["matcher"] == "zncc"}
     assert (out / "objects_depth_error.png").is_file()
     for row in result.rows:

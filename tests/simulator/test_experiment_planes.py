@@ -25,7 +25,7 @@ pytestmark = pytest.mark.render
 @pytest.fixture(scope="module")
 def planes(tmp_path_factory):
     out = tmp_path_factory.mktemp("planes") / "planes"
-    result = run_experiment("planes", out, scale="tiny", progress=False)
+    result = run_experiment("planes", out=out, scale="tiny", progress=False)
     rows = {(row["matcher"], row["method"], row["depth_m"]): row for row in result.rows}
     return out, {key[1:]: row for key, row in rows.items() if key[0] == "zncc"}, rows
 

@@ -1,14 +1,24 @@
-"""``lfsim experiment``: the command line of the experiment harness."""
+"""``lfsim experiment``: the command line of the experiment harness, its options and ``lfsim --version``."""
 
 from __future__ import annotations
 
+import csv
+import importlib.metadata
+
+import pytest
+
+import lfrefract
 from lfrefract.formats.jsonio import read_json
 from simulator import cli as sim_cli
-from simulator.experiments import load_experiments
+from simulator.experiments import OPTION_FLAGS, ExperimentOptions, experiment_names, load_experiments
 
 
 def test_experiments_are_registered():
-    assert {"planes", "averaging", "fov"} <= set(load_experiments())
+    assert {"planes", "averaging", "fov", "objects"} <= set(load_experiments())
+    assert experiment_names() == tuple(sorted(load_experiments()))
+    for experiment in load_experiments().values():
+        assert set(experiment.options) <= set(OPTION_FLAGS)
+        assert experiment.description
 
 
 def test_experiment_command_writes_its_table(tmp_path, capsys):
@@ -29,3 +39,102 @@ def test_unknown_experiment_is_refused_before_any_work(tmp_path, capsys):
     assert sim_cli.main(["experiment", "bubbles", "--out", str(tmp_path / "x")]) == 2
     assert "experiment must be one of" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_options_reach_the_experiment_and_parents_are_created(tmp_path, capsys):
+    out = tmp_path / "runs" / "2026" / "fov-options"  # none of these folders exists yet
+    argv = ["experiment", "fov", "--out", str(out), "--quiet", "--camera", "tiny", "--port-distance-m", "0.02"]
+    argv += ["--thickness-m", "0", "--tilts-deg", "0,10", "--f-numbers", "2.8,2.2"]
+    assert sim_cli.main(argv) == 0, capsys.readouterr().err
+    with open(out / "table.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    tilt = [r for r in rows if r["series"] == "tilt"]
+    assert sorted({float(r["tilt_deg"]) for r in tilt}) == [0.0, 10.0]
+    assert sorted({float(r["f_number"]) for r in tilt}) == [2.2, 2.8]
+    assert {float(r["distance_mm"]) for r in tilt} == {20.0}
+    meta = read_json(out / "meta.json")
+    assert meta["options"]["tilts_deg"] == [0.0, 10.0]
+    assert meta["options"]["camera"]["name"] == "tiny"
+    assert meta["parameters"]["port"] == {"distance_m": 0.02, "thickness_m": 0.0, "n_water": 1.333}
+
+
+def test_camera_file(tmp_path, capsys):
+    """--camera takes a camera file (here ``lfrefract describe --json`` output) as well as a preset."""
+    from lfrefract import cli as core_cli
+
+    path = tmp_path / "camera.json"
+    assert core_cli.main(["describe", "tiny", "--json"]) == 0
+    path.write_text(capsys.readouterr().out)
+    out = tmp_path / "fov"
+    argv = ["experiment", "fov", "--out", str(out), "--quiet", "--camera", str(path), "--tilts-deg", "0"]
+    assert sim_cli.main(argv) == 0, capsys.readouterr().err
+    assert read_json(out / "meta.json")["parameters"]["camera"]["name"] == "tiny"
+
+
+@pytest.mark.parametrize(
+    ("experiment", "option", "value"),
+    [
+        ("fov", "--methods", "proposed"),
+        ("planes", "--tilts-deg", "0,10"),
+        ("objects", "--f-numbers", "2.8"),
+        ("averaging", "--methods", "proposed"),
+        ("averaging", "--tilts-deg", "5"),
+    ],
+)
+def test_an_option_that_does_not_apply_is_refused(tmp_path, capsys, experiment, option, value):
+    out = tmp_path / "x"
+    assert sim_cli.main(["experiment", experiment, "--out", str(out), option, value]) == 2
+    err = capsys.readouterr().err
+    assert f"option {option}" in err
+    assert f"does not apply to experiment {experiment!r}" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--port-distance-m", "-1"], "port_distance_m must be positive"),
+        (["--thickness-m", "2"], "thickness_m must lie in [0, 1] m"),
+        (["--tilts-deg", "0,95"], "tilts_deg[1] must lie in (-90, 90) deg"),
+        (["--tilts-deg", "0,0"], "tilts_deg must not repeat"),
+        (["--camera", "pinhole"], "--camera must be a preset"),
+        (["--f-numbers", "0.1"], "f_number"),
+    ],
+)
+def test_invalid_option_values_name_the_option(tmp_path, capsys, argv, message):
+    out = tmp_path / "x"
+    assert sim_cli.main(["experiment", "fov", "--out", str(out), "--quiet", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_options_are_one_frozen_dataclass():
+    options = ExperimentOptions(scale="illum", methods=["proposed"], camera="tiny", tilts_deg=[0, 5])
+    assert options.methods == ("proposed",)
+    assert options.tilts_deg == (0.0, 5.0)
+    assert options.camera.name == "tiny"
+    assert options.given() == ("methods", "camera", "tilts_deg")
+    with pytest.raises(AttributeError):
+        options.scale = "tiny"  # frozen
+
+
+def test_help_lists_the_experiments_and_shows_defaults(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        sim_cli.main(["experiment", "--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for name in experiment_names():
+        assert f"  {name}: " in text
+    assert "(default: tiny)" in text
+    with pytest.raises(SystemExit):
+        sim_cli.main(["render", "--help"])
+    assert "(default: 8000000)" in capsys.readouterr().out
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        sim_cli.main(["--version"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out.strip()
+    assert out.startswith(f"lfsim {lfrefract.__version__}")
+    assert lfrefract.__version__ == importlib.metadata.version("lfrefract") or "installed distribution" in out

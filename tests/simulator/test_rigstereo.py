@@ -6,14 +6,29 @@ import numpy as np
 import pytest
 
 from lfrefract import ParameterError
-from simulator.experiments.rigstereo import MATCHERS, RigSetup, aim, exact_coverage, match, rig_data, warp_maps
-from simulator.rig import parse_rig
+from simulator.boards import CALIBRATION_ROTATIONS_DEG, SQUARES
+from simulator.config import Chessboard
+from simulator.experiments import ExperimentOptions
+from simulator.experiments.rigstereo import (
+    LIGHTS,
+    MATCHERS,
+    RigSetup,
+    aim,
+    chessboards,
+    exact_coverage,
+    experiment_rig,
+    match,
+    warp_maps,
+    with_objects,
+)
+from simulator.rig import load_rig
+
+SETUP = RigSetup(rig="default", calibration_depths_m=(0.3, 0.6), px_per_square=10.0, spp=16)
 
 
 @pytest.fixture(scope="module")
 def rig_and_warps():
-    setup = RigSetup(rig="default", calibration_depths_m=(0.3, 0.6), px_per_square=10.0, spp=16)
-    rig = parse_rig(rig_data(setup, []))
+    rig = experiment_rig(SETUP)
     return rig, warp_maps(rig)
 
 
@@ -51,3 +66,36 @@ def test_match_dispatches_and_refuses_unknown_matchers():
         assert np.nanmedian(disparity) == pytest.approx(4.0, abs=0.25), matcher
     with pytest.raises(ParameterError, match="matcher must be one of"):
         match("census", left, right, min_disparity_px=0, num_disparities=8)
+
+
+def test_experiment_rig_is_typed_and_takes_the_options():
+    """The embedded rig with the experiment's lights and render settings; the options replace the
+    cameras' optics and move the wall, and every camera's port follows the moved wall."""
+    rig = experiment_rig(SETUP)
+    embedded = load_rig("default")
+    assert [c.name for c in rig.cameras] == [c.name for c in embedded.cameras]
+    for camera, original in zip(rig.cameras, embedded.cameras, strict=True):
+        assert camera.scene.lights == LIGHTS
+        assert camera.scene.objects == ()
+        assert camera.scene.render.spp == SETUP.spp
+        assert camera.scene.port == original.scene.port
+    moved = experiment_rig(SETUP, ExperimentOptions(camera="tiny", port_distance_m=0.03, thickness_m=0.002))
+    assert moved.wall.distance_m == 0.03
+    assert moved.wall.thickness_m == 0.002
+    for camera in moved.cameras:
+        assert camera.scene.camera.name == "tiny"
+        assert camera.scene.port == moved.wall.port_for(camera.scene.pose)
+        assert camera.scene.port.thickness_m == 0.002
+    with pytest.raises(ParameterError, match="thickness_m"):
+        experiment_rig(SETUP, ExperimentOptions(thickness_m=0.0))  # a wall is glass
+
+
+def test_chessboards_are_typed_boards_on_the_line_of_sight():
+    rig = experiment_rig(SETUP)
+    boards = chessboards(rig, SETUP, 0.45)
+    assert all(isinstance(b, Chessboard) and b.squares == SQUARES for b in boards)
+    assert [b.placement.rotation_xyz_deg for b in boards] == [tuple(map(float, r)) for r in CALIBRATION_ROTATIONS_DEG]
+    centre = np.mean([b.placement.position_m for b in boards], axis=0)
+    assert np.allclose(centre[2], 0.45)
+    placed = with_objects(rig, boards[:1])
+    assert all(c.scene.objects == boards[:1] for c in placed.cameras)
