@@ -295,3 +295,16 @@ def test_every_example_file_reads():
             read_port_file(path)
         else:
             pytest.fail(f"{path.name}: an example file must be a camera-*.toml or port-*.toml file")
+
+
+def test_docs_cli_lists_every_key_of_both_files():
+    text = (EXAMPLES.parent / "cli.md").read_text(encoding="utf-8")
+    section = text[text.index("## Camera and port files") : text.index("## Captures: writing them")]
+    rows = [line.split("|")[1] for line in section.splitlines() if line.startswith("| `")]
+    documented = {key for cell in rows for key in re.findall(r"`([a-z_.]+)`", cell)}
+    camera = camera_preset("tiny").to_dict()
+    camera_keys = {k for k in camera if not isinstance(camera[k], dict)}
+    camera_keys |= {f"{table}.{k}" for table in ("mla", "sensor") for k in camera[table]}
+    port_keys = {"distance_m", "thickness_m", "tilt_x_deg", "tilt_y_deg", "tilt_x_rad", "tilt_y_rad", "normal"}
+    port_keys |= {"n_air", "n_glass", "n_water"}
+    assert documented == camera_keys | port_keys
