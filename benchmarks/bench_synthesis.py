@@ -6,7 +6,7 @@
 Each configuration runs in a fresh process so its peak memory (max RSS) is its own: "build MB"
 is the peak after building the map, "apply MB" the peak after applying it (map, raw frame and
 output). The raw frame is random RGB float32 of the camera's sensor size (apply time does not
-depend on content).
+depend on content). The port is the paper's reference port (``simulator.experiments.fov.reference_port``).
 Targets (issue 3), Illum, k = 32, s = 2, 2 cores: apply <= 20 ms per frame, build <= 2 s.
 Paper (Intel Xeon E5640, 4 cores, 2010): 53 ms per frame, 8.9 s for the map.
 """
@@ -29,12 +29,14 @@ PAPER_BUILD_S = 8.9
 
 
 def _worker(camera_name: str, k: int, supersample: int, frames: int, search: str) -> dict:
-    from lfrefract import FlatPort, camera_preset
+    from lfrefract import camera_preset
     from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
+    from simulator.experiments.fov import reference_port
 
     camera = camera_preset(camera_name)
-    # The reference set-up: port 59.2 mm away, normal proportional to (0.0085, 0.5004, 1), 5 mm glass.
-    port = FlatPort.from_normal([0.0085, 0.5004, 1.0], distance_m=0.0592, thickness_m=0.005)
+    # The reference port of the paper's implementation: normal (-0.0085, -0.5004, 1), 59.2 mm along the
+    # optical axis (52.9 mm perpendicular), a single air/water interface (docs/conventions.md, the port).
+    port = reference_port()
     options = SynthesisOptions(k=k, supersample=supersample, search=search)
     build_warp_map(camera_preset("tiny"), port, options=options)  # compile / load the kernels
     start = time.perf_counter()

@@ -1,7 +1,8 @@
 """The ``objects`` experiment (paper Fig. 7): a bowl and a figurine, reconstructed by every method.
 
 A rig (:mod:`simulator.experiments.planes` and :mod:`simulator.experiments.rigstereo` explain the
-rig, the methods and how each method's rig is calibrated) sees a textured bowl and a textured
+rig, the methods and how each method's rig is calibrated; the scene is built of typed objects,
+:func:`scene_objects`) sees a textured bowl and a textured
 figurine in front of a textured backdrop. The chessboards that calibrate the approximation and the
 rig are farther than both objects (``approx near`` / ``approx far``), as in the paper. ``tiny``:
 the default rig, objects at 0.31 and 0.34 m, backdrop at 0.7 m, boards at 0.45 and 0.6 m.
@@ -23,7 +24,14 @@ image's geometry (nearest pixel, nearest point). Against the ground truth on the
   pixels whose true surface point both cameras see through exact pixels
   (:func:`~simulator.experiments.rigstereo.exact_coverage`), and the errors on those pixels alone.
 
-Figures: the depth error maps by matcher and method (``objects_depth_error.png``).
+- ``status`` and ``error``: a method that fails gives rows with its error and NaN measures
+  (:mod:`simulator.experiments.methods`); a method that returns depth maps gives one row with
+  ``matcher = "none"``, its depth splatted and scored as above (its disparity from the cameras'
+  true baseline).
+
+The methods come from the registry (``ExperimentOptions.methods`` chooses); ``camera``,
+``port_distance_m`` and ``thickness_m`` change the rig as in ``planes``. Figures: the depth error
+maps by matcher and method (``objects_depth_error.png``).
 """
 
 from __future__ import annotations

@@ -193,9 +193,22 @@ def test_reference_port_is_the_authors():
     assert port.distance_m / port.normal[2] == pytest.approx(REFERENCE_AXIAL_DISTANCE_M, rel=1e-12)
     assert port.thickness_m == 0.0
     assert math.degrees(port.total_tilt_rad) == pytest.approx(26.58, abs=0.01)
+    assert setup_for("illum").reference_port == port
+
+
+def test_illum_scale_sweeps_about_the_reference_port():
+    """The illum grid: an untilted port at the reference port's perpendicular distance, no glass,
+    and the reference port itself turned up (until this was fixed: 59.2 mm perpendicular, 5 mm of
+    glass and the normal turned down)."""
     setup = setup_for("illum")
-    assert (setup.distance_m, setup.thickness_m, setup.n_water) == (port.distance_m, 0.0, port.n_water)
-    assert setup.reference_port == port
+    normal = np.array([-0.0085, -0.5004, 1.0]) / np.linalg.norm([-0.0085, -0.5004, 1.0])
+    assert setup.distance_m == pytest.approx(REFERENCE_PERPENDICULAR_M, rel=1e-12)
+    assert setup.thickness_m == 0.0
+    assert setup.n_water == 1.33
+    np.testing.assert_allclose(setup.reference_port.normal, normal, atol=1e-12)
+    assert setup.reference_port.distance_m == pytest.approx(REFERENCE_PERPENDICULAR_M, rel=1e-12)
+    assert setup.reference_port.thickness_m == 0.0
+    assert setup.distance_m in setup.distances_m
 
 
 def test_illum_perfect_fov_with_the_aperture_and_twice_it():

@@ -207,3 +207,20 @@ def test_a_failing_method_is_a_row(planes_run):
     assert all(r["status"] == "ok" for r in result.rows if r["method"] == "proposed")
     assert "broken: RuntimeError" in result.summary
     assert "broken on purpose" in (out / "table.md").read_text()
+
+
+@pytest.mark.render
+def test_a_depth_method_in_objects(tmp_path):
+    """``objects`` scores a depth method's maps against the ground truth directly: the rendered depth
+    itself scores (close to) zero on every object pixel."""
+    register_method("depth oracle", depth_oracle)
+    try:
+        result = run_experiment("objects", out=tmp_path / "objects", methods=("depth oracle",), progress=False)
+    finally:
+        unregister_method("depth oracle")
+    (row,) = result.rows
+    assert (row["matcher"], row["method"], row["status"]) == ("none", "depth oracle", "ok")
+    assert row["median_abs_mm"] < ORACLE_TRUTH_ERROR_MAX_MM
+    assert row["exact_median_abs_mm"] < ORACLE_TRUTH_ERROR_MAX_MM
+    assert row["completeness"] > 0.99
+    assert row["bad_0.5px"] < 0.01
