@@ -172,7 +172,11 @@ def _parser() -> argparse.ArgumentParser:
     exp.add_argument("--camera", help="camera preset or camera JSON file replacing the experiment's")
     exp.add_argument("--port-distance-m", type=float, help="perpendicular port (wall) distance, metres")
     exp.add_argument("--thickness-m", type=float, help="port (wall) glass thickness, metres (0: no glass)")
-    exp.add_argument("--tilts-deg", type=_numbers, help="port tilts about x, degrees, separated by commas")
+    exp.add_argument(
+        "--tilts-deg",
+        type=_numbers,
+        help="port tilts about x, degrees, separated by commas (a negative first one: --tilts-deg=-10,0)",
+    )
     exp.add_argument("--f-numbers", type=_numbers, help="main-lens f-numbers, separated by commas")
     exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
     exp.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -356,7 +356,10 @@ def _rows_for(
     f_numbers: tuple[float, ...],
     options: SynthesisOptions,
     aperture: str = "usable",
+    tilt_deg: float | None = None,
 ) -> tuple[list[dict], dict[float, np.ndarray]]:
+    """One row per f-number; ``tilt_deg``: the signed tilt of the sweep (default the total tilt)."""
+    tilt = round(math.degrees(port.total_tilt_rad), 4) if tilt_deg is None else tilt_deg
     rows, masks = [], {}
     original = original_fov(output, port)
     for n in f_numbers:
@@ -367,7 +370,7 @@ def _rows_for(
         rows.append(
             {
                 "series": series,
-                "tilt_deg": round(math.degrees(port.total_tilt_rad), 4),
+                "tilt_deg": tilt,
                 "distance_mm": round(port.distance_m * 1e3, 4),
                 "f_number": n,
                 "aperture": aperture,
@@ -562,7 +565,8 @@ def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> Experim
             if distance == setup.distance_m:
                 untilted_radius = radius
             continue
-        new, by_n = _rows_for(series, setup, port, radius, output, setup.f_numbers, synthesis)
+        signed = tilt if series == "tilt" else None  # a tilt row keeps the sweep's sign (negative: normal down)
+        new, by_n = _rows_for(series, setup, port, radius, output, setup.f_numbers, synthesis, tilt_deg=signed)
         rows += new
         if series == "tilt" and tilt in setup.mask_tilts_deg:
             masks[tilt] = by_n

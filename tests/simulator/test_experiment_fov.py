@@ -258,3 +258,15 @@ def test_options_change_the_grid(tmp_path):
     assert {r["distance_mm"] for r in tilt} == {20.0}
     assert 20.0 in {r["distance_mm"] for r in result.rows if r["series"] == "distance"}
     assert "tiny camera, port 20 mm away (perpendicular), no glass" in result.summary
+
+
+def test_a_negative_tilt_keeps_its_sign(tmp_path):
+    """A port turned down by 10 deg is the mirror image of one turned up by 10 deg (the tiny camera
+    is symmetric about its horizontal axis): the rows keep the sweep's sign and mirror each other."""
+    result = run_experiment("fov", out=tmp_path / "fov", tilts_deg=(-10.0, 10.0), f_numbers=(2.2,), progress=False)
+    by_tilt = {r["tilt_deg"]: r for r in result.rows if r["series"] == "tilt"}
+    assert sorted(by_tilt) == [-10.0, 10.0]
+    down, up = by_tilt[-10.0], by_tilt[10.0]
+    assert 0 < down["exact_share"] < 1
+    for key in ("exact_share", "perfect_fov_h_deg", "perfect_fov_v_deg", "perfect_fov_equiv_deg"):
+        assert down[key] == pytest.approx(up[key], abs=1e-9), key
