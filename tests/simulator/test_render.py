@@ -8,13 +8,24 @@ import math
 import numpy as np
 import pytest
 
-from lfrefract import ParameterError
+from lfrefract import ParameterError, virtual_camera_for
 from lfrefract.errors import FileFormatError
+from lfrefract.formats.capture import (
+    DEPTH_NAME,
+    IDEAL_NAME,
+    LENSES_NAME,
+    RAW_NAME,
+    SIDECAR_NAME,
+    read_capture,
+    read_ground_truth,
+)
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json
+from lfrefract.formats.outputs import output_manifest
 from simulator import cli
 from simulator.config import RenderSettings, embedded_scenes, load_scene, parse_scene
-from simulator.job import render_job, render_raw
+from simulator.groundtruth import lens_table
+from simulator.job import RENDER_KIND, render_job, render_raw
 from simulator.scene import check_geometry
 from tests.simulator.scenes import port, scene
 
@@ -59,6 +70,23 @@ def test_render_job_writes_every_file_with_its_parameters(tmp_path):
     lenses = np.load(out / "lenses.npz")
     assert len(lenses["lens_index"]) == meta["derived"]["lens_count"]
     assert {p.name for p in (out / "previews").iterdir()} == {"raw.png", "raw_crop.png", "ideal.png", "depth.png"}
+
+
+@pytest.mark.render
+def test_a_render_is_a_capture_folder_the_core_reads_back(tmp_path):
+    config = load_scene().with_overrides(render=RenderSettings(spp=1, seed=0))
+    out = render_job(config, tmp_path / "run", progress=False, write_previews=False).out_dir
+    assert output_manifest(out)["kind"] == RENDER_KIND
+    meta = read_json(out / SIDECAR_NAME)
+    assert meta["files"] == {"raw": RAW_NAME, "ideal": IDEAL_NAME, "depth": DEPTH_NAME, "lenses": LENSES_NAME}
+    capture = read_capture(out)
+    assert (capture.camera, capture.port, capture.pose) == (config.camera, config.port, config.pose)
+    assert capture.ideal == virtual_camera_for(config.camera)
+    truth = read_ground_truth(out)
+    assert truth.ideal.shape == (capture.ideal.height_px, capture.ideal.width_px, 3)
+    assert np.isfinite(truth.depth_m).any()
+    for key, value in lens_table(config.camera).items():
+        np.testing.assert_array_equal(truth.lenses[key], value)
 
 
 @pytest.mark.render

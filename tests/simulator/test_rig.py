@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfrefract import ParameterError, PinholeCamera, Pose
+from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose
+from lfrefract.formats.capture import DEPTH_NAME, read_capture, read_ground_truth
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json
 from simulator import cli as sim_cli
@@ -115,6 +116,11 @@ def test_rendered_rig_depth_maps_agree_about_the_world(tmp_path, capsys):
         assert sidecar["pose"] == entry["pose"]
         assert sidecar["port"] == entry["port"]
         pose = Pose.from_dict(sidecar["pose"])
+        capture = read_capture(out / entry["folder"])  # each camera's folder is a capture folder
+        assert (capture.pose, capture.port) == (pose, FlatPort.from_dict(entry["port"]))
+        assert capture.ideal == PinholeCamera.from_dict(sidecar["ideal"])
+        depth = read_exr(out / name / DEPTH_NAME, role="depth")
+        np.testing.assert_array_equal(read_ground_truth(out / name).depth_m, depth)
         cams[name] = (pose, PinholeCamera.from_dict(sidecar["ideal"]), read_exr(out / name / "depth.exr", role="depth"))
     (pose_l, view_l, depth_l), (pose_r, view_r, depth_r) = cams["left"], cams["right"]
     # Every surface point of the left depth map, seen by the right camera, is where its depth map says.
