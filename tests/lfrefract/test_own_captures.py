@@ -16,6 +16,7 @@ import pytest
 from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.formats.capture import read_capture
 from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.jsonio import read_json
 from lfrefract.formats.paramfile import read_camera_file, read_port_file
 from tests.lfrefract.test_calibration_mla import synthetic_white
 
@@ -87,13 +88,14 @@ def test_the_command_line_and_python_give_one_refraction_free_image(ran):
     image = read_exr(folder / "my" / "rf.exr", role="refraction_free")
     assert image.shape == (output.height_px, output.width_px, 3)
     assert read_exr(folder / "my" / "rf.coverage.exr", role="coverage").shape == image.shape[:2]
-    assert (folder / "my" / "rf.json").is_file()
+    assert read_json(folder / "my" / "rf.json")["K"] == output.K.tolist()  # as the page says
     assert (folder / "my" / "rf.png").is_file()
     assert any((folder / "my" / "maps").iterdir())  # the map kept for the next capture
     np.testing.assert_array_equal(read_exr(folder / "my" / "rf2.exr", role="refraction_free"), image)
     np.testing.assert_array_equal(read_exr(folder / "my" / "rf-python.exr", role="refraction_free"), image)
     assert read_exr(folder / "my" / "naive.exr").shape[:2] == image.shape[:2]
     assert f"{output.width_px} x {output.height_px} px, exact where" in "".join(printed)
+    assert "exact coverage" in printed[0]
     assert np.isfinite(image).all()
     assert image.max() > 0
 
