@@ -769,6 +769,8 @@ def _capture_sidecar(*, raw, camera, port, ideal, pose, ground_truth, metadata, 
         files.update(ideal=IDEAL_NAME, depth=DEPTH_NAME)
         if ground_truth.lenses is not None:
             files["lenses"] = LENSES_NAME
+    if metadata is not None and not (isinstance(metadata, Mapping) and all(isinstance(k, str) for k in metadata)):
+        raise ParameterError(f"metadata must be a mapping of str keys to plain data, got {metadata!r}")
     extra = dict(metadata or {})
     clash = sorted(set(extra) & {*_SIDECAR_KEYS, "schema_version"})
     if clash:

@@ -362,6 +362,7 @@ def test_writing_a_capture_replaces_only_an_earlier_capture_when_told(tmp_path):
         ({"port": {"distance_m": 0.02}}, "port must be a FlatPort"),
         ({"metadata": {"camera": {}}}, "metadata may not set ['camera']"),
         ({"metadata": {"schema_version": 2}}, "metadata may not set ['schema_version']"),
+        ({"metadata": [("scene", 1)]}, "metadata must be a mapping of str keys"),
         ({"ground_truth": "truth"}, "ground_truth needs ideal"),
         ({"kind": ""}, "kind must be a non-empty string"),
     ],
