@@ -323,7 +323,7 @@ def run_experiment(
     name: str,
     *,
     out: str | Path,
-    scale: str = "tiny",
+    scale: str | None = None,
     methods: Sequence[str] | None = None,
     camera: LightFieldCamera | str | None = None,
     port_distance_m: float | None = None,
@@ -345,7 +345,8 @@ def run_experiment(
         Output directory: absent (it and its missing parents are created) or empty, or an earlier
         output of the same experiment with ``overwrite``.
     scale, methods, camera, port_distance_m, thickness_m, tilts_deg, f_numbers
-        The fields of :class:`ExperimentOptions` (one is made of them); or give ``options``.
+        The fields of :class:`ExperimentOptions` (one is made of them; ``scale`` default ``"tiny"``);
+        or give ``options``.
     options : ExperimentOptions, optional
         All of them at once (then none of the separate ones may be given).
     progress : bool
@@ -371,7 +372,7 @@ def run_experiment(
     experiments = load_experiments()
     experiment = experiments[one_of("experiment", name, tuple(sorted(experiments)))]
     separate = {
-        "scale": scale if scale != "tiny" else None,
+        "scale": scale,
         "methods": methods,
         "camera": camera,
         "port_distance_m": port_distance_m,
@@ -380,7 +381,7 @@ def run_experiment(
         "f_numbers": f_numbers,
     }
     if options is None:
-        options = ExperimentOptions(**{"scale": scale, **{k: v for k, v in separate.items() if k != "scale"}})
+        options = ExperimentOptions(**{k: v for k, v in separate.items() if v is not None})
     else:
         if not isinstance(options, ExperimentOptions):
             raise ParameterError(f"options must be an ExperimentOptions, got {shown(options)}")

@@ -138,3 +138,16 @@ def test_version(capsys):
     out = capsys.readouterr().out.strip()
     assert out.startswith(f"lfsim {lfrefract.__version__}")
     assert lfrefract.__version__ == importlib.metadata.version("lfrefract") or "installed distribution" in out
+
+
+def test_options_or_separate_values_not_both(tmp_path):
+    from lfrefract import ParameterError
+    from simulator.experiments import run_experiment
+
+    options = ExperimentOptions(tilts_deg=(0.0,))
+    for separate in ({"scale": "tiny"}, {"tilts_deg": (5.0,)}):
+        with pytest.raises(ParameterError, match="give either options or"):
+            run_experiment("fov", out=tmp_path / "x", options=options, progress=False, **separate)
+    with pytest.raises(ParameterError, match="options must be an ExperimentOptions"):
+        run_experiment("fov", out=tmp_path / "x", options={"scale": "tiny"}, progress=False)
+    assert not (tmp_path / "x").exists()
