@@ -50,7 +50,7 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract.errors import ParameterError
-from lfrefract.optics.camera import GRID_TYPES, LightFieldCamera, MicrolensArray, micro_image_scale
+from lfrefract.optics.camera import GRID_TYPES, GridType, LightFieldCamera, MicrolensArray, micro_image_scale
 from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, reject_unknown_keys, require_keys
 
 __all__ = ["LATTICE_MODELS", "LENS_STATUS", "MlaCalibration", "calibrate_mla"]
@@ -68,7 +68,7 @@ _SQRT3 = math.sqrt(3.0)
 #: Canonical (unrotated, unit pitch) basis of each grid type, columns a1 and a2.
 _UNIT_BASIS = {"hex": np.array([[1.0, 0.5], [0.0, _SQRT3 / 2.0]]), "square": np.eye(2)}
 #: Angle between the two reciprocal basis vectors of each grid type, degrees.
-_GRID_ANGLE_DEG = {"hex": 60.0, "square": 90.0}
+_GRID_ANGLE_DEG: dict[GridType, float] = {"hex": 60.0, "square": 90.0}
 #: The measured angle must be this close to 60 or 90 deg.
 _GRID_ANGLE_TOLERANCE_DEG = 10.0
 #: Spectral peak over the median power at the same spatial frequency (all directions): white and
@@ -128,7 +128,7 @@ class MlaCalibration:
         Radius of the centroid window, pixels.
     """
 
-    grid: str
+    grid: GridType
     lattice_model: str
     image_size_px: tuple[int, int]
     origin_px: np.ndarray
@@ -538,7 +538,7 @@ def _validated_white(white: Any) -> np.ndarray:
 class _Lattice:
     """A micro-image lattice in pixels: index (i, j) at ``origin + basis @ (i, j)``."""
 
-    grid: str
+    grid: GridType
     model: str
     origin: np.ndarray
     basis: np.ndarray
@@ -610,7 +610,7 @@ def _check_dark_gaps(image: np.ndarray, calibration: MlaCalibration) -> None:
 
 def _spectral_lattice(
     image: np.ndarray, grid: str | None, min_pitch: float, max_pitch: float
-) -> tuple[str, np.ndarray]:
+) -> tuple[GridType, np.ndarray]:
     """Grid type and an approximate canonical pixel basis (2, 2) from the power spectrum."""
     height, width = image.shape
     h, w = min(height, _FFT_MAX_SIDE), min(width, _FFT_MAX_SIDE)
@@ -639,7 +639,7 @@ def _spectral_lattice(
             f"{max_pitch:.3g} px is {peak / max(floor, 1e-300):.3g} times the median power at its frequency "
             f"(a lattice gives over {_MIN_PEAK_PROMINENCE:.0f})"
         )
-    k1 = _refined_peak(power, first)
+    k1 = _refined_peak(power, (int(first[0]), int(first[1])))
     maxima = (power == ndimage.maximum_filter(power, size=3, mode="wrap")) & band & (power > 0.05 * peak)
     vv, uu = np.nonzero(maxima)
     ks = np.stack([fu[0, uu], fv[vv, 0]], axis=1)
@@ -689,7 +689,7 @@ def _refined_peak(power: np.ndarray, at: tuple[int, int]) -> np.ndarray:
     return np.array([(su + du) / w, (sv + dv) / h])
 
 
-def _canonical_basis(basis: np.ndarray, grid: str) -> np.ndarray:
+def _canonical_basis(basis: np.ndarray, grid: GridType) -> np.ndarray:
     """The canonical basis of the lattice spanned by ``basis``: ``a1`` the shortest vector within
     30 deg (hex) or 45 deg (square) of +u, ``a2`` the shortest one 60 or 90 deg further on."""
     mn = np.array([(m, n) for m in range(-2, 3) for n in range(-2, 3) if (m, n) != (0, 0)], dtype=np.float64)
@@ -831,9 +831,8 @@ def _robust_fit(
     for _ in range(50):
         lattice = _least_squares(lattice, indices[inliers], measured[inliers])
         distance = np.linalg.norm(measured - lattice.centres(indices), axis=1)
-        scale = sigma
-        if scale is None:
-            scale = max(float(np.median(distance[inliers])) / math.sqrt(2.0 * math.log(2.0)), _MIN_SIGMA_PX)
+        robust = max(float(np.median(distance[inliers])) / math.sqrt(2.0 * math.log(2.0)), _MIN_SIGMA_PX)
+        scale = sigma if sigma is not None else robust
         updated = candidates & (distance <= outlier_sigma * scale)
         if updated.sum() < _MIN_USED:
             raise ParameterError(

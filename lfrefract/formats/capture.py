@@ -40,6 +40,7 @@ import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -724,7 +725,8 @@ def write_capture_files(
         write_exr(folder / DEPTH_NAME, ground_truth.depth_m, role="depth")
         if ground_truth.lenses is not None:
             with atomic_file(folder / LENSES_NAME) as tmp, tmp.open("wb") as fh:
-                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in ground_truth.lenses.items()})
+                arrays: dict[str, Any] = {k: np.asarray(v) for k, v in ground_truth.lenses.items()}
+                np.savez_compressed(fh, **arrays)
     write_json(folder / SIDECAR_NAME, sidecar)
     return sidecar
 

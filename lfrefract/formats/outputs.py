@@ -237,7 +237,7 @@ def _is_kind(path: Path, expected: ExpectedKind) -> bool:
 
 
 def prepare_output_files(
-    outputs: Mapping[str | os.PathLike, ExpectedKind],
+    outputs: Mapping[Path, ExpectedKind] | Mapping[str, ExpectedKind],
     *,
     inputs: Iterable[str | os.PathLike] = (),
     overwrite: bool = False,

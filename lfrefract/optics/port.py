@@ -500,7 +500,7 @@ class FlatPort:
         alive = ~misses  # rays still travelling; misses and tir stay disjoint
         transmittance = np.ones(o.shape[0])
         point, direction = o.copy(), d.copy()
-        entry = None
+        entry: np.ndarray | None = None  # where the ray meets the first face
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             for offset, n_from, n_to in faces:
                 cos_i = direction @ travel_normal
@@ -517,6 +517,7 @@ class FlatPort:
                 direction, tir_here = _refract(direction, travel_normal, cos_i, n_from / n_to)
                 tir |= alive & tir_here
                 alive &= ~tir_here
+            assert entry is not None  # every port has its air-side face
             # Backstop: origins far beyond any port (finite, but ~1e300 m) can still overflow.
             finite = np.isfinite(np.concatenate([entry, point, direction], axis=1)).all(axis=1)
             misses |= alive & ~finite

@@ -108,13 +108,18 @@ class LazyRayTree:
     """Builds the :class:`RayTree` on first use, once, from any thread."""
 
     def __init__(self, camera: LightFieldCamera, port: FlatPort, *, usable_radius_m: float, lambda_m_per_rad: float):
-        self._args = (camera, port)
-        self._kwargs = {"usable_radius_m": usable_radius_m, "lambda_m_per_rad": lambda_m_per_rad}
+        self._camera, self._port = camera, port
+        self._usable_radius_m, self._lambda_m_per_rad = usable_radius_m, lambda_m_per_rad
         self._tree: RayTree | None = None
         self._lock = threading.Lock()
 
     def get(self) -> RayTree:
         with self._lock:
             if self._tree is None:
-                self._tree = RayTree(*self._args, **self._kwargs)
+                self._tree = RayTree(
+                    self._camera,
+                    self._port,
+                    usable_radius_m=self._usable_radius_m,
+                    lambda_m_per_rad=self._lambda_m_per_rad,
+                )
             return self._tree

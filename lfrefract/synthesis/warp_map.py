@@ -174,7 +174,9 @@ def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
     return options.search == "kdtree" or (options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m)
 
 
-def necessary_air_rays(port: FlatPort, directions_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def necessary_air_rays(
+    port: FlatPort, directions_cam: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Trace the light arriving along pinhole lines of sight back through the port into the air.
 
     Parameters
