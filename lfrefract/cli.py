@@ -1,8 +1,9 @@
 """``lfrefract``: the core's command line, working on files and presets (no renderer).
 
-    lfrefract describe (PRESET | META.json) [--json]
+    lfrefract describe (PRESET | CAMERA.toml | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k K] [--supersample S] [--lambda L] [--map-cache DIR]
-                    [--camera PRESET|FILE] [--port PORT.json] [--mla MLA.json] [--nonfinite refuse|mask] [--overwrite]
+                    [--camera PRESET|FILE] [--port PORT.toml|.json|.txt] [--mla MLA.json] [--nonfinite refuse|mask]
+                    [--overwrite]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full] [--camera PRESET|FILE] [--nonfinite refuse|mask]
                     [--overwrite]
     lfrefract views RAW.exr --out DIR [--grid 9] [--spacing-px S] [--format png|exr] [--overwrite]
@@ -93,6 +94,7 @@ from lfrefract.formats.exr import write_exr
 from lfrefract.formats.flatport import write_flat_port
 from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
+from lfrefract.formats.paramfile import read_camera_file
 from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
@@ -202,7 +204,7 @@ def synth(args: argparse.Namespace) -> int:
         port=port_from_file(args.port) if args.port is not None else None,
         nonfinite=args.nonfinite,
     )
-    camera = capture.camera
+    camera = _known(capture.camera, capture.raw_path)
     if args.mla:
         camera = mla_from_file(args.mla).calibrated_camera(camera)
     port = capture.port
@@ -310,7 +312,8 @@ def naive(args: argparse.Namespace) -> int:
         inputs=[*_capture_files(args.raw), *_option_files(args)],
         overwrite=args.overwrite,
     )
-    image = naive_view(capture.camera, capture.raw, output=capture.output, kind=args.kind, recorded=capture.recorded)
+    camera = _known(capture.camera, capture.raw_path)
+    image = naive_view(camera, capture.raw, output=capture.output, kind=args.kind, recorded=capture.recorded)
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
     return 0
@@ -319,7 +322,7 @@ def naive(args: argparse.Namespace) -> int:
 def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
     capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
-    camera, output = capture.camera, capture.output
+    camera, output = _known(capture.camera, capture.raw_path), capture.output
     if isinstance(args.grid, int) and args.grid >= 3 and args.grid % 2:  # else subaperture_stack names the grid
         require_memory(
             f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
@@ -371,6 +374,13 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _known(camera: LightFieldCamera | None, where: object) -> LightFieldCamera:
+    """The camera of a capture or sidecar read with ``camera_required`` (the default), which has one."""
+    if camera is None:
+        raise ParameterError(f"{str(where)!r}: no camera was given and its sidecar has none")
+    return camera
+
+
 def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     """The parameters of the first board capture, after every capture's sidecar is checked (before
     any raw image is read) and found to have the same camera (or ``--camera`` is given)."""
@@ -406,7 +416,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         inputs=_board_inputs(args),
         overwrite=args.overwrite,
     )
-    camera, known = first.camera, first.port  # known: the first capture's port, if its meta.json has one
+    camera = _known(first.camera, first.raw_path)
+    known = first.port  # the first capture's port, if its meta.json has one
     view = virtual_camera_for(camera)
     given = {"thickness_m": args.thickness_m, "n_glass": args.n_glass, "n_water": args.n_water}
     missing = [name for name, value in given.items() if value is None and known is None]
@@ -416,9 +427,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
             f"({args.boards[0]!r}) has no port in a meta.json to take them from"
         )
     n_air = known.n_air if known is not None else 1.0
-    thickness = args.thickness_m if args.thickness_m is not None else known.thickness_m
-    n_glass = args.n_glass if args.n_glass is not None else known.n_glass
-    n_water = args.n_water if args.n_water is not None else known.n_water
+    values = {name: value if value is not None else getattr(known, name) for name, value in given.items()}
+    thickness, n_glass, n_water = values["thickness_m"], values["n_glass"], values["n_water"]
     try:  # checked now, not after minutes of corner detection: a port with these (any distance)
         FlatPort(distance_m=1.0, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     except ParameterError as exc:
@@ -468,7 +478,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
     out = Path(args.out)
-    camera = _board_parameters(args).camera
+    first = _board_parameters(args)
+    camera = _known(first.camera, first.raw_path)
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
     )
@@ -482,12 +493,14 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
 
 
 def describe_command(args: argparse.Namespace) -> int:
-    """``lfrefract describe``: a preset's or a ``meta.json``'s camera (and port), as text or JSON."""
+    """``lfrefract describe``: a preset's, a camera file's or a ``meta.json``'s camera (and port), as text or JSON."""
     if args.source in PRESETS:
         info = describe(camera_preset(args.source))
+    elif Path(args.source).suffix == ".toml":
+        info = describe(read_camera_file(args.source))
     else:
         sidecar = read_sidecar(args.source)
-        info = describe(sidecar.camera, sidecar.port)
+        info = describe(_known(sidecar.camera, args.source), sidecar.port)
     if args.json:
         # A camera file: `lfrefract describe PRESET --json > CAMERA.json` is a --camera of the other commands.
         print(json.dumps({"schema_version": SCHEMA_VERSION, "kind": "lfrefract.describe", **info}, indent=2))
@@ -520,7 +533,7 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefa
         text = action.help or ""
         if "default" in text or action.default is None or isinstance(action.default, bool):
             return text
-        return super()._get_help_string(action)
+        return super()._get_help_string(action) or text
 
 
 def _camera_option(
@@ -529,8 +542,8 @@ def _camera_option(
     parser.add_argument(
         "--camera",
         metavar="PRESET|FILE",
-        help=f"the camera: a preset ({', '.join(sorted(PRESETS))}) or a JSON file with a camera table, e.g. "
-        f"`lfrefract describe PRESET --json` output or a render's meta.json {default}",
+        help=f"the camera: a preset ({', '.join(sorted(PRESETS))}), a camera file (CAMERA.toml, or JSON with a "
+        f"camera table such as `lfrefract describe PRESET --json` output or a render's meta.json) {default}",
     )
 
 
@@ -546,7 +559,9 @@ def _capture_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _describe_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("source", help=f"a preset ({', '.join(sorted(PRESETS))}) or a meta.json file")
+    parser.add_argument(
+        "source", help=f"a preset ({', '.join(sorted(PRESETS))}), a camera file (CAMERA.toml) or a meta.json file"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
@@ -576,8 +591,8 @@ def _synth_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
     parser.add_argument(
         "--port",
-        help="port file: PORT.json or the flat-port PORT.txt of `lfrefract calibrate port` (default: the capture's "
-        "meta.json)",
+        help="port file: PORT.toml, PORT.json or the flat-port PORT.txt of `lfrefract calibrate port` (default: the "
+        "capture's meta.json)",
     )
     parser.add_argument("--mla", help="MLA from `lfrefract calibrate mla` (default: the capture's meta.json)")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier synth output of the same name")

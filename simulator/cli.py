@@ -169,7 +169,7 @@ def _parser() -> argparse.ArgumentParser:
         help="methods to compare, by name, separated by commas, e.g. 'proposed,approx near' "
         "(default: every registered method)",
     )
-    exp.add_argument("--camera", help="camera preset or camera JSON file replacing the experiment's")
+    exp.add_argument("--camera", help="camera preset or camera file (TOML or JSON) replacing the experiment's")
     exp.add_argument("--port-distance-m", type=float, help="perpendicular port (wall) distance, metres")
     exp.add_argument("--thickness-m", type=float, help="port (wall) glass thickness, metres (0: no glass)")
     exp.add_argument(

@@ -3,6 +3,7 @@
 - :mod:`~lfrefract.formats.exr`: float OpenEXR images tagged with their role.
 - :mod:`~lfrefract.formats.jsonio`: JSON sidecars with a schema version.
 - :mod:`~lfrefract.formats.flatport`: a flat port as one line of text (Refractive COLMAP layout).
+- :mod:`~lfrefract.formats.paramfile`: camera and port files (TOML, JSON, or the flat-port text).
 - :mod:`~lfrefract.formats.ply`: point clouds.
 - :mod:`~lfrefract.formats.viewstack`: sub-aperture view stacks (HCI benchmark layout).
 - :mod:`~lfrefract.formats.capture`: a capture (raw image, camera, port, ground truth) as a folder.

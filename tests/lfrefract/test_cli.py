@@ -36,6 +36,20 @@ def test_describe_meta_json_includes_the_port(tmp_path, capsys):
     assert f"total_tilt_deg: {math.degrees(port.total_tilt_rad)}" in out
 
 
+def test_describe_takes_a_camera_file(tmp_path, capsys):
+    """A TOML camera file, as --camera takes it, describes the same camera as its preset."""
+    from lfrefract.formats.paramfile import write_camera_file
+
+    write_camera_file(tmp_path / "camera.toml", camera_preset("f01"))
+    assert main(["describe", str(tmp_path / "camera.toml"), "--json"]) == 0
+    from_file = json.loads(capsys.readouterr().out)
+    assert main(["describe", "f01", "--json"]) == 0
+    assert from_file == json.loads(capsys.readouterr().out)
+    (tmp_path / "bad.toml").write_text("[camera]\nname = 'x'\n")
+    assert main(["describe", str(tmp_path / "bad.toml")]) == 2
+    assert "bad.toml" in capsys.readouterr().err
+
+
 def test_describe_bad_file_is_a_clear_error(tmp_path, capsys):
     assert main(["describe", str(tmp_path / "nope.json")]) == 2
     assert "no such file" in capsys.readouterr().err
