@@ -719,3 +719,17 @@ MEMORY_ESTIMATE_RATIO_MAX = 1.25
 # .obj is refused by os.stat before anything reads it (measured well under 10 ms, even with a busy
 # 2-core machine); before issue 12 a 4 GB sparse OBJ was read by Mitsuba for 76 s before failing.
 FILE_SIZE_REFUSAL_SECONDS = 1.0
+
+# ----------------------------------------------------------------------------- direct lighting
+# Relative per-pixel noise of the ideal image of a white plane lit by point lights, 8 spp
+# (tests/simulator/test_lighting.py): with every light sampled at every sample, the only noise is
+# where in the pixel a sample lands on the plane's smooth shading, 0.13-0.24 % measured with one or
+# two lamps; 1 % leaves room for seeds and machines, while picking one of the two lamps at random
+# per sample (Mitsuba's ``direct``) gives |L1 - L2| / (L1 + L2) / sqrt(spp), 19.6 % measured.
+WHITE_PLANE_NOISE_RELATIVE = 0.01
+
+# Largest difference between the image of two lights and the sum of the images of each light alone
+# (same seed, same samples), relative to the image's brightest pixel: float32 sums of a few
+# samples in another order, about 1e-7 of the value; 1e-5 leaves room for the accumulation over
+# 2 spp. A random choice of one light per sample misses by a large fraction of the image.
+LIGHT_SUPERPOSITION_RELATIVE = 1e-5

@@ -15,6 +15,7 @@ from lfrefract.formats.jsonio import read_json
 from simulator import groundtruth
 from simulator.config import RenderSettings, SceneConfig, Water, parse_scene, read_toml
 from simulator.job import render_job, render_raw
+from simulator.lighting import EVERY_EMITTER
 from simulator.rig import embedded_rigs, parse_rig
 from simulator.scene import build_scene, check_geometry, integrator, water_medium
 from simulator.sensor import plenoptic_sensor_dict
@@ -225,8 +226,8 @@ def test_clear_water_keeps_the_integrators_of_clear_scenes():
     port = parse_scene(_data()).port
     for water in (None, Water(), Water(absorption_per_m=0.0, scattering_per_m=0.0, phase_g=0.7), Water(**SEA)):
         assert water_medium(water) is None
-        assert integrator(None, water=water) == {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}
-        assert integrator(port, water=water) == {"type": "path", "max_depth": 4, "rr_depth": 5, "hide_emitters": False}
+        assert integrator(None, water=water) == {"type": EVERY_EMITTER, "max_delta_depth": 0, "hide_emitters": False}
+        assert integrator(port, water=water) == {"type": EVERY_EMITTER, "max_delta_depth": 2, "hide_emitters": False}
 
 
 def test_turbid_water_is_a_homogeneous_medium_with_volpath():
