@@ -1,6 +1,6 @@
 """``lfsim``: the simulator's command line.
 
-    lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--seed S] [--overwrite]
+    lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--ideal-spp N] [--seed S] [--overwrite]
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA]
                      [--port-distance-m D] [--thickness-m T] [--tilts-deg T1,T2] [--f-numbers N1,N2]
@@ -32,7 +32,7 @@ from pathlib import Path
 from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.outputs import terminate_cleanly
-from simulator.config import PORT_MODELS, embedded_scenes, load_scene
+from simulator.config import DEFAULT_IDEAL_SPP, PORT_MODELS, embedded_scenes, load_scene
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
 __all__ = ["main"]
@@ -133,7 +133,13 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("scene", nargs="?", help="scene TOML file or embedded scene name (default: 'default')")
     render.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
     render.add_argument("--camera", choices=sorted(PRESETS), help="camera preset replacing the scene's")
-    render.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    render.add_argument("--spp", type=int, help="samples per pixel of the raw image (default: the scene's)")
+    render.add_argument(
+        "--ideal-spp",
+        type=int,
+        help="samples per pixel of the ideal (ground-truth) image (default: the scene's render.ideal_spp, "
+        f"else {DEFAULT_IDEAL_SPP})",
+    )
     render.add_argument("--seed", type=int, help="sampler seed (default: the scene's)")
     render.add_argument(
         "--port-model", choices=list(PORT_MODELS), help="how the port is rendered (default: the scene's)"
@@ -316,7 +322,7 @@ def _run(args: argparse.Namespace) -> int:
         changes = {}
         if args.camera:
             changes["camera"] = camera_preset(args.camera)
-        given = {"spp": args.spp, "seed": args.seed, "port_model": args.port_model}
+        given = {"spp": args.spp, "ideal_spp": args.ideal_spp, "seed": args.seed, "port_model": args.port_model}
         overrides = {key: value for key, value in given.items() if value is not None}
         if overrides:
             changes["render"] = dataclasses.replace(config.render, **overrides)
@@ -341,7 +347,8 @@ def _run(args: argparse.Namespace) -> int:
     cam = config.camera
     print(
         f"rendered {config.name!r} with {cam.name} ({cam.sensor.width_px}x{cam.sensor.height_px} px, "
-        f"{config.render.spp} spp) in {result.raw_seconds:.2f} s; ground truth in {result.ideal_seconds:.2f} s"
+        f"{config.render.spp} spp) in {result.raw_seconds:.2f} s; ground truth ({config.render.ideal_spp} spp) "
+        f"in {result.ideal_seconds:.2f} s"
     )
     print(f"wrote {result.out_dir}/: raw.exr ideal.exr depth.exr lenses.npz meta.json previews/")
     return 0

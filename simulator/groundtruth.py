@@ -1,7 +1,9 @@
 """Ground truth traced by the project, not read from Mitsuba's AOVs (which stop at the glass).
 
 * The ideal image: the same scene without the port, seen by the virtual pinhole camera
-  (centre of projection at the main-lens centre, OpenCV intrinsics K), lit identically. In turbid
+  (centre of projection at the main-lens centre, OpenCV intrinsics K), lit identically, at its
+  own samples per pixel (``render.ideal_spp``, default
+  :data:`simulator.config.DEFAULT_IDEAL_SPP`), which is independent of the raw image's. In turbid
   water the pinhole stands in the water: its rays are attenuated (and the view veiled) over the
   whole distance from the main-lens centre, where the raw image's rays cross water only beyond
   the port's water face.
@@ -83,7 +85,14 @@ def depth_map(mi: ModuleType, scene, pinhole: PinholeCamera, pose: Pose) -> np.n
 
 
 def compute(
-    mi: ModuleType, scene, config: SceneConfig, pinhole: PinholeCamera, *, spp: int, seed: int, progress: bool = True
+    mi: ModuleType,
+    scene,
+    config: SceneConfig,
+    pinhole: PinholeCamera,
+    *,
+    seed: int,
+    spp: int | None = None,
+    progress: bool = True,
 ) -> GroundTruth:
     """Render the ideal image and trace the depth map and lens table for ``config``.
 
@@ -97,11 +106,16 @@ def compute(
     config : SceneConfig
     pinhole : PinholeCamera
         Geometry of the ideal image.
-    spp, seed : int
-        Samples per pixel and job seed of the ideal render.
+    seed : int
+        Job seed of the ideal render (its stream is :data:`simulator.render.IDEAL_STREAM`).
+    spp : int, optional
+        Samples per pixel of the ideal render; default ``config.render.ideal_spp`` (the raw
+        image's ``config.render.spp`` is not used).
     progress : bool
         Show a progress bar.
     """
+    if spp is None:
+        spp = config.render.ideal_spp
     medium = water_medium(config.water)
     ideal = render_bands(
         mi,

@@ -108,8 +108,9 @@ def render_job(
 ) -> RenderResult:
     """Render a scene and its ground truth into ``out_dir``, a capture folder of kind ``lfsim.render``.
 
-    Writes (:func:`lfrefract.formats.capture.write_capture_files`) ``raw.exr`` (lenslet image, RGB),
-    ``ideal.exr`` (refraction-free pinhole image, RGB), ``depth.exr`` (camera-frame z of the ideal
+    Writes (:func:`lfrefract.formats.capture.write_capture_files`) ``raw.exr`` (lenslet image, RGB,
+    ``config.render.spp`` samples per pixel), ``ideal.exr`` (refraction-free pinhole image, RGB,
+    ``config.render.ideal_spp`` samples per pixel), ``depth.exr`` (camera-frame z of the ideal
     image's pixel centres, metres, +inf where no surface), ``lenses.npz`` (microlens ground truth),
     ``meta.json`` (every parameter, the seed, versions) and PNG previews. The directory is assembled
     in a staging directory and appears only when complete; a bad scene raises before anything is
@@ -140,7 +141,7 @@ def render_job(
     geometry = check_geometry(config)
     camera: LightFieldCamera = config.camera
     pinhole = ideal if ideal is not None else virtual_camera_for(camera)
-    spp, seed = config.render.spp, config.render.seed
+    spp, ideal_spp, seed = config.render.spp, config.render.ideal_spp, config.render.seed
     port_geometry = config.port is not None and config.render.port_model == "geometry"
     with staged_directory(out_dir, kind=RENDER_KIND, overwrite=overwrite, inputs=scene_inputs(config)) as stage:
         mi = backend.load_mitsuba(variant)
@@ -149,7 +150,7 @@ def render_job(
         raw = render_raw(mi, config, glass_free_scene=glass_free, max_band_pixels=max_band_pixels, progress=progress)
         raw_seconds = time.perf_counter() - start
         start = time.perf_counter()
-        truth = groundtruth.compute(mi, glass_free, config, pinhole, spp=spp, seed=seed, progress=progress)
+        truth = groundtruth.compute(mi, glass_free, config, pinhole, spp=ideal_spp, seed=seed, progress=progress)
         ideal_seconds = time.perf_counter() - start
         extra = {
             "scene": {k: v for k, v in config.to_dict().items() if k not in ("camera", "pose", "port")},
@@ -164,6 +165,7 @@ def render_job(
             },
             "render": {
                 "spp": spp,
+                "ideal_spp": ideal_spp,
                 "seed": seed,
                 "band_seed": "numpy.random.SeedSequence([seed, stream, band]).generate_state(1, uint32); "
                 "stream 0 raw, 1 ideal",

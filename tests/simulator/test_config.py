@@ -148,6 +148,8 @@ WRONG_TYPES = {
     "texture-px-float": (_object(0, texture_px=512.0), "texture_px must be an integer, got 512.0"),
     "squares-number": (_object(1, squares=8), "squares must be (columns, rows), a list of 2 integers, got 8"),
     "spp-string": (_scene(render={"spp": "16"}), "render.spp must be an integer, got '16'"),
+    "ideal-spp-float": (_scene(render={"ideal_spp": 256.0}), "render.ideal_spp must be an integer, got 256.0"),
+    "ideal-spp-bool": (_scene(render={"ideal_spp": True}), "render.ideal_spp must be an integer, got True"),
     "seed-bool": (_scene(render={"seed": True}), "render.seed must be an integer in [0, 2**31), got True"),
     "port-model-list": (_scene(render={"port_model": ["sensor"]}), "render.port_model must be a string, one of"),
     "render-number": (_scene(render=3), "render must be a table, got 3"),
@@ -208,6 +210,8 @@ def test_a_rig_value_of_the_wrong_type_names_key_type_and_value(case):
 
 OUT_OF_RANGE = {
     "spp-beyond-uint32": (_scene(render={"spp": 4294967297}), "render.spp must be at most 65536, got 4294967297"),
+    "ideal-spp-zero": (_scene(render={"ideal_spp": 0}), "render.ideal_spp must be positive, got 0"),
+    "ideal-spp-beyond": (_scene(render={"ideal_spp": 65537}), "render.ideal_spp must be at most 65536, got 65537"),
     "seed-beyond-int32": (_scene(render={"seed": 2**32}), "render.seed must be an integer in [0, 2**31)"),
     "position-1e300": (_object(0, position_m=[0.0, 0.0, 1e300]), "position_m[2] must lie in [-100, 100] m, got 1e+300"),
     "position-huge-int": (_object(0, position_m=[0, 0, 10**400]), "position_m[2] must be finite, got an integer of"),
@@ -265,6 +269,10 @@ def test_a_number_out_of_its_range_is_refused_by_name(tmp_path, case):
 def test_the_bounds_themselves_are_accepted():
     spp = parse_scene(_scene(render={"spp": config.MAX_SPP, "seed": 2**31 - 1})).render
     assert (spp.spp, spp.seed) == (65536, 2**31 - 1)
+    assert spp.ideal_spp == config.DEFAULT_IDEAL_SPP  # not the raw image's spp
+    ideal = parse_scene(_scene(render={"spp": 1, "ideal_spp": config.MAX_SPP})).render
+    assert (ideal.spp, ideal.ideal_spp) == (1, 65536)
+    assert parse_scene(_scene(render={"ideal_spp": 1})).render.ideal_spp == 1
     edge = config.MAX_COORDINATE_M
     plane = parse_scene(_object(0, position_m=[edge, -edge, edge], size_m=[config.MAX_SIZE_M, config.MIN_SIZE_M]))
     assert plane.objects[0].placement.position_m == (100.0, -100.0, 100.0)

@@ -22,11 +22,11 @@ from lfrefract.formats.capture import (
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json
 from lfrefract.formats.outputs import output_manifest
-from simulator import cli
-from simulator.config import RenderSettings, embedded_scenes, load_scene, parse_scene
+from simulator import cli, groundtruth
+from simulator.config import DEFAULT_IDEAL_SPP, RenderSettings, embedded_scenes, load_scene, parse_scene
 from simulator.groundtruth import lens_table
 from simulator.job import RENDER_KIND, render_job, render_raw
-from simulator.scene import check_geometry
+from simulator.scene import build_scene, check_geometry
 from tests.simulator.scenes import port, scene
 
 PLANE = {"type": "textured_plane", "position_m": [0.0, 0.0, 0.5], "size_m": [1.0, 1.0], "texture_px": 128}
@@ -62,6 +62,7 @@ def test_render_job_writes_every_file_with_its_parameters(tmp_path):
     assert np.all(np.isinf(depth))  # nothing but the environment
     assert meta["render"]["seed"] == config.render.seed
     assert meta["render"]["spp"] == config.render.spp
+    assert meta["render"]["ideal_spp"] == config.render.ideal_spp == DEFAULT_IDEAL_SPP
     assert meta["render"]["mitsuba"] == "3.9.1"
     assert meta["render"]["variant"] == "llvm_ad_rgb"
     assert meta["camera"] == cam.to_dict()
@@ -98,6 +99,36 @@ def test_cli_renders_default_scene(tmp_path, capsys):
     assert meta["render"]["spp"] == 2
     assert math.isclose(meta["port"]["total_tilt_deg"], 20.0)
     assert "rendered 'default'" in capsys.readouterr().out
+
+
+@pytest.mark.render
+def test_the_ideal_image_is_rendered_at_its_own_spp(mi, tmp_path):
+    config = load_scene().with_overrides(render=RenderSettings(spp=1, ideal_spp=8, seed=2))
+    out = render_job(config, tmp_path / "run", progress=False, write_previews=False).out_dir
+    assert read_json(out / SIDECAR_NAME)["render"]["ideal_spp"] == 8
+    glass_free = build_scene(mi, config, port_geometry=False)
+    pinhole = virtual_camera_for(config.camera)
+    at_8 = groundtruth.compute(mi, glass_free, config, pinhole, seed=2, progress=False).ideal
+    at_1 = groundtruth.compute(mi, glass_free, config, pinhole, spp=1, seed=2, progress=False).ideal
+    written = read_ground_truth(out).ideal
+    assert written.tobytes() == at_8.tobytes()
+    assert not np.array_equal(written, at_1)
+
+
+@pytest.mark.render
+def test_cli_sets_the_ideal_spp(tmp_path):
+    out = tmp_path / "white"
+    argv = ["render", "white", "--out", str(out), "--spp", "1", "--ideal-spp", "3", "--quiet", "--no-previews"]
+    assert cli.main(argv) == 0
+    assert read_json(out / SIDECAR_NAME)["render"]["ideal_spp"] == 3
+    assert read_json(out / SIDECAR_NAME)["render"]["spp"] == 1
+
+
+def test_cli_refuses_a_bad_ideal_spp_by_name(tmp_path, capsys):
+    out = tmp_path / "white"
+    assert cli.main(["render", "white", "--out", str(out), "--ideal-spp", "0", "--quiet"]) == 2
+    assert "render.ideal_spp must be positive, got 0" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_cli_refuses_non_empty_output(tmp_path, capsys):
