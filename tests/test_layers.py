@@ -35,6 +35,7 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract.formats.jsonio": (*_BASE, "lfrefract.formats.outputs"),
     "lfrefract.formats.exr": (*_BASE, "lfrefract.formats.outputs", "lfrefract.formats.jsonio"),
     "lfrefract.formats.ply": (*_BASE, *_LOW_FORMATS),
+    "lfrefract.formats.lytro": (*_BASE, *_LOW_FORMATS, "lfrefract.optics"),
     "lfrefract.optics": (*_BASE, "lfrefract.optics"),
     "lfrefract.formats.flatport": (*_BASE, *_LOW_FORMATS, "lfrefract.optics"),
     "lfrefract.formats.paramfile": (*_BASE, *_LOW_FORMATS, "lfrefract.optics", "lfrefract.formats.flatport"),
