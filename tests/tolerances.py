@@ -733,3 +733,41 @@ WHITE_PLANE_NOISE_RELATIVE = 0.01
 # samples in another order, about 1e-7 of the value; 1e-5 leaves room for the accumulation over
 # 2 spp. A random choice of one light per sample misses by a large fraction of the image.
 LIGHT_SUPERPOSITION_RELATIVE = 1e-5
+
+# ----------------------------------------------------------------------------- sensor model (issue 14)
+# Standard errors; a flat field's sample mean of digital numbers per CFA channel (65536 to 131072
+# pixels) against black + gain * mean electrons. The standard error is sqrt(variance / n), the
+# theory's variance; 5 of them are exceeded by chance with probability 6e-7, while a missing or
+# doubled shot-noise term, a wrong gain or a black level off by 1 DN moves the mean by far more.
+DETECTOR_MEAN_STANDARD_ERRORS = 5.0
+
+# Standard errors; the same flat field's sample variance against gain^2 (mean + read^2) + 1/12
+# (Poisson shot noise, Gaussian read noise, rounding to integers). For nearly Gaussian samples the
+# standard error of a variance is variance * sqrt(2 / (n - 1)): 0.39 % to 0.55 % here, so 5 of
+# them are 2-3 %; leaving out the quantisation term (5.5 % of the variance in the low-gain case) or
+# the read noise fails.
+DETECTOR_VARIANCE_STANDARD_ERRORS = 5.0
+
+# Dimensionless; a step edge blurred by the pixel-integrated Gaussian PSF against the closed form
+# Phi((u - edge) / sigma): the kernel is cut at 6 sigma (2e-9 of the light) and renormalised, and
+# the rest is double-precision round-off of sums of ~100 terms.
+DETECTOR_GAUSSIAN_EDGE = 1e-8
+
+# Dimensionless; the same step blurred by the Airy PSF (first dark ring 3 px) against the edge
+# spread function integrated from the closed-form line spread function (4 / pi) H1(2 v) / v^2
+# (Struve H1). The kernel stops at 25 ring radii, leaving out ~0.7 % of the light, and is
+# renormalised, which moves the edge profile by up to 4e-3 (measured 2.8e-3); 8 sub-samples per
+# pixel side integrate the core to ~1e-4. A Gaussian of the same 0.42 lambda N instead differs by
+# 0.05 (it has no rings), an Airy PSF twice as wide by 0.14.
+DETECTOR_AIRY_EDGE = 5e-3
+
+# Pixels; 10-90 % width of a sampled profile 1 - Phi((r - R) / sigma) (0.01 px bins) against the
+# exact 2.5631 sigma: linear interpolation between bins errs by < bin^2 / sigma ~ 1e-4 px.
+DETECTOR_EDGE_WIDTH_PX = 1e-3
+
+# Dimensionless; a flat colour through the tiny detector (64 frames averaged, shot noise ~1.5 % per
+# frame, so 0.2 % per pixel after averaging and rounding to 1 DN of ~700), demosaiced and turned
+# back into radiance by the inverse filter response and gain: the mean over the interior agrees
+# within 0.5 % of the colour's largest channel; swapping R and B (a wrong OpenCV code) is off by
+# 30 % or more.
+DETECTOR_COLOUR_RELATIVE = 5e-3
