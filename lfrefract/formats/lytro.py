@@ -380,6 +380,8 @@ def _check_mosaic(mosaic: RawMosaic, camera: LightFieldCamera, bits: int, what: 
             f"mosaic of shape {mosaic.shape} does not match the camera's "
             f"{sensor.width_px} x {sensor.height_px} px sensor"
         )
+    if sensor.height_px < 2 or sensor.width_px < 2:
+        raise ParameterError(f"a Bayer mosaic has at least 2 x 2 pixels, got {sensor.width_px} x {sensor.height_px}")
     group = 4 if bits == _ILLUM_BITS else 2
     if sensor.width_px % group:
         raise ParameterError(
@@ -583,32 +585,30 @@ def _mosaic_from_metadata(counts: np.ndarray, metadata: dict, format_table: str,
 
 # =============================================================================== thumbnail
 def _thumbnail_jpeg(mosaic: RawMosaic, settings: LytroSettings, *, max_side_px: int = 640) -> tuple[bytes, int, int]:
-    """A display preview: 2 x 2 Bayer cells to RGB, white-balanced, colour-corrected, gamma 1/2.2, JPEG."""
+    """A display preview, JPEG: each colour's sites area-averaged to at most ``max_side_px`` a side,
+    black-subtracted, white-balanced, colour-corrected, clipped to white, gamma 1/2.2."""
     import cv2
 
     counts = mosaic.counts
-    height, width = (mosaic.shape[0] // 2) * 2, (mosaic.shape[1] // 2) * 2
-    cells = counts[:height, :width].astype(np.float32)
+    cells = (mosaic.shape[0] // 2, mosaic.shape[1] // 2)  # 2 x 2 tiles
+    factor = max(1, math.ceil(max(cells) / max_side_px))
+    size = (max(1, cells[1] // factor), max(1, cells[0] // factor))  # (width, height), as OpenCV takes it
     scale = 1.0 / float(mosaic.white_level - mosaic.black_level)
     gains = dict(zip(_CHANNELS, settings.white_balance_gain, strict=True))
-    names = {"R": "r", "B": "b"}
-    # The pattern's four positions, in tile order (0, 0), (0, 1), (1, 0), (1, 1); greens take the row's name.
-    position = {}
+    # The pattern's four sites in tile order (0, 0), (0, 1), (1, 0), (1, 1); a green is named by its row's other colour.
+    plane = {}
     for k, letter in enumerate(mosaic.cfa):
         row, col = divmod(k, 2)
-        if letter == "G":
-            other = mosaic.cfa[2 * row + (1 - col)]
-            channel = "gr" if other == "R" else "gb"
-        else:
-            channel = names[letter]
-        position[channel] = (row, col)
-    plane = {c: (cells[r::2, q::2] - mosaic.black_level) * (scale * gains[c]) for c, (r, q) in position.items()}
+        row_partner = mosaic.cfa[2 * row + (1 - col)]
+        channel = {"R": "r", "B": "b"}.get(letter) or ("gr" if row_partner == "R" else "gb")
+        # Mean of factor x factor blocks of this colour's sites (the last partial blocks are left out).
+        sites = counts[row : 2 * size[1] * factor : 2, col : 2 * size[0] * factor : 2]
+        sums = sites.reshape(size[1], factor, size[0], factor).sum(axis=(1, 3), dtype=np.uint32)
+        mean = sums.astype(np.float32) / float(factor * factor)
+        plane[channel] = (mean - mosaic.black_level) * (scale * gains[channel])
     rgb = np.stack([plane["r"], 0.5 * (plane["gr"] + plane["gb"]), plane["b"]], axis=-1)
     rgb = rgb @ np.asarray(settings.color_matrix, dtype=np.float32).reshape(3, 3).T
-    factor = max(1, math.ceil(max(rgb.shape[:2]) / max_side_px))
-    size = (max(1, rgb.shape[1] // factor), max(1, rgb.shape[0] // factor))
-    small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA) if factor > 1 else rgb
-    display = np.clip(small, 0.0, 1.0) ** (1.0 / 2.2)
+    display = np.clip(rgb, 0.0, 1.0) ** (1.0 / 2.2)
     bgr = np.ascontiguousarray((display[..., ::-1] * 255.0 + 0.5).astype(np.uint8))
     ok, buffer = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 90])
     if not ok:  # OpenCV reports failure by its return value
