@@ -206,6 +206,13 @@ def _parser() -> argparse.ArgumentParser:
     dcheck.add_argument("dir", type=Path, help="dataset folder")
     dcheck.add_argument("--sizes-only", action="store_true", help="compare file sizes, do not re-hash")
     _command(sub, "scenes", help="list the embedded scenes, rigs and sweeps")
+    _command(
+        sub,
+        "lenses",
+        help="list the main-lens presets (published multi-element designs)",
+        description="List the main-lens presets, one per line: name, focal length and f-number as tabulated "
+        "(each camera scales a preset to its own focal length), surface count, source (docs/lenses.md).",
+    )
     return parser
 
 
@@ -284,6 +291,19 @@ def _rig(args: argparse.Namespace) -> int:
     return 0
 
 
+def _lenses() -> int:
+    from lfrefract.optics.lens import LENS_PRESETS
+
+    for name, preset in LENS_PRESETS.items():
+        lens = preset.build()
+        first = lens.first_order()
+        print(
+            f"{name}\tf = {first.efl_m * 1e3:.2f} mm\tf/{first.f_number:.2f}\t{len(lens.surfaces)} surfaces\t"
+            f"{lens.source}"
+        )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -305,6 +325,8 @@ def _run(args: argparse.Namespace) -> int:
             for name, path in sorted(embedded_sweeps().items()):
                 print(f"{name} (sweep)\t{path}")
             return 0
+        if args.command == "lenses":
+            return _lenses()
         if args.command == "dataset":
             return _dataset(args)
         if args.command == "rig":

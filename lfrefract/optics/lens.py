@@ -971,7 +971,10 @@ def _wide_angle() -> LensPrescription:
     # Provisional apertures (0.2 mm, the stop 0.1 mm) only to compute the first-order data.
     draft = LensPrescription(
         name="wide-angle",
-        source=("Wide angle, 100 deg field, f/4: M. Laikin, Lens Design, 4th ed. (CRC Press, 2007), p. 108"),
+        source=(
+            "Wide angle, 100 deg field, f/4: M. Laikin, Lens Design, 4th ed. (CRC Press, 2007), p. 108; "
+            "scaled to f = 20 mm, clear apertures fitted to the 50 deg beam"
+        ),
         surfaces=_table([(r, t, m, 0.1 if i == 8 else 0.2) for i, (r, t, m) in enumerate(rows)], stop=8, scale_m=1e-3),
     )
     draft = draft.with_f_number(4.0)
