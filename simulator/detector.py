@@ -40,6 +40,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import ndimage, signal, special
 
 from lfrefract.errors import ParameterError
@@ -565,13 +566,23 @@ def _blurred(channel_image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
         row = kernel.sum(axis=0)
         out = ndimage.convolve1d(channel_image, col, axis=0, mode="reflect")
         return ndimage.convolve1d(out, row, axis=1, mode="reflect")
+    # Not separable (the Airy pattern): one FFT product over the mirrored image. A circular convolution
+    # of at least the padded size leaves the valid part (offsets 2k onwards) free of wrap-around.
     padded = np.pad(channel_image, k, mode="symmetric")
-    return signal.oaconvolve(padded, kernel, mode="valid")
+    size = tuple(sp_fft.next_fast_len(n, real=True) for n in padded.shape)
+    product = sp_fft.rfft2(padded, size, workers=-1)
+    product *= sp_fft.rfft2(kernel, size, workers=-1)
+    del padded
+    full = sp_fft.irfft2(product, size, workers=-1)
+    h, w = channel_image.shape
+    return full[2 * k : 2 * k + h, 2 * k : 2 * k + w]
 
 
 # ---------------------------------------------------------------------------------------- the chain
 def _radiance(name: str, radiance_rgb: Any) -> np.ndarray:
-    image = np.asarray(radiance_rgb, dtype=np.float64)
+    image = np.asarray(radiance_rgb)
+    if not np.issubdtype(image.dtype, np.floating):  # float32 (as raw.exr holds) stays float32
+        image = image.astype(np.float64)
     if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 2 or image.shape[1] < 2:
         raise ParameterError(f"{name} must have shape (H, W, 3) with H, W >= 2, got {image.shape}")
     if not np.all(np.isfinite(image)):
@@ -603,7 +614,7 @@ def expected_electrons(radiance_rgb: np.ndarray, config: DetectorConfig) -> np.n
     response = np.array(config.cfa_response)
     filtered = np.zeros((h, w))
     for c in range(3):  # input channels: each its own wavelength's blur
-        blurred = _blurred(image[:, :, c], pixel_psf_kernel(config, c))
+        blurred = _blurred(image[:, :, c].astype(np.float64), pixel_psf_kernel(config, c))
         filtered += response[channels, c] * blurred
     electrons = config.electrons_per_unit_radiance * filtered
     if config.crosstalk > 0.0:
