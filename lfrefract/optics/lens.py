@@ -149,11 +149,9 @@ class Medium:
             object.__setattr__(self, "sellmeier_c_um2", c)
         elif self.model == "abbe":
             n_d = bounded_float(f"medium {self.name!r} n_d", self.n_d, 1.0, _N_MAX)
-            v_d = float(self.v_d)
-            if not (v_d > 0.0) or math.isnan(v_d):
-                raise ParameterError(
-                    f"medium {self.name!r} v_d must be positive (inf: no dispersion), got {self.v_d!r}"
-                )
+            v_d = self.v_d
+            if not (isinstance(v_d, float) and math.isinf(v_d) and v_d > 0.0):
+                v_d = positive_float(f"medium {self.name!r} v_d (inf: no dispersion)", v_d)
             object.__setattr__(self, "n_d", n_d)
             object.__setattr__(self, "v_d", v_d)
         if self.model != "sellmeier" and (self.sellmeier_b or self.sellmeier_c_um2):
@@ -423,7 +421,8 @@ class LensPrescription:
     surfaces: tuple[Surface, ...]
 
     def __post_init__(self) -> None:
-        text("lens name", self.name)
+        if not text("lens name", self.name).strip():
+            raise ParameterError("lens name must not be empty")
         if not isinstance(self.source, str):
             raise ParameterError(f"lens source must be a string, got {shown(self.source)}")
         surfaces = tuple(self.surfaces)

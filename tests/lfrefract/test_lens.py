@@ -181,6 +181,7 @@ def test_medium_round_trips_through_its_dict(medium):
         ({"n_d": 1.5, "sellmeier_b": [1.0], "sellmeier_c_um2": [0.1]}, "not both"),
         ({"sellmeier_b": [-5.0], "sellmeier_c_um2": [0.0]}, "not a real medium"),
         ({"nd": 1.5}, "nd"),
+        ({"n_d": 1.5, "v_d": "fifty"}, "v_d"),
     ],
 )
 def test_bad_media_are_refused_with_the_value_named(data, fragment):
@@ -277,6 +278,25 @@ def test_flat_surfaces_are_inf_whether_given_as_0_or_inf():
 def test_bad_prescriptions_are_refused_with_the_reason(surfaces, fragment):
     with pytest.raises(ParameterError, match=fragment):
         LensPrescription.from_dict(_singlet(surfaces=surfaces))
+
+
+def test_a_lens_needs_a_name():
+    with pytest.raises(ParameterError, match="lens name"):
+        LensPrescription.from_dict(_singlet(name=" "))
+
+
+@pytest.mark.parametrize("name", sorted(LENS_PRESETS))
+def test_placement_puts_the_rear_principal_plane_at_the_camera_origin(name):
+    lens = lens_preset(name, focal_length_m=ILLUM_F_M)
+    fo = lens.first_order()
+    z = lens.vertex_z_m()
+    assert (z[0], z[-1]) == (fo.front_vertex_z_m, pytest.approx(fo.rear_vertex_z_m, abs=1e-15))
+    assert np.all(np.diff(z) <= 0.0)  # surfaces in order from the scene (+z) towards the sensor
+    assert fo.rear_vertex_z_m - fo.rear_principal_m == pytest.approx(0.0, abs=1e-15)
+    assert fo.entrance_pupil_z_m == pytest.approx(fo.front_vertex_z_m - fo.entrance_pupil_m, abs=1e-15)
+    assert fo.front_principal_z_m == pytest.approx(fo.front_vertex_z_m - fo.front_principal_m, abs=1e-15)
+    # The placement is a mechanical fact: at another wavelength the lens stays where it is.
+    assert lens.first_order(F_LINE_M).front_vertex_z_m == fo.front_vertex_z_m
 
 
 def test_scaling_to_a_focal_length_keeps_the_f_number_and_the_shape():
