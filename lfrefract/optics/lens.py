@@ -278,8 +278,8 @@ class Surface:
     stop: bool = False
 
     def __post_init__(self) -> None:
-        radius = float(self.radius_m) if isinstance(self.radius_m, (int, float, np.number)) else self.radius_m
-        if isinstance(radius, float) and (radius == 0.0 or math.isinf(radius)):
+        number = isinstance(self.radius_m, (int, float, np.number)) and not isinstance(self.radius_m, bool)
+        if number and (float(self.radius_m) == 0.0 or math.isinf(float(self.radius_m))):
             object.__setattr__(self, "radius_m", math.inf)
         else:
             object.__setattr__(self, "radius_m", finite_float("radius_m", self.radius_m))
@@ -492,9 +492,12 @@ class LensPrescription:
         """
         lam = _wavelength(wavelength_m)
         count = len(self.surfaces)
+        # Camera placement (always at the d line, a mechanical fact): rear principal plane at z = 0.
+        (da, _), (dc, _) = self._matrix(0, count, D_LINE_M)
         (a, _b), (c, d) = self._matrix(0, count, lam)
-        if abs(c) < 1e-300:
-            raise ParameterError(f"lens {self.name!r} is afocal (no focal length) at {lam!r} m")
+        for wavelength, power in ((D_LINE_M, dc), (lam, c)):
+            if abs(power) < 1e-300:
+                raise ParameterError(f"lens {self.name!r} is afocal (no focal length) at {wavelength!r} m")
         efl = -1.0 / c
         bfd = -a / c
         ffd = -d / c
@@ -520,10 +523,11 @@ class LensPrescription:
         xpd = 2.0 * a_stop / abs(rd)
         rear_principal = bfd - efl
         front_principal = -ffd + efl
-        # Camera placement (always at the d line): rear principal plane at z = 0.
-        (da, _), (dc, _) = self._matrix(0, count, D_LINE_M)
         t_rear_principal_d = track + (-da / dc) - (-1.0 / dc)
-        z = lambda t: t_rear_principal_d - t  # noqa: E731
+
+        def z(t: float) -> float:
+            return float(t_rear_principal_d - t)
+
         return FirstOrder(
             wavelength_m=lam,
             efl_m=float(efl),

@@ -225,6 +225,21 @@ def test_flat_surfaces_are_inf_whether_given_as_0_or_inf():
     b = Surface.from_dict({"radius_m": "inf", "thickness_m": 0.0, "semi_aperture_m": 1e-3, "stop": True})
     assert a.radius_m == b.radius_m == math.inf
     assert a.curvature_per_m == 0.0
+    with pytest.raises(ParameterError, match="radius_m"):
+        Surface(radius_m=False, thickness_m=0.0, medium=Medium.air(), semi_aperture_m=1e-3)  # type: ignore[arg-type]
+
+
+def test_a_window_has_no_focal_length():
+    window = LensPrescription.from_dict(
+        _singlet(
+            surfaces=[
+                {"radius_m": "inf", "thickness_m": 0.004, "medium": "N-BK7", "semi_aperture_m": 0.01, "stop": True},
+                {"radius_m": "inf", "thickness_m": 0.0, "semi_aperture_m": 0.01},
+            ]
+        )
+    )
+    with pytest.raises(ParameterError, match="afocal"):
+        window.first_order()
 
 
 @pytest.mark.parametrize(
