@@ -13,6 +13,7 @@ from lfrefract.optics.lens import (
     LensTrace,
     Medium,
     Surface,
+    exit_pupil_bounds,
     lens_preset,
     trace_lens,
 )
@@ -40,6 +41,7 @@ __all__ = [
     "SensorGeometry",
     "Surface",
     "camera_preset",
+    "exit_pupil_bounds",
     "fresnel_transmittance",
     "lens_preset",
     "refract",

@@ -44,6 +44,7 @@ from lfrefract.optics.port import refract
 from lfrefract.validate import (
     as_table,
     bounded_float,
+    bounded_int,
     finite_float,
     non_negative_float,
     one_of,
@@ -65,6 +66,7 @@ __all__ = [
     "LensTrace",
     "Medium",
     "Surface",
+    "exit_pupil_bounds",
     "lens_preset",
     "trace_lens",
 ]
@@ -797,6 +799,69 @@ def trace_lens(
         blocked_at=blocked,
         surface_points_cam=surface_cam,
     )
+
+
+def exit_pupil_bounds(
+    lens: LensPrescription,
+    *,
+    plane_z_m: float,
+    radii_m: np.ndarray,
+    grid: int = 128,
+    wavelength_m: float = D_LINE_M,
+) -> np.ndarray:
+    """Where rays from points of a plane behind the lens can leave through it: bounds on the rear vertex plane.
+
+    For a point ``(r, 0, plane_z_m)`` of a plane behind the lens (the microlens array's), rays aimed
+    at a ``grid`` x ``grid`` lattice of points of the rear vertex plane, over a square 1.5 times the
+    rear surface's clear semi-aperture, are traced out through the lens (towards the object); the
+    result is the axis-aligned box of the points whose rays pass, widened by one lattice spacing on
+    every side (the scheme of PBRT-v4's realistic camera). A renderer samples its rays towards this
+    box instead of the whole rear element, so vignetted samples are not wasted; for a point at
+    polar angle ``phi`` the box is turned by ``phi`` about the axis.
+
+    Parameters
+    ----------
+    lens : LensPrescription
+    plane_z_m : float
+        Camera-frame z of the plane (behind the rear vertex: ``plane_z_m < rear_vertex_z_m``), metres.
+    radii_m : ndarray, shape (R,)
+        Distances from the axis of the plane's points, metres (>= 0).
+    grid : int
+        Lattice points per side (8 to 2048).
+    wavelength_m : float
+        Wavelength for the media, metres.
+
+    Returns
+    -------
+    ndarray, shape (R, 4)
+        ``x_min, x_max, y_min, y_max`` on the rear vertex plane (camera-frame x, y), metres; NaN
+        rows for points from which no ray passes.
+    """
+    n_grid = bounded_int("grid", grid, 8, 2048)
+    radii = np.asarray(radii_m, dtype=np.float64)
+    if radii.ndim != 1 or not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
+        raise ParameterError(f"radii_m must be a 1-D array of distances >= 0, got {shown(radii_m)}")
+    fo = lens.first_order()
+    z_plane = finite_float("plane_z_m", plane_z_m)
+    if z_plane >= fo.rear_vertex_z_m:
+        raise ParameterError(
+            f"plane_z_m={plane_z_m!r} must lie behind the lens's rear vertex (z < {fo.rear_vertex_z_m!r} m)"
+        )
+    half = 1.5 * lens.surfaces[-1].semi_aperture_m
+    step = 2.0 * half / n_grid
+    axis = -half + step * (np.arange(n_grid) + 0.5)
+    gx, gy = (g.ravel() for g in np.meshgrid(axis, axis, indexing="xy"))
+    targets = np.column_stack([gx, gy, np.full(gx.size, fo.rear_vertex_z_m)])
+    out = np.full((radii.size, 4), np.nan)
+    for k, r in enumerate(radii):
+        origin = np.array([r, 0.0, z_plane])
+        passed = trace_lens(
+            lens, np.broadcast_to(origin, targets.shape), targets - origin, toward="object", wavelength_m=wavelength_m
+        ).passed
+        if np.any(passed):
+            x, y = gx[passed], gy[passed]
+            out[k] = (x.min() - step, x.max() + step, y.min() - step, y.max() + step)
+    return out
 
 
 # --- presets -------------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ from lfrefract.optics.lens import (
     LensPrescription,
     Medium,
     Surface,
+    exit_pupil_bounds,
     lens_preset,
     trace_lens,
 )
@@ -490,3 +491,52 @@ def test_trace_refuses_bad_arrays():
         trace_lens(lens, np.zeros((1, 3)), np.zeros((1, 3)))
     with pytest.raises(ParameterError, match="toward"):
         trace_lens(lens, np.zeros((1, 3)), np.ones((1, 3)), toward="sideways")  # type: ignore[arg-type]
+
+
+# ----------------------------------------------------------------------------- exit pupil bounds
+
+
+@pytest.mark.parametrize("name", sorted(LENS_PRESETS))
+def test_exit_pupil_bounds_hold_every_ray_that_passes(name):
+    lens = lens_preset(name, focal_length_m=ILLUM_F_M)
+    fo = lens.first_order()
+    plane_z = -ILLUM_F_M  # the MLA of a camera focused at infinity
+    radii = np.array([0.0, 1.5e-3, 3.0e-3, 4.5e-3])
+    bounds = exit_pupil_bounds(lens, plane_z_m=plane_z, radii_m=radii, grid=64)
+    rng = np.random.default_rng(4)
+    half = 1.5 * lens.surfaces[-1].semi_aperture_m
+    for r, (x0, x1, y0, y1) in zip(radii, bounds, strict=True):
+        phi = rng.uniform(0.0, 2.0 * np.pi)
+        c, s = math.cos(phi), math.sin(phi)
+        local = rng.uniform(-half, half, (20000, 2))  # targets in the frame turned by phi
+        targets = np.column_stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]])
+        origin = np.array([c * r, s * r, plane_z])
+        aim = np.column_stack([targets, np.full(len(targets), fo.rear_vertex_z_m)])
+        passed = trace_lens(lens, np.broadcast_to(origin, aim.shape), aim - origin, toward="object").passed
+        assert passed.sum() > 100
+        inside = (local[:, 0] >= x0) & (local[:, 0] <= x1) & (local[:, 1] >= y0) & (local[:, 1] <= y1)
+        assert np.all(inside[passed]), (name, r)
+        # The box is much smaller than the square a renderer would sample otherwise.
+        assert passed.sum() / inside.sum() > 2.0 * passed.mean()
+
+
+def test_exit_pupil_bounds_on_the_axis_are_the_paraxial_exit_pupil_seen_from_the_image_plane():
+    # Stopped down to f/16 the pupil's aberrations vanish: from an axial point the beam through the
+    # exit pupil crosses the rear vertex plane in a disc of radius (XPD / 2) (z_rear - z) / (z_xp - z).
+    lens = lens_preset("double-gauss", focal_length_m=ILLUM_F_M, f_number=16.0)
+    fo = lens.first_order()
+    plane_z = -ILLUM_F_M
+    grid = 512
+    (x0, x1, y0, y1), *_ = exit_pupil_bounds(lens, plane_z_m=plane_z, radii_m=np.array([0.0]), grid=grid)
+    expected = fo.exit_pupil_diameter_m / 2.0 * (fo.rear_vertex_z_m - plane_z) / (fo.exit_pupil_z_m - plane_z)
+    spacing = 3.0 * lens.surfaces[-1].semi_aperture_m / grid
+    for edge in (x1, -x0, y1, -y0):
+        assert expected <= edge <= expected + 2.0 * spacing
+
+
+def test_exit_pupil_bounds_refuse_a_plane_in_front_of_the_rear_vertex():
+    lens = lens_preset("double-gauss", focal_length_m=ILLUM_F_M)
+    with pytest.raises(ParameterError, match="plane_z_m"):
+        exit_pupil_bounds(lens, plane_z_m=0.0, radii_m=np.array([0.0]))
+    with pytest.raises(ParameterError, match="radii_m"):
+        exit_pupil_bounds(lens, plane_z_m=-ILLUM_F_M, radii_m=np.array([-1e-3]))
