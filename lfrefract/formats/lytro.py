@@ -429,6 +429,8 @@ def illum_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroS
             "color": {"ccm": list(settings.color_matrix), "whiteBalanceGain": gains},
             "iso": settings.iso,
             "originOnSensor": {"x": 0, "y": 0},
+            "modulationExposureBias": 0.0,
+            "limitExposureBias": 0.0,
         },
         "devices": {
             "sensor": {
@@ -479,6 +481,8 @@ def f01_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroSet
                 "mosaic": mosaic_table,
             },
             "color": {"ccmRgbToSrgbArray": list(settings.color_matrix), "whiteBalanceGain": gains},
+            "modulationExposureBias": 0.0,
+            "limitExposureBias": 0.0,
         },
         "devices": {
             "sensor": {

@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import cv2
+import imageio  # a test dependency: the third-party reader these files must satisfy
 import numpy as np
 import pytest
 
@@ -34,9 +35,6 @@ from lfrefract.formats.lytro import (
 )
 from lfrefract.optics.camera import MicrolensArray
 from lfrefract.optics.presets import camera_preset
-
-imageio = pytest.importorskip("imageio")
-
 
 # imageio's raw readers open the metadata file beside a .raw without closing it (json.load(open(...))):
 # the ResourceWarning it raises when the handle is collected is theirs.
@@ -203,6 +201,8 @@ def test_exit_pupil_and_steps_are_recorded(tmp_path):
     assert meta["image"]["color"]["ccm"] == [2.0, -1.0, 0.0] * 3
     assert meta["devices"]["mla"]["sensorOffset"]["z"] == cam.mla.focal_length_m
     assert meta["devices"]["sensor"]["pixelPitch"] == cam.sensor.pixel_pitch_m
+    # PlenoptiCam scales its highlight clipping by 2 ** -modulationExposureBias: it must be a number.
+    assert meta["image"]["modulationExposureBias"] == 0.0
 
 
 def test_square_mla_is_recorded_as_square(tmp_path):
