@@ -79,6 +79,7 @@ from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_fie
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
+    RAW_NAME,
     SIDECAR_NAME,
     Capture,
     CaptureParameters,
@@ -173,8 +174,10 @@ def _option_files(args: argparse.Namespace) -> list[Path]:
 
 
 def _capture_files(path: str | Path) -> list[Path]:
-    """A raw image and the sidecar beside it: what a command reads of a capture."""
-    return [Path(path), Path(path).parent / SIDECAR_NAME]
+    """A raw image and the sidecar beside it: what a command reads of a capture (given as the raw
+    image or as its folder, as :func:`read_capture` takes it)."""
+    raw = Path(path) / RAW_NAME if Path(path).is_dir() else Path(path)
+    return [raw, raw.parent / SIDECAR_NAME]
 
 
 def _exr_out(args: argparse.Namespace) -> Path:
@@ -496,7 +499,7 @@ def describe_command(args: argparse.Namespace) -> int:
     """``lfrefract describe``: a preset's, a camera file's or a ``meta.json``'s camera (and port), as text or JSON."""
     if args.source in PRESETS:
         info = describe(camera_preset(args.source))
-    elif Path(args.source).suffix == ".toml":
+    elif Path(args.source).suffix.lower() == ".toml":
         info = describe(read_camera_file(args.source))
     else:
         sidecar = read_sidecar(args.source)
@@ -681,7 +684,7 @@ class Command:
 
 #: The commands, by name; ``calibrate`` dispatches on :data:`CALIBRATE_COMMANDS`.
 COMMANDS: dict[str, Command] = {
-    "describe": Command(describe_command, _describe_arguments, "derived optics of a preset camera or a meta.json"),
+    "describe": Command(describe_command, _describe_arguments, "optics of a preset, a camera file or a meta.json"),
     "synth": Command(synth, _synth_arguments, "refraction-free image of a raw capture (meta.json beside it)"),
     "naive": Command(naive, _naive_arguments, "conventional view with no refraction handling"),
     "views": Command(views, _views_arguments, "grid of sub-aperture views in the HCI 4D light field benchmark layout"),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import SIDECAR_NAME
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import staged_directory
@@ -50,6 +51,9 @@ def render_rig(
         ``out_dir``.
     """
     out = Path(out_dir)
+    taken = sorted(set(metadata or {}) & {"kind", "name", "source", "wall", "water", "cameras", "schema_version"})
+    if taken:
+        raise ParameterError(f"metadata may not set {taken}: the rig's own keys of its meta.json")
     with staged_directory(out, kind=RIG_KIND, overwrite=overwrite) as stage:
         cameras = {}
         for index, camera in enumerate(rig.cameras):

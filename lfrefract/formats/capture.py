@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import zipfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -862,25 +863,39 @@ def read_ground_truth(folder: str | os.PathLike) -> CaptureTruth:
     Returns
     -------
     CaptureTruth
-        ``ideal`` float32 (h, w, 3), ``depth_m`` float32 (h, w).
+        ``ideal`` float32 (h, w, 3), or (h, w) for a grey render; ``depth_m`` float32 (h, w).
 
     Raises
     ------
     FileFormatError
-        If an image is missing, not an EXR of its role, or the lens table is not a NumPy archive.
+        If an image is missing, not an EXR of its role, or not of the size the sidecar's ``ideal``
+        geometry gives; or if the lens table is not a NumPy ``.npz`` archive of arrays.
     """
     folder = Path(folder)
     ideal = read_exr(folder / IDEAL_NAME, role="ideal")
     depth = read_exr(folder / DEPTH_NAME, role="depth")
-    lenses = None
-    if (folder / LENSES_NAME).is_file():
-        try:
-            with np.load(folder / LENSES_NAME, allow_pickle=False) as data:
-                lenses = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
+    if (folder / SIDECAR_NAME).is_file():
+        geometry = read_sidecar(folder / SIDECAR_NAME, camera_required=False).ideal
+        if geometry is not None and ideal.shape[:2] != (geometry.height_px, geometry.width_px):
             raise FileFormatError(
-                f"{str(folder / LENSES_NAME)!r} is not a NumPy .npz archive of arrays: {exc}"
-            ) from None
+                f"{str(folder / IDEAL_NAME)!r} is {ideal.shape[1]} x {ideal.shape[0]} px, but the sidecar's ideal "
+                f"image is {geometry.width_px} x {geometry.height_px} px"
+            )
+    lenses = None
+    path = folder / LENSES_NAME
+    if path.is_file():
+        try:
+            # Our own handle: np.load of a plain .npy returns an array, and of a broken zip leaks its handle.
+            with path.open("rb") as fh:
+                data = np.load(fh, allow_pickle=False)
+                if not isinstance(data, np.lib.npyio.NpzFile):
+                    raise FileFormatError(f"{str(path)!r} is a single NumPy array, not an .npz archive of arrays")
+                with data:
+                    lenses = {k: data[k] for k in data.files}
+        except FileFormatError:
+            raise
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise FileFormatError(f"{str(path)!r} is not a NumPy .npz archive of arrays: {exc}") from None
     try:
         return CaptureTruth(ideal=ideal, depth_m=depth, lenses=lenses)
     except ParameterError as exc:

@@ -144,6 +144,10 @@ def read_port_file(path: str | os.PathLike) -> FlatPort:
             f"{str(path)!r}: key 'port' gives no orientation: add 'tilt_x_deg' and 'tilt_y_deg' (degrees) or "
             "'normal' (a 3-vector, camera frame, into the water)"
         )
+    if any(k in _DEG_ANGLES for k in angles) and any(k in _RAD_ANGLES for k in angles):
+        raise FileFormatError(
+            f"{str(path)!r}: key 'port' mixes degrees and radians ({angles}): give both tilts in one unit"
+        )
     if angles:
         return _parsed(path, "port", table, _port_from_angles)
     return _parsed(path, "port", table, _port_from_normal)
@@ -239,7 +243,7 @@ def _toml_table(path: Path, key: str) -> dict:
             "schema_version only)"
         )
     version = data.get("schema_version", SCHEMA_VERSION)
-    if isinstance(version, bool) or version != SCHEMA_VERSION:
+    if not isinstance(version, int) or isinstance(version, bool) or version != SCHEMA_VERSION:
         raise FileFormatError(
             f"{str(path)!r}: key 'schema_version' is {shown(version)}, this lfrefract reads {SCHEMA_VERSION}"
         )

@@ -28,8 +28,9 @@ the error, not a failed run.
 from __future__ import annotations
 
 import importlib.metadata
+import re
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -53,6 +54,8 @@ __all__ = [
     "MethodFactory",
     "MethodRig",
     "Shot",
+    "check_file_stems",
+    "file_stem",
     "method_factories",
     "method_names",
     "register_method",
@@ -94,7 +97,8 @@ class MethodCamera:
     pose : Pose
         Camera to world.
     warp : WarpMap
-        The refraction-free synthesis's warp map with the default options (built once per run).
+        The refraction-free synthesis's warp map with the paper's options (k = ``PAPER_K`` = 32;
+        built once per run).
     """
 
     name: str
@@ -301,6 +305,31 @@ def method_factories() -> dict[str, MethodFactory]:
             factory = _failing(exc, f"entry point {entry.name!r} = {entry.value!r}")
         methods[entry.name] = factory
     return methods
+
+
+def file_stem(name: str) -> str:
+    """The stem of a method's output files (``cloud_<stem>.ply``): its name with every run of
+    characters other than ASCII letters and digits made one ``_`` (``proposed+distortion`` ->
+    ``proposed_distortion``)."""
+    return re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "_"
+
+
+def check_file_stems(names: Sequence[str]) -> None:
+    """Refuse methods whose output files would share a name (:func:`file_stem`), before any work.
+
+    Raises
+    ------
+    ParameterError
+        Naming the methods and the stem they share.
+    """
+    seen: dict[str, str] = {}
+    for name in names:
+        stem = file_stem(name)
+        if stem in seen and seen[stem] != name:
+            raise ParameterError(
+                f"methods {seen[stem]!r} and {name!r} would write the same files (cloud_{stem}*.ply); rename one"
+            )
+        seen[stem] = name
 
 
 def method_names() -> tuple[str, ...]:

@@ -37,7 +37,6 @@ maps by matcher and method (``objects_depth_error.png``).
 from __future__ import annotations
 
 import math
-import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,7 +49,7 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.stereo.geometry import disparity_to_points
 from simulator.config import Bowl, Figurine, Placement, SceneObject, TexturedPlane
 from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
-from simulator.experiments.methods import depth_points
+from simulator.experiments.methods import check_file_stems, depth_points, file_stem, method_names
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
     MATCHERS,
@@ -147,6 +146,7 @@ def run_objects(
     base = experiment_rig(setup, options)
     depths = setup.calibration_depths_m
     nearest, farthest = 0.25 * objects_setup.size, 0.8 * objects_setup.size  # disparity search range
+    check_file_stems(options.methods if options.methods is not None else method_names())
     first = base.cameras[0].name
     with tempfile.TemporaryDirectory(prefix="lfsim-objects-") as tmp:
         work = Path(tmp)
@@ -171,11 +171,16 @@ def run_objects(
             if not method.ok:
                 rows += [_failed(method.name, method.error, m) for m in MATCHERS]
                 continue
+            clouds: list[tuple[Path, np.ndarray]] = []
             try:
-                rows += measure.rows(method, scene, base, (nearest, farthest), errors)
+                new = measure.rows(method, scene, base, (nearest, farthest), errors, clouds)
             except Exception as exc:  # a method failing on the capture is a row, not a failed run
                 matchers = (DEPTH_MATCHER,) if method.depth is not None else MATCHERS
                 rows += [_failed(method.name, describe_error(exc), m) for m in matchers]
+            else:  # written outside the try: a full disk fails the run, not the method
+                rows += new
+                for path, points in clouds:
+                    write_ply(path, points)
     figure = _figure(Path(out_dir), errors, order)
     summary = "\n".join(
         f"- {r['matcher']}, {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
@@ -211,8 +216,9 @@ class _Measure:
     mask: np.ndarray  # (H, W) the objects' pixels
     exact: np.ndarray  # (H, W) those seen through exact pixels of both cameras
 
-    def rows(self, method: PreparedMethod, shot, base: RigConfig, search_m, errors: dict) -> list[dict]:
-        """One row per matcher (one for a depth method), and the error maps into ``errors``."""
+    def rows(self, method: PreparedMethod, shot, base: RigConfig, search_m, errors: dict, clouds: list) -> list[dict]:
+        """One row per matcher (one for a depth method), the error maps into ``errors`` and the
+        point clouds to write, (path, points), into ``clouds``."""
         nearest, farthest = search_m
         if method.depth is not None:
             points = depth_points(np.asarray(method.depth.depth(shot)), method.depth.output)
@@ -229,7 +235,7 @@ class _Measure:
             disparity = match(matcher, left, right, min_disparity_px=int(low), num_disparities=int(high - low) + 3)
             points = disparity_to_points(disparity, rect)
             suffix = "" if matcher == MATCHERS[0] else f"_{matcher}"
-            write_ply(self.out_dir / f"cloud_{re.sub('[^a-z]+', '_', method.name)}{suffix}.ply", points)
+            clouds.append((self.out_dir / f"cloud_{file_stem(method.name)}{suffix}.ply", points))
             out.append(self._row(method, matcher, points, focal_baseline, errors, method.stereo.rms_px, method.boards))
         return out
 

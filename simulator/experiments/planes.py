@@ -37,7 +37,6 @@ depth:
 from __future__ import annotations
 
 import math
-import re
 import tempfile
 from pathlib import Path
 
@@ -48,7 +47,7 @@ from lfrefract.metrics import fit_plane_ransac
 from lfrefract.stereo.geometry import disparity_to_depth, disparity_to_points
 from simulator.config import Placement, TexturedPlane
 from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
-from simulator.experiments.methods import depth_points
+from simulator.experiments.methods import check_file_stems, depth_points, file_stem, method_names
 from simulator.experiments.rigstereo import (
     BOARD_OFFSETS,
     MATCHERS,
@@ -140,6 +139,7 @@ def _run(
     write_clouds: bool,
 ) -> ExperimentResult:
     """Render (into ``work``) and measure; see :func:`run_planes`."""
+    check_file_stems(options.methods if options.methods is not None else method_names())
     scale = options.scale
     plane_depths = PLANE_DEPTHS_M[scale]
     near, far = setup.calibration_depths_m
@@ -159,6 +159,7 @@ def _run(
             rows += _failed(method.name, method.error, plane_depths, MATCHERS)
             continue
         for depth in plane_depths:
+            clouds: list[tuple[Path, np.ndarray, np.ndarray]] = []
             try:
                 new = _measure(
                     method,
@@ -169,11 +170,14 @@ def _run(
                     warps,
                     disparities,
                     out_dir,
-                    write_clouds=write_clouds and depth == plane_depths[1],
+                    clouds=clouds if write_clouds and depth == plane_depths[1] else None,
                 )
             except Exception as exc:  # a method failing on one capture is a row, not a failed run
                 matchers = (DEPTH_MATCHER,) if method.depth is not None else MATCHERS
                 new = _failed(method.name, describe_error(exc), (depth,), matchers)
+            else:  # written outside the try: a full disk fails the run, not the method
+                for path, points, colours in clouds:
+                    write_ply(path, points, colours)
             rows += new
     figures = _figures(out_dir, rows, disparities, plane_depths, order)
     return ExperimentResult(
@@ -198,9 +202,10 @@ def _measure(
     disparities: dict,
     out_dir: Path,
     *,
-    write_clouds: bool,
+    clouds: list | None,
 ) -> list[dict]:
-    """The rows of one method on the plane at ``depth``: one per matcher, or one for a depth method."""
+    """The rows of one method on the plane at ``depth``: one per matcher, or one for a depth method.
+    ``clouds``: where to put the point cloud to write (path, points, colours), or None for none."""
     if method.depth is not None:
         estimate = np.asarray(method.depth.depth(shot), dtype=np.float64)
         points = depth_points(estimate, method.depth.output)
@@ -235,11 +240,11 @@ def _measure(
         )
         disparities[(matcher, method.name, depth)] = disparity
         points = disparity_to_points(disparity, rect)
-        if write_clouds and matcher == MATCHERS[0]:
+        if clouds is not None and matcher == MATCHERS[0]:
             finite = np.isfinite(disparity_to_depth(disparity, rect))
             colours = np.clip(left[finite] / max(float(np.nanpercentile(left, 99)), 1e-12), 0, 1)
-            cloud = Path(out_dir) / f"cloud_{re.sub('[^a-z]+', '_', method.name)}.ply"
-            write_ply(cloud, points, (colours * 255).astype(np.uint8))
+            cloud = Path(out_dir) / f"cloud_{file_stem(method.name)}.ply"
+            clouds.append((cloud, points, (colours * 255).astype(np.uint8)))
         exact = exact_coverage(points, base, warps)
         inside = _plane_measures(points[exact], truth, depth)
         rows.append(

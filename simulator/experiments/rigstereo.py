@@ -355,7 +355,10 @@ def method_rig(base: RigConfig, setup: RigSetup, boards: dict[float, list[Captur
     def calibration(name: str, depth_m: float) -> CalibrationViews:
         if depth_m not in boards:
             raise ParameterError(f"no chessboards were rendered at depth_m={depth_m!r}; there are some at {depths}")
-        scene = next(c.scene for c in base.cameras if c.name == name)
+        scenes = {c.name: c.scene for c in base.cameras}
+        if name not in scenes:
+            raise ParameterError(f"the rig has no camera {name!r}; it has {list(scenes)}")
+        scene = scenes[name]
         tables = chessboards(base, setup, depth_m)
         return CalibrationViews(
             raws=[b.raw(name) for b in boards[depth_m]],

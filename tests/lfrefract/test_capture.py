@@ -383,3 +383,39 @@ def test_ground_truth_must_match_its_ideal_geometry():
     other = dataclasses.replace(ideal, width_px=40, cx_px=19.5)
     with pytest.raises(ParameterError, match="ideal is 40 x 31 px"):
         write_capture("unused", raw=raw_image(), camera=TINY, ideal=other, ground_truth=truth_for(ideal))
+
+
+def _capture_with_truth(tmp_path):
+    ideal = PinholeCamera(focal_px=90.0, cx_px=20.0, cy_px=15.0, width_px=41, height_px=31)
+    return write_capture(tmp_path / "cap", raw=raw_image(0), camera=TINY, ideal=ideal, ground_truth=truth_for(ideal))
+
+
+def _npy(path):
+    with path.open("wb") as fh:
+        np.save(fh, np.zeros(3))
+
+
+@pytest.mark.parametrize(
+    "content",
+    [
+        pytest.param(_npy, id="a single .npy array"),
+        pytest.param(lambda path: path.write_bytes(b"PK\x03\x04 truncated"), id="a truncated zip"),
+        pytest.param(lambda path: path.write_bytes(b""), id="empty"),
+    ],
+)
+def test_a_broken_lens_table_is_a_file_format_error_naming_it(tmp_path, content):
+    """A lenses.npz that is not an archive of arrays was a TypeError or BadZipFile (a traceback)."""
+    out = _capture_with_truth(tmp_path)
+    (out / LENSES_NAME).unlink()
+    content(out / LENSES_NAME)
+    with pytest.raises(FileFormatError, match=re.escape(repr(str(out / LENSES_NAME)))):
+        read_ground_truth(out)
+
+
+def test_ground_truth_images_must_have_the_sidecars_size(tmp_path):
+    out = _capture_with_truth(tmp_path)
+    small = np.ones((4, 5, 3), np.float32)
+    (out / IDEAL_NAME).unlink()
+    write_exr(out / IDEAL_NAME, small, role="ideal")
+    with pytest.raises(FileFormatError, match=r"5 x 4 px, but the sidecar's ideal image is"):
+        read_ground_truth(out)

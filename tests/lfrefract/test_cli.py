@@ -43,6 +43,9 @@ def test_describe_takes_a_camera_file(tmp_path, capsys):
     write_camera_file(tmp_path / "camera.toml", camera_preset("f01"))
     assert main(["describe", str(tmp_path / "camera.toml"), "--json"]) == 0
     from_file = json.loads(capsys.readouterr().out)
+    (tmp_path / "camera.toml").rename(tmp_path / "CAMERA.TOML")  # as --camera takes it: any case
+    assert main(["describe", str(tmp_path / "CAMERA.TOML"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == from_file
     assert main(["describe", "f01", "--json"]) == 0
     assert from_file == json.loads(capsys.readouterr().out)
     (tmp_path / "bad.toml").write_text("[camera]\nname = 'x'\n")

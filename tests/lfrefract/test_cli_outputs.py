@@ -51,6 +51,19 @@ def test_no_command_writes_over_its_input(capture, capsys, command, out, named):
     assert snapshot(folder) == before
 
 
+def test_a_capture_given_as_its_folder_is_still_an_input(capture, capsys):
+    """With the capture given as its folder R, the commands counted R and R's parent's meta.json as their
+    inputs, not R/raw.exr and R/meta.json: only the kind check kept them (the message said "exists")."""
+    folder = capture.parent
+    before = snapshot(folder)
+    for command, out, named in (("naive", "raw.exr", "raw.exr"), ("synth", "meta.exr", "meta.json")):
+        for extra in ([], ["--overwrite"]):
+            err = refused(capsys, [command, str(folder), "--out", str(folder / out), *extra])
+            assert "the command's own input" in err, err
+            assert named in err
+    assert snapshot(folder) == before
+
+
 def test_views_never_replaces_the_capture_folder(capture, capsys):
     folder = capture.parent
     before = snapshot(folder)

@@ -151,6 +151,8 @@ CAMERA = (EXAMPLES / "camera-illum.toml").read_text(encoding="utf-8")
             "key 'schema_version' is 2, this lfrefract reads 1",
         ),
         (CAMERA.replace("schema_version = 1", "schema_version = true"), "key 'schema_version' is True"),
+        # A float was taken for the integer version.
+        (CAMERA.replace("schema_version = 1", "schema_version = 1.0"), "key 'schema_version' is 1.0"),
         (
             CAMERA.replace('name = "illum"', 'name = "illum"\nzoom = 2.0'),
             "key 'camera': unknown key(s) in camera: ['zoom']",
@@ -187,7 +189,9 @@ PORT = "[port]\ndistance_m = 0.02\nthickness_m = 0.005\ntilt_x_deg = 10.0\n"
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        (PORT + "tilt_x_rad = 0.1\n", "key 'port': unknown key(s) in port: ['tilt_x_rad']"),
+        # Degrees and radians mixed were "unknown key(s) in port: ['tilt_y_rad']", a key the format has.
+        (PORT + "tilt_x_rad = 0.1\n", "key 'port' mixes degrees and radians (['tilt_x_deg', 'tilt_x_rad'])"),
+        (PORT + "tilt_y_rad = 0.1\n", "key 'port' mixes degrees and radians (['tilt_x_deg', 'tilt_y_rad'])"),
         (PORT + "total_tilt_deg = 10.0\n", "key 'port': unknown key(s) in port: ['total_tilt_deg']"),
         (PORT.replace("distance_m = 0.02", "distance_m = 0.0"), "key 'port': port.distance_m must be positive"),
         (PORT.replace("distance_m = 0.02", "distance_m = 1000.0"), "key 'port': port.distance_m=1000.0 exceeds 100"),

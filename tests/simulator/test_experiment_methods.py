@@ -23,6 +23,7 @@ from simulator.experiments.methods import (
     CentralImages,
     DepthMaps,
     MethodRig,
+    file_stem,
     method_factories,
     method_names,
     register_method,
@@ -140,6 +141,24 @@ def test_unknown_method_is_refused_before_any_work(tmp_path):
     with pytest.raises(ParameterError, match="method must be one of"):
         run_experiment("planes", out=tmp_path / "planes", methods=("proposed", "telepathy"), progress=False)
     assert not (tmp_path / "planes").exists()
+
+
+@pytest.mark.parametrize("experiment", ["planes", "objects"])
+def test_methods_whose_files_would_collide_are_refused_before_any_work(tmp_path, experiment):
+    """'approx-far' and 'approx far' both wrote cloud_approx_far.ply (one cloud silently replaced the other),
+    and upper case and digits were dropped ('MyMethod' wrote cloud__y_ethod.ply)."""
+    register_method("approx-far", naive_view)
+    try:
+        with pytest.raises(ParameterError, match=r"'approx far' and 'approx-far' would write the same files"):
+            run_experiment(experiment, out=tmp_path / "out", methods=("approx far", "approx-far"), progress=False)
+    finally:
+        unregister_method("approx-far")
+    assert not (tmp_path / "out").exists()
+    assert [file_stem(n) for n in ("proposed+distortion", "MyMethod v2", "approx near")] == [
+        "proposed_distortion",
+        "MyMethod_v2",
+        "approx_near",
+    ]
 
 
 # ------------------------------------------------------------------------------- in planes

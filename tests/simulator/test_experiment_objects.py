@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
 from lfrefract.formats.ply import read_ply
 from simulator.experiments import run_experiment
+from simulator.experiments.methods import file_stem
 from tests.tolerances import OBJECTS_APPROX_FAR_OVER_PROPOSED_MIN, OBJECTS_COMPLETENESS_MIN
 
 pytestmark = pytest.mark.render
@@ -22,7 +21,7 @@ def test_objects_by_method(tmp_path):
         method, suffix = row["method"], "" if row["matcher"] == "zncc" else f"_{row['matcher']}"
         assert row["completeness"] > OBJECTS_COMPLETENESS_MIN[row["matcher"]], (row["matcher"], method)
         assert 0 <= row["bad_2px"] <= row["bad_1px"] <= row["bad_0.5px"] <= 1
-        points, _ = read_ply(out / f"cloud_{re.sub('[^a-z]+', '_', method)}{suffix}.ply")
+        points, _ = read_ply(out / f"cloud_{file_stem(method)}{suffix}.ply")
         assert len(points) > 1000, (row["matcher"], method)
     # The approximation calibrated at 0.6 m, twice as far as the objects, misses them most.
     far, proposed = rows["approx far"]["median_abs_mm"], rows["proposed"]["median_abs_mm"]

@@ -134,3 +134,13 @@ def test_rendered_rig_depth_maps_agree_about_the_world(tmp_path, capsys):
     relative = np.abs(seen - in_right[inside, 2]) / in_right[inside, 2]
     assert inside.mean() > 0.5
     assert np.nanmedian(relative) < RIG_DEPTH_AGREEMENT_RELATIVE
+
+
+def test_rig_metadata_may_not_replace_the_rigs_own_keys(tmp_path):
+    """``render_rig(..., metadata={"cameras": ...})`` silently replaced the rig's camera table in its meta.json."""
+    from simulator.rig_render import render_rig
+
+    for key in ("cameras", "kind", "wall"):
+        with pytest.raises(ParameterError, match=rf"metadata may not set \['{key}'\]"):
+            render_rig(load_rig(), tmp_path / "rig", metadata={key: 1})
+    assert not (tmp_path / "rig").exists()
