@@ -467,10 +467,10 @@ PORT_MODELS = ("sensor", "geometry")
 #: says otherwise. From the curve of docs/simulator.md ("The ideal image's samples"): the RMS
 #: error of the chessboard corners that the core's detector finds in the ideal image, against the
 #: pinhole projection of the board's corners, falls with spp to the detector's own floor on a
-#: noise-free image; at 256 spp it is within 10 % of that floor (the sampling noise adds about
-#: 0.03 px in quadrature), at 64 spp still 34 % above it. The ideal image has two pixels per
-#: microlens pitch, so 256 spp of it cost about as many samples as 1-3 spp of the raw image
-#: (0.3 s for the tiny-2x camera, about 10 s for the Illum on two cores).
+#: noise-free image (0.073 px); at 256 spp it is within 8 % of that floor (the sampling noise adds
+#: about 0.03 px in quadrature), at 64 spp still 34 % above it. The ideal image has two pixels per
+#: microlens pitch, 2-4 % of the raw image's pixels, so 256 spp of it cost as many samples as
+#: 5-10 spp of the raw image (0.3 s for the tiny-2x camera's 188 x 141 px).
 DEFAULT_IDEAL_SPP = 256
 
 

@@ -75,10 +75,10 @@ def register(mi: ModuleType) -> None:
                 for emitter in emitters:  # one shadow ray to each emitter: no random choice among them
                     ds, weight = emitter.sample_direction(si, sampler.next_2d(smooth), smooth)
                     lit = smooth & (ds.pdf != 0.0)
+                    value = throughput * bsdf.eval(ctx, si, si.to_local(ds.d), lit) * weight
+                    lit &= dr.any(value != 0.0)  # no shadow ray where the light cannot contribute
                     lit &= ~scene.ray_test(si.spawn_ray_to(ds.p), lit)
-                    wo = si.to_local(ds.d)
-                    value = bsdf.eval(ctx, si, wo, lit)
-                    result += dr.select(lit, throughput * value * weight, 0.0)
+                    result += dr.select(lit, value, 0.0)
                 if depth == self.max_delta_depth:
                     break
                 crossing = active & ~smooth  # a delta surface (a port face): follow its refraction
