@@ -147,7 +147,8 @@ def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) ->
             port=wall.port_for(scene.pose) if changes else scene.port,
             lights=LIGHTS,
             objects=(),
-            render=RenderSettings(spp=setup.spp, seed=0),
+            # The ideal images at the raw images' spp: the experiments compare the two at equal noise.
+            render=RenderSettings(spp=setup.spp, ideal_spp=setup.spp, seed=0),
         )
         cameras.append(RigCamera(camera.name, scene))
     return dataclasses.replace(rig, name=f"experiment-{setup.rig}", wall=wall, cameras=tuple(cameras))
