@@ -64,8 +64,14 @@ def _checks(rows: list[dict]) -> list[str]:
         f"{far['truth_error_mm']:.2f} mm at {depths[-1]:g} m ({growth:.1f} x; "
         f"{'holds' if growth >= 2 else 'FAILS'} the paper's claim of at least 2 x).",
         f"- Proposed plane RMSE over the ideal images' floor: {', '.join(f'{r:.2f}' for r in ratios)} "
-        f"({at}; {'holds' if max(ratios) <= 1.3 else 'FAILS'} the 1.3 x bound).",
+        f"({at}; {'holds' if max(ratios) <= PROPOSED_OVER_IDEAL_RMSE_MAX else 'FAILS'} the "
+        f"{PROPOSED_OVER_IDEAL_RMSE_MAX:g} x bound).",
     ]
+
+
+#: The proposed method's plane-fit RMSE may be at most this many times the ideal images' (both at the
+#: raw's spp). The tests hold planes to the same bound (tests/tolerances.py says what was measured).
+PROPOSED_OVER_IDEAL_RMSE_MAX = 2.0
 
 
 #: Why the proposed method's plane RMSE can fall below the ideal images' (a ratio under 1 above).

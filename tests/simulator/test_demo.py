@@ -15,7 +15,7 @@ def test_demo_writes_a_report_with_every_method(tmp_path, capsys):
     out = tmp_path / "demo"
     assert sim_cli.main(["demo", "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "holds the 1.3 x bound" in printed
+    assert "holds the 2 x bound" in printed
     assert "holds the paper's claim" in printed
     report = (out / "report.md").read_text()
     for name in ("approx far", "approx near", "proposed", "proposed+distortion", "ideal"):
