@@ -27,18 +27,13 @@ from lfrefract.optics.lens import (
     lens_preset,
     trace_lens,
 )
-from tests.tolerances import FLOAT64_RELATIVE
-
-# The issue's acceptance figures for agreement with an independent tracer (the tracers agree to about
-# 1e-17 m and 1e-15 rad on these lenses; the margin covers other platforms' libm).
-AGREE_POSITION_M = 1e-9
-AGREE_DIRECTION_RAD = 1e-9
-AGREE_FIRST_ORDER_RELATIVE = 1e-6
-# Paraxial limit: rays 1e-6 f off the axis and 1e-6 rad off it. The thick lens departs from its
-# first-order (thin-lens) mapping by third-order aberrations, (1e-6)^2 relative to the ray heights:
-# measured 3e-12 on both presets (3e-8 at 1e-4, as the square predicts). 1e-10 leaves a margin, while
-# a principal plane misplaced by 1 nm already moves the heights by 1e-7 of themselves.
-PARAXIAL_RELATIVE = 1e-10
+from tests.tolerances import (
+    FLOAT64_RELATIVE,
+    LENS_AGREE_DIRECTION_RAD,
+    LENS_AGREE_FIRST_ORDER_RELATIVE,
+    LENS_AGREE_POSITION_M,
+    LENS_PARAXIAL_RELATIVE,
+)
 
 ILLUM_F_M = 9.993e-3
 
@@ -365,7 +360,7 @@ def test_first_order_data_agree_with_optiland(name, wavelength_m):
         "f_number": float(np.ravel(p.FNO())[0]),
     }
     for key, value in theirs.items():
-        assert getattr(fo, key) == pytest.approx(value, rel=AGREE_FIRST_ORDER_RELATIVE), key
+        assert getattr(fo, key) == pytest.approx(value, rel=LENS_AGREE_FIRST_ORDER_RELATIVE), key
 
 
 @pytest.mark.parametrize(("name", "half_field_deg"), [("double-gauss", 24.0), ("wide-angle", 52.0)])
@@ -380,9 +375,9 @@ def test_real_rays_agree_with_optiland_at_every_surface(name, half_field_deg):
         assert 0.2 < mine.passed.mean() < 0.95
         ok = mine.passed
         assert mine.surface_points_cam is not None
-        assert np.max(np.abs(mine.surface_points_cam[:, ok] - points[:, ok])) < AGREE_POSITION_M
+        assert np.max(np.abs(mine.surface_points_cam[:, ok] - points[:, ok])) < LENS_AGREE_POSITION_M
         np.testing.assert_array_equal(mine.points_cam[ok], mine.surface_points_cam[-1, ok])
-        assert np.max(np.abs(mine.directions_cam[ok] - dirs[ok])) < AGREE_DIRECTION_RAD
+        assert np.max(np.abs(mine.directions_cam[ok] - dirs[ok])) < LENS_AGREE_DIRECTION_RAD
         assert np.all(np.isnan(mine.points_cam[~ok]))
         assert np.all(mine.blocked_at[~ok] >= 0)
 
@@ -402,8 +397,8 @@ def test_rays_traced_back_from_the_sensor_side_retrace_their_path(name):
     assert np.all(back.passed)
     assert forward.surface_points_cam is not None
     assert back.surface_points_cam is not None
-    assert np.max(np.abs(back.surface_points_cam - forward.surface_points_cam[:, ok])) < AGREE_POSITION_M
-    assert np.max(np.abs(back.directions_cam + directions[ok])) < AGREE_DIRECTION_RAD
+    assert np.max(np.abs(back.surface_points_cam - forward.surface_points_cam[:, ok])) < LENS_AGREE_POSITION_M
+    assert np.max(np.abs(back.directions_cam + directions[ok])) < LENS_AGREE_DIRECTION_RAD
 
 
 @pytest.mark.parametrize("name", sorted(LENS_PRESETS))
@@ -426,8 +421,8 @@ def test_in_the_paraxial_limit_the_thick_lens_maps_rays_like_the_thin_lens_of_it
     slope_out = out.directions_cam[:, :2] / -out.directions_cam[:, 2:]
     h_out = out.points_cam[:, :2] + slope_out * out.points_cam[:, 2:]  # back along the ray to z = 0
     scale = 1e-6 * f
-    assert np.max(np.abs(h_out - h_in)) < PARAXIAL_RELATIVE * scale
-    assert np.max(np.abs(slope_out - (slope_in - h_in / f))) < PARAXIAL_RELATIVE * 1e-6
+    assert np.max(np.abs(h_out - h_in)) < LENS_PARAXIAL_RELATIVE * scale
+    assert np.max(np.abs(slope_out - (slope_in - h_in / f))) < LENS_PARAXIAL_RELATIVE * 1e-6
     # Rays parallel to the axis meet it at z = -f: the microlens array of a camera focused at infinity.
     par = trace_lens(
         lens, np.column_stack([h_in, np.full(count, fo.front_vertex_z_m + 1e-3)]), np.tile([0, 0, -1.0], (count, 1))
