@@ -211,7 +211,8 @@ def _parser() -> argparse.ArgumentParser:
         "lenses",
         help="list the main-lens presets (published multi-element designs)",
         description="List the main-lens presets, one per line: name, focal length and f-number as tabulated "
-        "(each camera scales a preset to its own focal length), surface count, source (docs/lenses.md).",
+        "(lfrefract.optics.lens_preset(name, focal_length_m=...) scales one to a camera's), surface count, "
+        "source (docs/lenses.md).",
     )
     return parser
 

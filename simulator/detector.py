@@ -626,7 +626,11 @@ def expected_electrons(radiance_rgb: np.ndarray, config: DetectorConfig) -> np.n
 
 def _digitised(mean_e: np.ndarray, config: DetectorConfig, rng: np.random.Generator) -> np.ndarray:
     """One exposure of mean charge ``mean_e``: Poisson, full well, read noise, gain, black, round, clip (float64 DN)."""
-    electrons = np.minimum(rng.poisson(mean_e).astype(np.float64), config.full_well_e)
+    # Charge far beyond the full well saturates whatever the draw: cap the mean 10 sigma above it
+    # (a draw below the well is then as unlikely as 1e-23), so that numpy's Poisson, which refuses
+    # means above about 1e19, takes any finite radiance.
+    cap = config.full_well_e + 10.0 * np.sqrt(config.full_well_e) + 10.0
+    electrons = np.minimum(rng.poisson(np.minimum(mean_e, cap)).astype(np.float64), config.full_well_e)
     if config.read_noise_e > 0.0:
         electrons += rng.normal(0.0, config.read_noise_e, size=electrons.shape)
     dn = np.rint(electrons * config.gain_effective_dn_per_e + config.black_level_dn)

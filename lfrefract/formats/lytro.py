@@ -265,17 +265,32 @@ def pack_10bit(counts: np.ndarray) -> bytes:
     bytes
         ``H * W * 5 / 4`` bytes.
     """
-    flat = np.ascontiguousarray(counts, dtype=np.uint16).reshape(-1)
+    flat = _packable(counts, 10)
     if flat.size % 4:
         raise ParameterError(f"10-bit packing needs a pixel count divisible by 4, got {flat.size}")
-    if flat.size and int(flat.max()) > 1023:
-        raise ParameterError(f"10-bit packing needs values in [0, 1023], got a maximum of {int(flat.max())}")
     groups = flat.reshape(-1, 4)
     out = np.empty((groups.shape[0], 5), dtype=np.uint8)
     out[:, :4] = groups >> 2
     low = groups & 3
     out[:, 4] = low[:, 0] | (low[:, 1] << 2) | (low[:, 2] << 4) | (low[:, 3] << 6)
     return out.tobytes()
+
+
+def _packable(counts: np.ndarray, bits: int) -> np.ndarray:
+    """``counts`` flattened to uint16, after checking they are integers in [0, 2**bits - 1]: a float
+    or out-of-range value is refused, never rounded or wrapped by the cast."""
+    arr = np.asarray(counts)
+    if arr.dtype.kind not in "iu":
+        raise ParameterError(f"{bits}-bit packing needs integer counts, got dtype {arr.dtype}")
+    top = 2**bits - 1
+    if arr.size and (int(arr.min()) < 0 or int(arr.max()) > top):
+        raise ParameterError(f"{bits}-bit packing needs values in [0, {top}], got [{int(arr.min())}, {int(arr.max())}]")
+    return np.ascontiguousarray(arr, dtype=np.uint16).reshape(-1)
+
+
+def _image_size(height: int, width: int) -> None:
+    if height <= 0 or width <= 0:
+        raise FileFormatError(f"an image of {width} x {height} pixels: its size must be positive")
 
 
 def unpack_10bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray:
@@ -287,6 +302,7 @@ def unpack_10bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray
         If the byte count does not match the shape.
     """
     height, width = shape
+    _image_size(height, width)
     expected = height * width * 5 // 4
     if (height * width) % 4 or len(data) != expected:
         raise FileFormatError(f"a 10-bit {width} x {height} image takes {expected} bytes, got {len(data)}")
@@ -308,11 +324,9 @@ def pack_12bit(counts: np.ndarray) -> bytes:
     counts : numpy.ndarray
         Values in [0, 4095], shape (H, W) with ``H * W`` even.
     """
-    flat = np.ascontiguousarray(counts, dtype=np.uint16).reshape(-1)
+    flat = _packable(counts, 12)
     if flat.size % 2:
         raise ParameterError(f"12-bit packing needs an even pixel count, got {flat.size}")
-    if flat.size and int(flat.max()) > 4095:
-        raise ParameterError(f"12-bit packing needs values in [0, 4095], got a maximum of {int(flat.max())}")
     pairs = flat.reshape(-1, 2)
     out = np.empty((pairs.shape[0], 3), dtype=np.uint8)
     out[:, 0] = pairs[:, 0] >> 4
@@ -330,6 +344,7 @@ def unpack_12bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray
         If the byte count does not match the shape.
     """
     height, width = shape
+    _image_size(height, width)
     expected = height * width * 3 // 2
     if (height * width) % 2 or len(data) != expected:
         raise FileFormatError(f"a 12-bit {width} x {height} image takes {expected} bytes, got {len(data)}")
@@ -596,7 +611,9 @@ def _thumbnail_jpeg(mosaic: RawMosaic, settings: LytroSettings, *, max_side_px: 
     counts = mosaic.counts
     cells = (mosaic.shape[0] // 2, mosaic.shape[1] // 2)  # 2 x 2 tiles
     factor = max(1, math.ceil(max(cells) / max_side_px))
-    size = (max(1, cells[1] // factor), max(1, cells[0] // factor))  # (width, height), as OpenCV takes it
+    # Per axis: a long, narrow sensor has fewer tiles across than the long side's factor.
+    fy, fx = min(factor, cells[0]), min(factor, cells[1])
+    size = (cells[1] // fx, cells[0] // fy)  # (width, height), as OpenCV takes it
     scale = 1.0 / float(mosaic.white_level - mosaic.black_level)
     gains = dict(zip(_CHANNELS, settings.white_balance_gain, strict=True))
     # The pattern's four sites in tile order (0, 0), (0, 1), (1, 0), (1, 1); a green is named by its row's other colour.
@@ -606,9 +623,9 @@ def _thumbnail_jpeg(mosaic: RawMosaic, settings: LytroSettings, *, max_side_px: 
         row_partner = mosaic.cfa[2 * row + (1 - col)]
         channel = {"R": "r", "B": "b"}.get(letter) or ("gr" if row_partner == "R" else "gb")
         # Mean of factor x factor blocks of this colour's sites (the last partial blocks are left out).
-        sites = counts[row : 2 * size[1] * factor : 2, col : 2 * size[0] * factor : 2]
-        sums = sites.reshape(size[1], factor, size[0], factor).sum(axis=(1, 3), dtype=np.uint32)
-        mean = sums.astype(np.float32) / float(factor * factor)
+        sites = counts[row : 2 * size[1] * fy : 2, col : 2 * size[0] * fx : 2]
+        sums = sites.reshape(size[1], fy, size[0], fx).sum(axis=(1, 3), dtype=np.uint32)
+        mean = sums.astype(np.float32) / float(fy * fx)
         plane[channel] = (mean - mosaic.black_level) * (scale * gains[channel])
     rgb = np.stack([plane["r"], 0.5 * (plane["gr"] + plane["gb"]), plane["b"]], axis=-1)
     rgb = rgb @ np.asarray(settings.color_matrix, dtype=np.float32).reshape(3, 3).T

@@ -240,7 +240,9 @@ class Medium:
             if "sellmeier_b" in table or "sellmeier_c_um2" in table:
                 raise ParameterError(f"medium {shown(table)}: give n_d/v_d or Sellmeier terms, not both")
             v_d = table.get("v_d", "inf")
-            v_d = math.inf if v_d == "inf" else finite_float("medium v_d", v_d)
+            # No dispersion: the string "inf" (JSON has no infinity) or the number itself (TOML's inf).
+            is_inf = v_d == "inf" or (isinstance(v_d, float) and v_d == math.inf)
+            v_d = math.inf if is_inf else finite_float("medium v_d", v_d)
             return cls.abbe(n_d=table["n_d"], v_d=v_d, name=str(table.get("name", "")))
         if "sellmeier_b" in table and "sellmeier_c_um2" in table:
             b, c = table["sellmeier_b"], table["sellmeier_c_um2"]

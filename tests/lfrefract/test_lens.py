@@ -535,3 +535,10 @@ def test_exit_pupil_bounds_refuse_a_plane_in_front_of_the_rear_vertex():
         exit_pupil_bounds(lens, plane_z_m=0.0, radii_m=np.array([0.0]))
     with pytest.raises(ParameterError, match="radii_m"):
         exit_pupil_bounds(lens, plane_z_m=-ILLUM_F_M, radii_m=np.array([-1e-3]))
+
+
+def test_a_medium_without_dispersion_takes_a_numeric_infinity():
+    """TOML spells an infinite Abbe number inf, a float; Medium.from_dict refused it ('must be finite')."""
+    assert Medium.from_dict({"n_d": 1.5, "v_d": float("inf")}) == Medium.from_dict({"n_d": 1.5, "v_d": "inf"})
+    with pytest.raises(ParameterError, match="v_d"):
+        Medium.from_dict({"n_d": 1.5, "v_d": float("nan")})

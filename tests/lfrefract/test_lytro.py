@@ -417,3 +417,40 @@ def test_settings_are_validated():
 def test_module_names_what_it_exports():
     assert sorted(lytro.__all__) == lytro.__all__
     assert all(hasattr(lytro, name) for name in lytro.__all__)
+
+
+def test_packing_refuses_what_a_cast_would_change():
+    """Floats were rounded and negatives wrapped by the cast to uint16 before the range check."""
+    for pack, bits in ((pack_10bit, 10), (pack_12bit, 12)):
+        with pytest.raises(ParameterError, match=rf"{bits}-bit packing needs integer counts, got dtype float64"):
+            pack(np.array([[1.9, 2.5, 3.7, 0.2]]))
+        with pytest.raises(
+            ParameterError, match=rf"{bits}-bit packing needs values in \[0, {2**bits - 1}\], got \[-1, "
+        ):
+            pack(np.array([[-1, 2, 3, 4]], dtype=np.int32))
+
+
+def test_a_long_narrow_sensor_gets_a_thumbnail(tmp_path):
+    """A sensor more than 640 micro-image tiles long and 1 tile high failed to reshape its thumbnail."""
+    cam = camera_preset("tiny")
+    cam = dataclasses.replace(cam, sensor=dataclasses.replace(cam.sensor, width_px=2600, height_px=2))
+    mosaic = full_scale_mosaic((2, 2600), 10, 64, "GRBG", seed=5)
+    back = read_lfr(write_lfr(tmp_path / "narrow.lfr", mosaic, cam))
+    assert np.array_equal(back.mosaic.counts, mosaic.counts)
+
+
+@pytest.mark.parametrize("reader", ["f01", "illum"])
+def test_raw_metadata_with_an_impossible_size_is_refused(tmp_path, reader):
+    """A width or height of -2 in a bare RAW's metadata escaped as numpy's reshape error."""
+    cam = camera_preset("tiny")
+    if reader == "f01":
+        raw_path, meta_path = write_f01_raw(tmp_path / "f.raw", full_scale_mosaic((360, 480), 12, 168, "BGGR", 8), cam)
+        read = read_f01_raw
+    else:
+        raw_path, meta_path = write_illum_raw(tmp_path / "i.raw", full_scale_mosaic((360, 480), 10, 64, "GRBG", 8), cam)
+        read = read_illum_raw
+    meta = json.loads(meta_path.read_text())
+    meta["image"]["width"] = meta["image"]["height"] = -2
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(FileFormatError, match=r"-2 x -2 pixels: its size must be positive"):
+        read(raw_path)

@@ -379,3 +379,13 @@ def test_mla_calibration_finds_the_lattice_in_a_simulated_white_image(mi):
         cal.centres_px - camera.micro_image_centres_px(camera.lens_indices_for_pixels(cal.centres_px)), axis=1
     )
     assert fitted.max() < MLA_FITTED_CENTRE_MAX_PX
+
+
+def test_any_finite_radiance_saturates_instead_of_failing():
+    """A radiance whose mean charge passed about 1e19 electrons made numpy's Poisson raise 'lam value too large'."""
+    from simulator.detector import DETECTOR_PRESETS, simulate_mosaic
+
+    config = DETECTOR_PRESETS["illum"]
+    mosaic = simulate_mosaic(np.full((4, 4, 3), 1e16), config, seed=0)
+    # Full well, then read noise (2.5 e- RMS, about 0.5 DN here) on top: every pixel at the white level but a DN or two.
+    assert mosaic.counts.min() >= config.white_level_dn - 3
