@@ -121,7 +121,7 @@ def _tuple3x3(name: str, value: Any) -> tuple[tuple[float, float, float], ...]:
     return out  # type: ignore[return-value]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DetectorConfig:
     """The sensor behind the microlens array: colour filters, photoelectrons, noise, converter, blur.
 
@@ -429,7 +429,7 @@ def detector_preset(name: str) -> DetectorConfig:
 
 
 # ---------------------------------------------------------------------------------------- mosaic
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Mosaic:
     """A Bayer mosaic of digital numbers, as the sensor writes it.
 

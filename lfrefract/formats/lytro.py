@@ -87,7 +87,7 @@ _F01_BITS = 12
 
 
 # =============================================================================== mosaics
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RawMosaic:
     """A sensor's output: one digital number per pixel, under a colour-filter array.
 
@@ -222,7 +222,7 @@ def _sequence(name: str, value: Any, length: int) -> tuple:
     return tuple(value)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LytroCapture:
     """What a Lytro file holds, as read back.
 
@@ -597,7 +597,13 @@ def _mosaic_from_metadata(counts: np.ndarray, metadata: dict, format_table: str,
             f"{where}: mosaic {shown(_get(metadata, f'{format_table}.mosaic', where))} is not a Bayer pattern"
         )
     try:
-        return RawMosaic(counts, bits, levels["black"], levels["white"], patterns[upper_left])
+        return RawMosaic(
+            counts=counts,
+            bit_depth=bits,
+            black_level=levels["black"],
+            white_level=levels["white"],
+            cfa=patterns[upper_left],
+        )
     except ParameterError as exc:
         raise FileFormatError(f"{where}: {exc}") from None
 

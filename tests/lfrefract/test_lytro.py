@@ -47,7 +47,7 @@ def full_scale_mosaic(shape, bits, black, pattern, seed) -> RawMosaic:
     top = 2**bits - 1
     counts = rng.integers(0, top + 1, size=shape, dtype=np.uint16)
     counts.reshape(-1)[:4] = (0, top, 1, top - 1)
-    return RawMosaic(counts, bits, black, top, pattern)
+    return RawMosaic(counts=counts, bit_depth=bits, black_level=black, white_level=top, cfa=pattern)
 
 
 def tilted_tiny():
@@ -184,7 +184,9 @@ def test_thumbnail_shows_the_colour_that_was_lit(tmp_path, pattern):
     row, col = divmod(pattern.index("R"), 2)
     counts = np.full((360, 480), 32, dtype=np.uint16)
     counts[row::2, col::2] = 1023
-    path = write_lfr(tmp_path / "red.lfr", RawMosaic(counts, 10, 32, 1023, pattern), cam)
+    path = write_lfr(
+        tmp_path / "red.lfr", RawMosaic(counts=counts, bit_depth=10, black_level=32, white_level=1023, cfa=pattern), cam
+    )
     bgr = cv2.imdecode(np.frombuffer(read_lfr(path).thumbnail_jpeg, dtype=np.uint8), cv2.IMREAD_COLOR)
     b, g, r = (float(bgr[..., k].mean()) for k in range(3))
     assert r > 240
@@ -361,7 +363,11 @@ def test_writes_are_atomic_and_leave_nothing_behind(tmp_path):
     path, mosaic = small_lfr(tmp_path)
     before = path.read_bytes()
     with pytest.raises(ParameterError, match="bit_depth"):
-        write_lfr(path, RawMosaic(mosaic.counts, 12, 64, 4095, "GRBG"), camera_preset("tiny"))
+        write_lfr(
+            path,
+            RawMosaic(counts=mosaic.counts, bit_depth=12, black_level=64, white_level=4095, cfa="GRBG"),
+            camera_preset("tiny"),
+        )
     assert path.read_bytes() == before
     write_lfr(path, mosaic, camera_preset("tiny"), settings=LytroSettings(serial_number="B123"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.lfr"]
@@ -454,3 +460,10 @@ def test_raw_metadata_with_an_impossible_size_is_refused(tmp_path, reader):
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(FileFormatError, match=r"-2 x -2 pixels: its size must be positive"):
         read(raw_path)
+
+
+def test_mosaics_take_keywords_only():
+    """Positional levels could be swapped unnoticed (black for white): the fields are keyword-only."""
+    counts = np.zeros((2, 2), dtype=np.uint16)
+    with pytest.raises(TypeError):
+        RawMosaic(counts, 10, 32, 1023, "GRBG")

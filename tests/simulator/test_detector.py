@@ -389,3 +389,9 @@ def test_any_finite_radiance_saturates_instead_of_failing():
     mosaic = simulate_mosaic(np.full((4, 4, 3), 1e16), config, seed=0)
     # Full well, then read noise (2.5 e- RMS, about 0.5 DN here) on top: every pixel at the white level but a DN or two.
     assert mosaic.counts.min() >= config.white_level_dn - 3
+
+
+def test_detector_types_take_keywords_only():
+    from simulator.detector import DetectorConfig, Mosaic
+
+    assert all(f.kw_only for cls in (DetectorConfig, Mosaic) for f in dataclasses.fields(cls))
