@@ -378,21 +378,31 @@ _READ_NOISE_E = 2.5
 _WHITE_FILL = 0.7
 _CROSSTALK = 0.03
 
-_ILLUM = dict(
-    cfa_pattern="GRBG",
-    cfa_response=_response(_ILLUM_CCM, _ILLUM_RESPONSES),
-    quantum_efficiency=_QE,
-    photons_per_unit_radiance=_WHITE_FILL * _FULL_WELL_E / _QE,
-    full_well_e=_FULL_WELL_E,
-    read_noise_e=_READ_NOISE_E,
-    gain_dn_per_e=(1023 - 64) / _FULL_WELL_E,
-    iso=80.0,
-    base_iso=80.0,
-    black_level_dn=64,
-    white_level_dn=1023,
-    bit_depth=10,
-    psf="airy",
-    crosstalk=_CROSSTALK,
+
+def _lytro(cfa_pattern: str, cfa_response, *, black_level_dn: int, white_level_dn: int, bit_depth: int, iso: float):
+    """A Lytro camera's detector table: its metadata's pattern, levels, bit depth and base ISO, and the
+    assumptions shared by both cameras (quantum efficiency, full well, read noise, exposure, crosstalk);
+    the gain spans the full well from black to white."""
+    return dict(
+        cfa_pattern=cfa_pattern,
+        cfa_response=cfa_response,
+        quantum_efficiency=_QE,
+        photons_per_unit_radiance=_WHITE_FILL * _FULL_WELL_E / _QE,
+        full_well_e=_FULL_WELL_E,
+        read_noise_e=_READ_NOISE_E,
+        gain_dn_per_e=(white_level_dn - black_level_dn) / _FULL_WELL_E,
+        iso=iso,
+        base_iso=iso,
+        black_level_dn=black_level_dn,
+        white_level_dn=white_level_dn,
+        bit_depth=bit_depth,
+        psf="airy",
+        crosstalk=_CROSSTALK,
+    )
+
+
+_ILLUM = _lytro(
+    "GRBG", _response(_ILLUM_CCM, _ILLUM_RESPONSES), black_level_dn=64, white_level_dn=1023, bit_depth=10, iso=80.0
 )
 
 #: Named detector presets: ``"illum"`` (Lytro Illum), ``"f01"`` (first-generation Lytro) and
@@ -401,20 +411,9 @@ DETECTOR_PRESETS: dict[str, DetectorConfig] = {
     "illum": _preset("illum", **_ILLUM),
     "f01": _preset(
         "f01",
-        cfa_pattern="BGGR",
-        cfa_response=_response(_F01_CCM, _F01_RESPONSES),
-        quantum_efficiency=_QE,
-        photons_per_unit_radiance=_WHITE_FILL * _FULL_WELL_E / _QE,
-        full_well_e=_FULL_WELL_E,
-        read_noise_e=_READ_NOISE_E,
-        gain_dn_per_e=(4095 - 168) / _FULL_WELL_E,
-        iso=50.0,
-        base_iso=50.0,
-        black_level_dn=168,
-        white_level_dn=4095,
-        bit_depth=12,
-        psf="airy",
-        crosstalk=_CROSSTALK,
+        **_lytro(
+            "BGGR", _response(_F01_CCM, _F01_RESPONSES), black_level_dn=168, white_level_dn=4095, bit_depth=12, iso=50.0
+        ),
     ),
     # The tiny camera's 10 um pixels are 7.1 times the Illum's 1.4 um, so diffraction at its f/2
     # microlenses spans 0.13 px; the extra Gaussian (2.9 um = 0.29 px) is the Illum's diffraction

@@ -288,9 +288,21 @@ def _packable(counts: np.ndarray, bits: int) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.uint16).reshape(-1)
 
 
-def _image_size(height: int, width: int) -> None:
+def _packed_groups(data: bytes | memoryview, shape: tuple[int, int], bits: int, pixels: int, size: int) -> np.ndarray:
+    """The bytes of a ``bits``-bit packed (H, W) image as (groups, ``size``) uint16, ``pixels`` pixels a group.
+
+    Raises
+    ------
+    FileFormatError
+        If the size is not positive, or the byte count does not match it.
+    """
+    height, width = shape
     if height <= 0 or width <= 0:
         raise FileFormatError(f"an image of {width} x {height} pixels: its size must be positive")
+    expected = height * width * size // pixels
+    if (height * width) % pixels or len(data) != expected:
+        raise FileFormatError(f"a {bits}-bit {width} x {height} image takes {expected} bytes, got {len(data)}")
+    return np.frombuffer(data, dtype=np.uint8).reshape(-1, size).astype(np.uint16)
 
 
 def unpack_10bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray:
@@ -301,16 +313,11 @@ def unpack_10bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray
     FileFormatError
         If the byte count does not match the shape.
     """
-    height, width = shape
-    _image_size(height, width)
-    expected = height * width * 5 // 4
-    if (height * width) % 4 or len(data) != expected:
-        raise FileFormatError(f"a 10-bit {width} x {height} image takes {expected} bytes, got {len(data)}")
-    groups = np.frombuffer(data, dtype=np.uint8).reshape(-1, 5).astype(np.uint16)
+    groups = _packed_groups(data, shape, 10, 4, 5)
     out = np.empty((groups.shape[0], 4), dtype=np.uint16)
     for k in range(4):
         out[:, k] = (groups[:, k] << 2) | ((groups[:, 4] >> (2 * k)) & 3)
-    return out.reshape(height, width)
+    return out.reshape(shape)
 
 
 def pack_12bit(counts: np.ndarray) -> bytes:
@@ -343,16 +350,11 @@ def unpack_12bit(data: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray
     FileFormatError
         If the byte count does not match the shape.
     """
-    height, width = shape
-    _image_size(height, width)
-    expected = height * width * 3 // 2
-    if (height * width) % 2 or len(data) != expected:
-        raise FileFormatError(f"a 12-bit {width} x {height} image takes {expected} bytes, got {len(data)}")
-    triples = np.frombuffer(data, dtype=np.uint8).reshape(-1, 3).astype(np.uint16)
+    triples = _packed_groups(data, shape, 12, 2, 3)
     out = np.empty((triples.shape[0], 2), dtype=np.uint16)
     out[:, 0] = (triples[:, 0] << 4) | (triples[:, 1] >> 4)
     out[:, 1] = ((triples[:, 1] & 15) << 8) | triples[:, 2]
-    return out.reshape(height, width)
+    return out.reshape(shape)
 
 
 # =============================================================================== metadata
