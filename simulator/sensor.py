@@ -12,12 +12,15 @@ twin is :meth:`lfrefract.LightFieldCamera.rays_through_lenses`; the tests compar
 
 from __future__ import annotations
 
+import json
 import math
 from types import ModuleType
 
 import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry
+from lfrefract.optics.lens import LensPrescription
+from lfrefract.optics.real_lens import RealLensCamera
 
 __all__ = ["pinhole_sensor_dict", "plenoptic_sensor_dict", "register"]
 
@@ -65,6 +68,7 @@ def plenoptic_sensor_dict(
     crop: tuple[int, int, int, int] | None = None,
     port: FlatPort | None = None,
     medium: dict | None = None,
+    lens: LensPrescription | None = None,
 ) -> dict:
     """Mitsuba dict of the plenoptic sensor for ``camera`` at ``pose``.
 
@@ -74,10 +78,15 @@ def plenoptic_sensor_dict(
     scene must not contain the glass too. ``medium`` (a Mitsuba medium dict,
     :func:`simulator.scene.water_medium`) is the medium the sensor's rays start in: the turbid
     water for the ``sensor`` port model or a camera without a port, None for a camera in air
-    behind port geometry.
+    behind port geometry. ``lens`` is a real main lens with the camera's first-order data
+    (:class:`lfrefract.optics.real_lens.RealLensCamera` checks the pair), traced exactly in place of
+    the thin lens; None keeps the thin lens.
     """
     mla = camera.mla
     extra = {} if medium is None else {"medium": medium}
+    if lens is not None:
+        RealLensCamera(camera=camera, lens=lens)  # refuse a lens that does not fit before Mitsuba sees it
+        extra["lens_json"] = json.dumps(lens.to_dict(), allow_nan=False)
     if port is not None:
         extra.update({f"port_{key}": float(getattr(port, key)) for key in _PORT_PROPS})
     return {
@@ -225,6 +234,20 @@ def register(mi: ModuleType) -> None:
                 else:
                     faces = [(d, port["n_air"], port["n_water"])]
                 self._port = (normal, faces, (port["n_air"] / port["n_water"]) ** 2)
+            self._lens = None
+            if "lens_json" in props:
+                real = RealLensCamera(
+                    camera=self.camera, lens=LensPrescription.from_dict(json.loads(props["lens_json"]))
+                )
+                lens = real.lens
+                indices = lens.indices()
+                # Surfaces in the order a path from the sensor meets them (last to first): camera-frame
+                # vertex z, curvature (design sign), clear semi-aperture squared, index after and before.
+                self._lens = [
+                    (float(z), s.curvature_per_m, s.semi_aperture_m**2, float(indices[i + 1]), float(indices[i]))
+                    for i, (s, z) in reversed(list(enumerate(zip(lens.surfaces, lens.vertex_z_m(), strict=True))))
+                ]
+                self._scale = real.micro_image_scale
 
         def through_port(self, origin, direction):
             """Refract camera-frame rays through the port's faces (Snell, vector form).
@@ -250,6 +273,38 @@ def register(mi: ModuleType) -> None:
                 r_p = dr.square((n_from * cos_t - n_to * cos_i) / (n_from * cos_t + n_to * cos_i))
                 weight *= 1.0 - 0.5 * (r_s + r_p)
             return origin, direction, dr.select(passed, weight, 0.0), passed
+
+        def through_lens(self, origin, direction):
+            """Trace camera-frame rays from behind the real main lens out through every surface.
+
+            Each surface is the sphere ``c |q|^2 + 2 q_z = 0`` about its vertex (``q`` relative to
+            the vertex, camera frame; light from the sensor travels towards +z); the nearer root of
+            the ray's quadratic is taken in the form that is stable for any curvature (a plane at
+            ``c = 0``). A path is stopped where it misses a sphere, falls outside a clear aperture or
+            is totally reflected. Returns the point on the front surface, the direction into the
+            scene and whether the path got through.
+            """
+            passed = mi.Bool(True)
+            for vertex_z, c, aperture2, n_from, n_to in self._lens:
+                q = origin - mi.Vector3f(0.0, 0.0, vertex_z)
+                big_b = direction.z + c * dr.dot(q, direction)
+                big_c = c * dr.squared_norm(q) + 2.0 * q.z
+                disc = big_b * big_b - c * big_c
+                denom = big_b + dr.safe_sqrt(disc)
+                s = -big_c / denom
+                hit = dr.fma(direction, s, q)
+                passed &= (disc >= 0.0) & (denom > 0.0) & (s >= -1e-9)
+                passed &= hit.x * hit.x + hit.y * hit.y <= aperture2
+                normal = mi.Vector3f(c * hit.x, c * hit.y, 1.0 + c * hit.z)
+                cos_i = dr.dot(direction, normal)
+                passed &= cos_i > 0.0
+                eta = n_from / n_to
+                sin2_t = eta * eta * (1.0 - cos_i * cos_i)
+                passed &= sin2_t <= 1.0
+                cos_t = dr.safe_sqrt(1.0 - sin2_t)
+                direction = dr.normalize(eta * direction + (cos_t - eta * cos_i) * normal)
+                origin = hit + mi.Vector3f(0.0, 0.0, vertex_z)
+            return origin, direction, passed
 
         def sample_lens_offset(self, aperture_sample):
             """Image-plane offset from the lens centre (metres) for an aperture sample.
@@ -306,11 +361,17 @@ def register(mi: ModuleType) -> None:
             through_img = centre_img + self.sample_lens_offset(aperture_sample)
             # Image-plane -> camera frame: x = -xi, y = -eta.
             slope_in = (sensor_img - centre_img) / self._f_mla
-            hit = -through_img + slope_in * self._f_prime
-            inside = dr.squared_norm(hit) <= self._aperture_r2
-            slope_out = slope_in - hit / self._f
-            direction = dr.normalize(mi.Vector3f(slope_out.x, slope_out.y, 1.0))
-            origin = mi.Point3f(hit.x, hit.y, 0.0)
+            if self._lens is None:
+                hit = -through_img + slope_in * self._f_prime
+                inside = dr.squared_norm(hit) <= self._aperture_r2
+                slope_out = slope_in - hit / self._f
+                direction = dr.normalize(mi.Vector3f(slope_out.x, slope_out.y, 1.0))
+                origin = mi.Point3f(hit.x, hit.y, 0.0)
+            else:
+                origin, direction, inside = self.through_lens(
+                    mi.Point3f(-through_img.x, -through_img.y, -self._f_prime),
+                    dr.normalize(mi.Vector3f(slope_in.x, slope_in.y, 1.0)),
+                )
             weight = mi.Float(1.0)
             if self._port is not None:
                 origin, direction, weight, passed = self.through_port(origin, direction)
@@ -319,7 +380,8 @@ def register(mi: ModuleType) -> None:
             return ray, mi.Spectrum(dr.select(inside & active, weight, 0.0))
 
         def to_string(self):
-            return f"PlenopticSensor[camera={self.camera!r}, port={self._port!r}]"
+            lens = "thin" if self._lens is None else f"{len(self._lens)} surfaces"
+            return f"PlenopticSensor[camera={self.camera!r}, lens={lens}, port={self._port!r}]"
 
     class PinholeSensor(_CameraSensor):
         """Ideal central projection with OpenCV intrinsics, centre at the main-lens centre."""

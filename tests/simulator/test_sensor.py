@@ -8,12 +8,17 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, LightFieldCamera, MicrolensArray, PinholeCamera, Pose, SensorGeometry, camera_preset
+from lfrefract.errors import ParameterError
+from lfrefract.optics.lens import lens_preset
+from lfrefract.optics.real_lens import RealLensCamera
 from simulator.sensor import pinhole_sensor_dict, plenoptic_sensor_dict
 from tests.tolerances import (
     SENSOR_VS_NUMPY_DIRECTION,
     SENSOR_VS_NUMPY_ORIGIN_M,
     SENSOR_VS_NUMPY_PIXEL_PX,
     SENSOR_VS_NUMPY_PORT_POINT_M,
+    SENSOR_VS_NUMPY_REAL_LENS_DIRECTION,
+    SENSOR_VS_NUMPY_REAL_LENS_ORIGIN_M,
     SENSOR_VS_NUMPY_WEIGHT_RELATIVE,
 )
 
@@ -152,3 +157,42 @@ def test_plenoptic_sensor_reports_tir_as_zero_weight(mi, tiny):
     assert 0.05 < tir.mean() < 0.95
     assert np.all(_arrays(weight)[tir] == 0.0)
     assert np.all(np.asarray(ray.maxt)[tir] == 0.0)
+
+
+REAL_LENS_CAMERAS = {
+    "tiny": camera_preset("tiny"),
+    "square-rotated-offset": CAMERAS["square-rotated-offset"],
+}
+
+
+@pytest.mark.parametrize("lens_name", ["double-gauss", "wide-angle"])
+@pytest.mark.parametrize("name", sorted(REAL_LENS_CAMERAS))
+def test_plenoptic_sensor_traces_real_lens_like_numpy(mi, name, lens_name):
+    """The Dr.Jit trace through every surface of a real lens agrees with the numpy twin
+    (:class:`lfrefract.optics.real_lens.RealLensCamera`, built on :func:`lfrefract.optics.lens.trace_lens`)."""
+    real = RealLensCamera.from_preset(REAL_LENS_CAMERAS[name], lens_name)
+    camera = real.camera
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, camera, POSE, spp=1, lens=real.lens))
+    uv, aperture, ray, weight = _sample_random_paths(mi, sensor, camera, seed=7)
+
+    expected = real.rays_through_lenses(uv, lens_offsets_m=camera.mla.cell_offsets_m(aperture))
+    inside = _arrays(weight)[:, 0] > 0
+    # Paths within float32 round-off of a clear aperture may be classified either way: compare
+    # the classification where the numpy trace is clear of every rim by 1e-7 of the aperture.
+    agree = inside == expected.in_aperture
+    assert agree.mean() > 0.995, agree.mean()
+    assert 0.1 < inside.mean() < 0.95  # both vignetted and unvignetted paths are compared
+    ok = inside & expected.in_aperture
+    np.testing.assert_allclose(
+        _arrays(ray.o)[ok], POSE.to_world(expected.origins_cam[ok]), atol=SENSOR_VS_NUMPY_REAL_LENS_ORIGIN_M
+    )
+    directions_world = expected.directions_cam @ np.asarray(POSE.rotation).T
+    np.testing.assert_allclose(_arrays(ray.d)[ok], directions_world[ok], atol=SENSOR_VS_NUMPY_REAL_LENS_DIRECTION)
+    np.testing.assert_array_equal(_arrays(weight)[ok, 0], 1.0)
+    assert np.all(np.asarray(ray.maxt)[~inside] == 0.0)
+
+
+def test_plenoptic_sensor_refuses_a_lens_of_another_focal_length(mi, tiny):
+    lens = lens_preset("double-gauss", focal_length_m=1.1 * tiny.focal_length_m, f_number=tiny.f_number)
+    with pytest.raises(ParameterError, match="effective focal length"):
+        plenoptic_sensor_dict(mi, tiny, Pose(), spp=1, lens=lens)

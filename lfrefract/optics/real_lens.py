@@ -1,0 +1,234 @@
+"""A light-field camera whose main lens is a real multi-element lens, traced exactly.
+
+:class:`RealLensCamera` pairs a :class:`~lfrefract.optics.camera.LightFieldCamera` (microlens
+array, sensor, and the thin-lens equivalent of the main lens: focal length, f-number, lens-to-MLA
+distance) with a :class:`~lfrefract.optics.lens.LensPrescription` that has the same first-order data:
+its d-line effective focal length is the camera's ``focal_length_m`` and its paraxial f-number the
+camera's ``f_number``. The lens is placed as :mod:`lfrefract.optics.lens` places every lens, rear
+principal plane at ``z = 0`` of the camera frame, so ``lens_to_mla_m`` keeps its meaning (distance
+from the rear principal plane to the MLA; focus is set by it) and the thin-lens camera is this
+camera's paraxial model.
+
+What changes with a real lens:
+
+- The micro-images are images of the **exit pupil** through the microlenses, so their centres lie
+  ``(D + f_mla) / D`` times further from the axis than the microlens centres, with ``D`` the exit
+  pupil's distance from the MLA (``f'`` for the thin lens).
+- A light path from a sensor point leaves its microlens parallel to the microlens's chief ray (the
+  sensor is at the microlenses' focal plane, as for the thin lens) and is then traced exactly
+  through every surface of the lens towards the object (:func:`lfrefract.optics.lens.trace_lens`):
+  it is vignetted by every clear aperture, not only by one aperture disc, and it leaves the lens
+  from a point on its front surface, not from the plane ``z = 0``.
+
+This is the numpy twin of the Dr.Jit plenoptic sensor's real-lens path
+(:mod:`simulator.sensor`); the tests compare the two. It also gives the ground-truth object-space
+ray of every raw pixel (:meth:`RealLensCamera.chief_rays`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.lens import D_LINE_M, FirstOrder, LensPrescription, lens_preset, trace_lens
+from lfrefract.validate import as_points, as_table, reject_unknown_keys, require_keys
+
+__all__ = ["FIRST_ORDER_MATCH_RTOL", "RealLensCamera"]
+
+#: Relative agreement required between the lens's first-order data (d-line focal length and
+#: f-number) and the camera's thin-lens equivalent. Presets are scaled and stopped to the camera
+#: exactly (to rounding, ~1e-15); a prescription typed in by hand must be scaled to the camera too,
+#: and 1e-6 is well below any difference a render could show (a 1e-6 change of the focal length
+#: moves an Illum edge pixel by 4e-3 px).
+FIRST_ORDER_MATCH_RTOL = 1e-6
+
+_EXTENT_SAMPLES = 33  # heights per surface at which the lens's extent along z is evaluated
+
+
+@dataclass(frozen=True, kw_only=True)
+class RealLensCamera:
+    """A plenoptic 1.0 camera with a real main lens (see the module docstring).
+
+    Attributes
+    ----------
+    camera : LightFieldCamera
+        The microlens array, the sensor, and the thin-lens equivalent of the main lens.
+    lens : LensPrescription
+        The main lens; its d-line effective focal length and f-number must equal the camera's
+        (relative :data:`FIRST_ORDER_MATCH_RTOL`). :meth:`from_preset` scales a published design.
+
+    Raises
+    ------
+    ParameterError
+        If the first-order data disagree, if the lens reaches back to the MLA, if its exit pupil
+        lies at or behind the MLA, or if its image-side f-number is below the microlenses' (the
+        micro-images would overlap, which the plenoptic 1.0 model does not represent).
+    """
+
+    camera: LightFieldCamera
+    lens: LensPrescription
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.camera, LightFieldCamera):
+            raise ParameterError(f"camera must be a LightFieldCamera, got {self.camera!r}")
+        if not isinstance(self.lens, LensPrescription):
+            raise ParameterError(f"lens must be a LensPrescription, got {self.lens!r}")
+        fo = self.first_order
+        cam = self.camera
+        for what, lens_value, camera_value in (
+            ("effective focal length", fo.efl_m, cam.focal_length_m),
+            ("f-number", fo.f_number, cam.f_number),
+        ):
+            if not math.isclose(lens_value, camera_value, rel_tol=FIRST_ORDER_MATCH_RTOL):
+                raise ParameterError(
+                    f"lens {self.lens.name!r}: its {what} {lens_value!r} differs from the camera's {camera_value!r} "
+                    f"(camera {cam.name!r}); scale and stop the lens to the camera "
+                    "(LensPrescription.scaled_to_focal_length, with_f_number, or RealLensCamera.from_preset)"
+                )
+        rear_z = self.extent_z_m[0]
+        if rear_z <= cam.mla_z_m:
+            raise ParameterError(
+                f"lens {self.lens.name!r} reaches z = {rear_z!r} m, at or behind the MLA (z = {cam.mla_z_m!r} m) "
+                f"of camera {cam.name!r}: lens_to_mla_m={cam.lens_to_mla_m!r} is too short for it"
+            )
+        if self.exit_pupil_distance_m <= 0.0:
+            raise ParameterError(
+                f"lens {self.lens.name!r}: its exit pupil (z = {fo.exit_pupil_z_m!r} m) lies at or behind the MLA"
+            )
+        if self.image_side_f_number < cam.mla.f_number * (1.0 - 1e-9):
+            raise ParameterError(
+                f"lens {self.lens.name!r} on camera {cam.name!r}: image-side f-number "
+                f"{self.image_side_f_number:.4g} (exit pupil distance over diameter) is below the microlens "
+                f"f-number {cam.mla.f_number:.4g}: micro-images would overlap"
+            )
+
+    @classmethod
+    def from_preset(cls, camera: LightFieldCamera, name: str) -> RealLensCamera:
+        """The published design ``name`` (:data:`lfrefract.optics.lens.LENS_PRESETS`) scaled and
+        stopped to ``camera``'s focal length and f-number."""
+        return cls(
+            camera=camera, lens=lens_preset(name, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
+        )
+
+    # ----------------------------------------------------------------- first-order quantities
+    @functools.cached_property
+    def first_order(self) -> FirstOrder:
+        """The lens's first-order data at the d line (camera-frame positions in ``*_z_m``)."""
+        return self.lens.first_order(D_LINE_M)
+
+    @functools.cached_property
+    def extent_z_m(self) -> tuple[float, float]:
+        """Camera-frame z of the rearmost and the frontmost point of the lens's surfaces within their
+        clear apertures, metres: a port must lie beyond the second, the MLA behind the first."""
+        vertex_z = self.lens.vertex_z_m()
+        z = [
+            vertex_z[i] - s.sag_m(np.linspace(0.0, s.semi_aperture_m, _EXTENT_SAMPLES))
+            for i, s in enumerate(self.lens.surfaces)
+        ]
+        stacked = np.concatenate(z)
+        return float(stacked.min()), float(stacked.max())
+
+    @property
+    def exit_pupil_distance_m(self) -> float:
+        """Distance ``D`` from the MLA to the exit pupil (positive: the pupil is in front), metres."""
+        return self.first_order.exit_pupil_z_m - self.camera.mla_z_m
+
+    @property
+    def image_side_f_number(self) -> float:
+        """``D`` over the exit pupil's diameter: the cone of light arriving at the MLA."""
+        return self.exit_pupil_distance_m / self.first_order.exit_pupil_diameter_m
+
+    @property
+    def micro_image_scale(self) -> float:
+        """Micro-image centre over microlens centre, image plane: ``(D + f_mla) / D``."""
+        d = self.exit_pupil_distance_m
+        return (d + self.camera.mla.focal_length_m) / d
+
+    @property
+    def micro_image_radius_px(self) -> float:
+        """Radius of a micro-image (the exit pupil's paraxial image through a microlens), pixels."""
+        radius_m = 0.5 * self.first_order.exit_pupil_diameter_m * self.camera.mla.focal_length_m
+        return radius_m / self.exit_pupil_distance_m / self.camera.sensor.pixel_pitch_m
+
+    # ----------------------------------------------------------------- lenses and rays
+    def lens_indices_for_pixels(self, uv: np.ndarray) -> np.ndarray:
+        """Lattice index (N, 2) of the microlens whose micro-image holds each raw pixel position (N, 2)."""
+        pts = self.camera.sensor.pixels_to_image_plane(as_points("uv", uv, 2))
+        return self.camera.mla.nearest_indices(pts / self.micro_image_scale)
+
+    def micro_image_centres_px(self, indices: np.ndarray) -> np.ndarray:
+        """Raw-pixel coordinates (N, 2) of the paraxial micro-image centres of lenses ``indices`` (N, 2)."""
+        return self.camera.sensor.image_plane_to_pixels(self.camera.mla.centres_m(indices) * self.micro_image_scale)
+
+    def rays_through_lenses(self, uv: np.ndarray, *, lens_offsets_m: np.ndarray | None = None) -> CapturedRays:
+        """Trace light paths from raw-pixel positions out through a microlens and the real lens.
+
+        Parameters
+        ----------
+        uv : array_like, shape (N, 2)
+            Raw pixel coordinates (column, row), pixel centres at integers.
+        lens_offsets_m : array_like, shape (N, 2), optional
+            Image-plane offsets from the microlens centre where each path crosses the MLA, metres.
+            Default: zero (the microlens's chief ray).
+
+        Returns
+        -------
+        CapturedRays
+            Camera frame: ``origins_cam`` on the lens's front surface, unit ``directions_cam`` into
+            the scene (object space, air); ``in_aperture`` is False for paths stopped by a clear
+            aperture or totally reflected inside the lens (their origin and direction are NaN).
+        """
+        cam = self.camera
+        uv_arr = as_points("uv", uv, 2)
+        n = uv_arr.shape[0]
+        offsets = np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
+        if offsets.shape[0] != n:
+            raise ParameterError(f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows")
+        sensor_img = cam.sensor.pixels_to_image_plane(uv_arr)
+        idx = cam.mla.nearest_indices(sensor_img / self.micro_image_scale)
+        centre_img = cam.mla.centres_m(idx)
+        # Image plane -> camera frame: x = -xi, y = -eta; every path from one sensor point leaves
+        # the microlens parallel to its chief ray.
+        slope = (sensor_img - centre_img) / cam.mla.focal_length_m
+        origins = np.column_stack([-(centre_img + offsets), np.full(n, cam.mla_z_m)])
+        directions = np.column_stack([slope, np.ones(n)])
+        trace = trace_lens(self.lens, origins, directions, toward="object")
+        return CapturedRays(
+            origins_cam=trace.points_cam,
+            directions_cam=trace.directions_cam,
+            in_aperture=trace.passed,
+            lens_indices=idx,
+        )
+
+    def chief_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
+        """The object-space ray of each raw pixel's chief sample (through its microlens centre).
+
+        Parameters
+        ----------
+        uv : array_like, shape (N, 2), optional
+            Raw pixel coordinates. Default: every pixel centre, row-major, N = W * H.
+        """
+        if uv is None:
+            sensor = self.camera.sensor
+            vv, uu = np.mgrid[0 : sensor.height_px, 0 : sensor.width_px]
+            uv = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
+        return self.rays_through_lenses(uv)
+
+    # ----------------------------------------------------------------- files
+    def to_dict(self) -> dict:
+        """Plain data: ``{"camera": LightFieldCamera.to_dict(), "lens": LensPrescription.to_dict()}``."""
+        return {"camera": self.camera.to_dict(), "lens": self.lens.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> RealLensCamera:
+        """Inverse of :meth:`to_dict`."""
+        table = as_table("real-lens camera", data)
+        reject_unknown_keys("real-lens camera", table, {"camera", "lens"})
+        require_keys("real-lens camera", table, {"camera", "lens"})
+        return cls(camera=LightFieldCamera.from_dict(table["camera"]), lens=LensPrescription.from_dict(table["lens"]))
