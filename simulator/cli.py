@@ -32,7 +32,8 @@ from pathlib import Path
 from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.outputs import terminate_cleanly
-from simulator.config import DEFAULT_IDEAL_SPP, PORT_MODELS, embedded_scenes, load_scene
+from lfrefract.optics.lens import LENS_PRESETS
+from simulator.config import DEFAULT_IDEAL_SPP, PORT_MODELS, THIN_LENS, embedded_scenes, load_scene, main_lens
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
 __all__ = ["main"]
@@ -141,6 +142,17 @@ def _parser() -> argparse.ArgumentParser:
         f"else {DEFAULT_IDEAL_SPP})",
     )
     render.add_argument("--seed", type=int, help="sampler seed (default: the scene's)")
+    render.add_argument(
+        "--lens",
+        choices=[THIN_LENS, *sorted(LENS_PRESETS)],
+        help="main lens replacing the scene's camera.lens: the thin lens or a preset scaled and stopped to the "
+        "camera (lfsim lenses)",
+    )
+    render.add_argument(
+        "--rays",
+        action="store_true",
+        help="also write rays.npz: the object-space chief ray of every raw pixel (float32, 24 bytes a pixel)",
+    )
     render.add_argument(
         "--port-model", choices=list(PORT_MODELS), help="how the port is rendered (default: the scene's)"
     )
@@ -345,6 +357,11 @@ def _run(args: argparse.Namespace) -> int:
         changes = {}
         if args.camera:
             changes["camera"] = camera_preset(args.camera)
+        lens_name = args.lens
+        if lens_name is None and args.camera and config.lens is not None and config.lens.name in LENS_PRESETS:
+            lens_name = config.lens.name  # the scene's preset lens, scaled to the new camera
+        if lens_name is not None:
+            changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
         given = {"spp": args.spp, "ideal_spp": args.ideal_spp, "seed": args.seed, "port_model": args.port_model}
         overrides = {key: value for key, value in given.items() if value is not None}
         if overrides:
@@ -361,6 +378,7 @@ def _run(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             progress=not args.quiet,
             write_previews=not args.no_previews,
+            write_rays=args.rays,
         )
     except (ParameterError, FileFormatError, OSError) as exc:
         # OSError covers refusals (FileExistsError), missing files and failed writes (read-only, disk full):
@@ -370,10 +388,12 @@ def _run(args: argparse.Namespace) -> int:
     cam = config.camera
     print(
         f"rendered {config.name!r} with {cam.name} ({cam.sensor.width_px}x{cam.sensor.height_px} px, "
+        f"{THIN_LENS if config.lens is None else config.lens.name} main lens, "
         f"{config.render.spp} spp) in {result.raw_seconds:.2f} s; ground truth ({config.render.ideal_spp} spp) "
         f"in {result.ideal_seconds:.2f} s"
     )
-    print(f"wrote {result.out_dir}/: raw.exr ideal.exr depth.exr lenses.npz meta.json previews/")
+    rays = " rays.npz" if args.rays else ""
+    print(f"wrote {result.out_dir}/: raw.exr ideal.exr depth.exr lenses.npz{rays} meta.json previews/")
     return 0
 
 

@@ -5,6 +5,10 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
     name = "..."                      # optional label
     [camera]                          # preset = "tiny" | "f01" | "illum", or every field of
     preset = "tiny"                   #   LightFieldCamera.to_dict() (with [camera.mla], [camera.sensor])
+    lens = "thin"                     # optional main lens: "thin" (default), a lens preset
+                                      #   ("double-gauss", "wide-angle": lfsim lenses) scaled and
+                                      #   stopped to the camera, or a [camera.lens] table (a
+                                      #   LensPrescription); a real lens needs a [port] clear of it
     [camera.pose]                     # optional; camera-to-world, default identity
     rotation_xyz_deg = [0, 0, 0]
     position_m = [0, 0, 0]
@@ -110,7 +114,9 @@ import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset, seawater_index
 from lfrefract.errors import ParameterError
+from lfrefract.optics.lens import LENS_PRESETS, LensPrescription, lens_preset
 from lfrefract.optics.pose import rotation_from_euler_xyz
+from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.optics.water import SODIUM_D_NM
 from lfrefract.validate import (
     as_table,
@@ -148,6 +154,7 @@ __all__ = [
     "OBJECT_TYPES",
     "PORT_MODELS",
     "SEED_LIMIT",
+    "THIN_LENS",
     "Bowl",
     "Chessboard",
     "ConstantLight",
@@ -164,6 +171,7 @@ __all__ = [
     "default_scene_path",
     "embedded_scenes",
     "load_scene",
+    "main_lens",
     "parse_scene",
     "read_toml",
     "scene_files",
@@ -171,6 +179,9 @@ __all__ = [
 
 
 # The ranges of the scene's numbers; the module docstring gives each one's reason.
+
+#: The ``camera.lens`` value of the thin main lens (the default).
+THIN_LENS = "thin"
 
 #: Largest absolute coordinate of a position (objects, point lights, the camera), metres.
 MAX_COORDINATE_M = 100.0
@@ -697,6 +708,28 @@ OBJECT_TYPES: dict[str, type] = {
 LIGHT_TYPES: dict[str, type] = {"point": PointLight, "constant": ConstantLight}
 
 
+def _check_real_lens(camera: LightFieldCamera, lens: LensPrescription, port: FlatPort | None) -> None:
+    """A real main lens must fit the camera (:class:`RealLensCamera`) and sit in air behind a port
+    that clears its front: a lens prescription is designed for air in front of it."""
+    real = RealLensCamera(camera=camera, lens=lens)
+    if port is None:
+        raise ParameterError(
+            f"camera.lens={lens.name!r} needs a [port]: a real lens is designed for air in front of it, "
+            'and without a port the camera stands in the water (use lens = "thin" there)'
+        )
+    # The port's inner face n.x = distance_m must clear every point of the lens: the frontmost
+    # surface point lies at most max semi-aperture off the axis.
+    normal = np.asarray(port.normal, dtype=np.float64)
+    reach_m = max(s.semi_aperture_m for s in lens.surfaces)
+    nearest_m = normal[2] * real.extent_z_m[1] + math.hypot(normal[0], normal[1]) * reach_m
+    if nearest_m >= port.distance_m:
+        raise ParameterError(
+            f"port.distance_m={port.distance_m!r} does not clear the main lens {lens.name!r}: its front reaches "
+            f"z = {real.extent_z_m[1]:.6g} m with a clear semi-aperture up to {reach_m:.6g} m, which touches the "
+            f"port's face (needs distance_m > {nearest_m:.6g} m at this tilt)"
+        )
+
+
 @dataclass(frozen=True, kw_only=True)
 class SceneConfig:
     """A whole scene: camera, pose, optional port, lights, objects and render settings.
@@ -710,6 +743,7 @@ class SceneConfig:
     camera: LightFieldCamera
     pose: Pose = field(default_factory=Pose)
     port: FlatPort | None = None
+    lens: LensPrescription | None = None
     lights: tuple[Light, ...] = ()
     objects: tuple[SceneObject, ...] = ()
     render: RenderSettings = field(default_factory=RenderSettings)
@@ -726,6 +760,8 @@ class SceneConfig:
             )
         if not self.lights:
             raise ParameterError("the scene has no [[light]]: it would render black")
+        if self.lens is not None:
+            _check_real_lens(self.camera, self.lens, self.port)
         _position("camera.pose.position_m", self.pose.position_m)
         water = self.water
         if water is not None and not isinstance(water, Water):
@@ -774,6 +810,7 @@ class SceneConfig:
             "name": self.name,
             "source": self.source,
             "camera": self.camera.to_dict(),
+            "lens": THIN_LENS if self.lens is None else self.lens.to_dict(),
             "pose": self.pose.to_dict(),
             "port": None if self.port is None else self.port.to_dict(),
             "lights": plain(self.lights),
@@ -840,16 +877,35 @@ def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path
     return tuple(out)
 
 
-def _camera(table: Any) -> tuple[LightFieldCamera, Pose]:
+def main_lens(value: Any, camera: LightFieldCamera) -> LensPrescription | None:
+    """The main lens a ``camera.lens`` value names: ``"thin"`` (None: the thin lens), a preset name
+    of :data:`lfrefract.optics.lens.LENS_PRESETS` (scaled and stopped to ``camera``), or a lens table
+    (:meth:`LensPrescription.from_dict`, which must already have the camera's focal length and
+    f-number)."""
+    if isinstance(value, str):
+        if value == THIN_LENS:
+            return None
+        if value not in LENS_PRESETS:
+            raise ParameterError(
+                f"camera.lens={value!r} is neither {THIN_LENS!r} nor a lens preset ({', '.join(sorted(LENS_PRESETS))})"
+            )
+        return lens_preset(value, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
+    return LensPrescription.from_dict(as_table("[camera.lens]", value))
+
+
+def _camera(table: Any) -> tuple[LightFieldCamera, Pose, LensPrescription | None]:
     table = as_table("[camera]", table)
     pose_table = as_table("[camera.pose]", table.pop("pose")) if "pose" in table else {}
     if "position_m" in pose_table:  # the scene's bound first (lfrefract's Pose allows a wider one)
         _position("camera.pose.position_m", pose_table["position_m"])
     pose = Pose.from_dict(pose_table) if pose_table else Pose()
+    lens_value = table.pop("lens", THIN_LENS)
     if "preset" in table:
         reject_unknown_keys("camera", table, {"preset"})
-        return camera_preset(table["preset"]), pose
-    return LightFieldCamera.from_dict(table), pose
+        camera = camera_preset(table["preset"])
+    else:
+        camera = LightFieldCamera.from_dict(table)
+    return camera, pose, main_lens(lens_value, camera)
 
 
 def _port(table: Any, water: Water | None) -> FlatPort:
@@ -888,7 +944,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water"})
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
-    camera, pose = _camera(data["camera"])
+    camera, pose, lens = _camera(data["camera"])
     water = Water.from_dict(data["water"]) if "water" in data else None
     port = _port(data["port"], water) if "port" in data else None
     render = _build(RenderSettings, data.get("render", {}), "render", base)
@@ -897,6 +953,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
         name=text("name", data["name"]) if "name" in data else Path(source).stem,
         source=source,
         camera=camera,
+        lens=lens,
         pose=pose,
         port=port,
         lights=_typed_entries(data.get("light", []), LIGHT_TYPES, "light", base),

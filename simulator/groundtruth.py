@@ -21,6 +21,8 @@ from types import ModuleType
 import numpy as np
 
 from lfrefract import LightFieldCamera, PinholeCamera, Pose
+from lfrefract.optics.lens import LensPrescription
+from lfrefract.optics.real_lens import RealLensCamera
 from simulator.config import SceneConfig
 from simulator.render import IDEAL_STREAM, render_bands
 from simulator.scene import water_medium
@@ -38,7 +40,7 @@ class GroundTruth:
     lenses: dict[str, np.ndarray]
 
 
-def lens_table(camera: LightFieldCamera) -> dict[str, np.ndarray]:
+def lens_table(camera: LightFieldCamera, lens: LensPrescription | None = None) -> dict[str, np.ndarray]:
     """Microlens ground truth for every lens whose micro-image centre is on the sensor.
 
     Returns
@@ -46,13 +48,16 @@ def lens_table(camera: LightFieldCamera) -> dict[str, np.ndarray]:
     dict
         ``lens_index`` (M, 2) int64 lattice indices (i, j); ``lens_centre_m`` (M, 2) image-plane
         centres on the MLA, metres; ``micro_image_centre_px`` (M, 2) raw-pixel (u, v) centres of
-        the micro-images (the main-lens centre imaged through each lens centre).
+        the micro-images (the main lens's exit pupil centre imaged through each lens centre: the
+        thin lens's centre, or with a real ``lens`` the paraxial exit pupil,
+        :meth:`lfrefract.optics.real_lens.RealLensCamera.micro_image_centres_px`).
     """
     idx = camera.lens_indices_on_sensor()
+    optics = camera if lens is None else RealLensCamera(camera=camera, lens=lens)
     return {
         "lens_index": idx,
         "lens_centre_m": camera.mla.centres_m(idx),
-        "micro_image_centre_px": camera.micro_image_centres_px(idx),
+        "micro_image_centre_px": optics.micro_image_centres_px(idx),
     }
 
 
@@ -130,5 +135,5 @@ def compute(
         stream=IDEAL_STREAM,
     )
     return GroundTruth(
-        ideal=ideal, depth_m=depth_map(mi, scene, pinhole, config.pose), lenses=lens_table(config.camera)
+        ideal=ideal, depth_m=depth_map(mi, scene, pinhole, config.pose), lenses=lens_table(config.camera, config.lens)
     )

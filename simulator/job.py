@@ -13,6 +13,7 @@ import lfrefract
 from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
 from lfrefract.formats.capture import CaptureTruth, write_capture_files
 from lfrefract.formats.outputs import staged_directory
+from lfrefract.optics.real_lens import RealLensCamera
 from simulator import backend, groundtruth, previews
 from simulator.config import SceneConfig, scene_files
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
@@ -20,6 +21,48 @@ from simulator.scene import build_scene, check_geometry, integrator, water_mediu
 from simulator.sensor import plenoptic_sensor_dict
 
 __all__ = ["RENDER_KIND", "RenderResult", "render_job", "render_raw", "scene_inputs"]
+
+
+#: Name of the per-raw-pixel ground-truth rays written with ``write_rays``.
+RAYS_NAME = "rays.npz"
+
+
+def _lens_summary(real: RealLensCamera) -> dict:
+    fo = real.first_order
+    return {
+        "name": real.lens.name,
+        "surfaces": len(real.lens.surfaces),
+        "entrance_pupil_z_m": fo.entrance_pupil_z_m,
+        "exit_pupil_z_m": fo.exit_pupil_z_m,
+        "front_principal_z_m": fo.front_principal_z_m,
+        "extent_z_m": list(real.extent_z_m),
+    }
+
+
+def write_chief_rays(path: Path, optics: LightFieldCamera | RealLensCamera) -> None:
+    """Write the object-space ray of every raw pixel's chief sample (through its microlens centre).
+
+    ``rays.npz`` holds ``origins_cam`` and ``directions_cam`` (H, W, 3) float32, camera frame, metres
+    and unit vectors (origins on the thin lens's plane z = 0 or on a real lens's front surface; NaN
+    where vignetted), ``passed`` (H, W) bool (the chief sample gets through the main lens) and
+    ``lens_index`` (H, W, 2) int32 (the microlens of each pixel). Rays are in air, before the port.
+    Float32 keeps an Illum's 41 Mpx at 1.1 GB before compression: write it for small sensors or
+    when the rays are needed.
+    """
+    camera = optics.camera if isinstance(optics, RealLensCamera) else optics
+    rays = optics.chief_rays() if isinstance(optics, RealLensCamera) else optics.captured_rays()
+    h, w = camera.sensor.height_px, camera.sensor.width_px
+    passed = rays.in_aperture.reshape(h, w)
+    origins = np.where(rays.in_aperture[:, None], rays.origins_cam, np.nan).reshape(h, w, 3)
+    directions = np.where(rays.in_aperture[:, None], rays.directions_cam, np.nan).reshape(h, w, 3)
+    with open(path, "wb") as handle:
+        np.savez_compressed(
+            handle,
+            origins_cam=origins.astype(np.float32),
+            directions_cam=directions.astype(np.float32),
+            passed=passed,
+            lens_index=rays.lens_indices.reshape(h, w, 2).astype(np.int32),
+        )
 
 
 def render_raw(
@@ -59,7 +102,9 @@ def render_raw(
 
     def sensor(crop):
         spp = config.render.spp
-        return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port, medium=medium)
+        return plenoptic_sensor_dict(
+            mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port, medium=medium, lens=config.lens
+        )
 
     return render_bands(
         mi,
@@ -105,6 +150,7 @@ def render_job(
     overwrite: bool = False,
     progress: bool = True,
     write_previews: bool = True,
+    write_rays: bool = False,
 ) -> RenderResult:
     """Render a scene and its ground truth into ``out_dir``, a capture folder of kind ``lfsim.render``.
 
@@ -112,7 +158,8 @@ def render_job(
     ``config.render.spp`` samples per pixel), ``ideal.exr`` (refraction-free pinhole image, RGB,
     ``config.render.ideal_spp`` samples per pixel), ``depth.exr`` (camera-frame z of the ideal
     image's pixel centres, metres, +inf where no surface), ``lenses.npz`` (microlens ground truth),
-    ``meta.json`` (every parameter, the seed, versions) and PNG previews. The directory is assembled
+    ``meta.json`` (every parameter, the seed, versions) and PNG previews; with ``write_rays``
+    also ``rays.npz``, the object-space ray of every raw pixel (:func:`write_chief_rays`). The directory is assembled
     in a staging directory and appears only when complete; a bad scene raises before anything is
     rendered.
 
@@ -152,13 +199,16 @@ def render_job(
         start = time.perf_counter()
         truth = groundtruth.compute(mi, glass_free, config, pinhole, spp=ideal_spp, seed=seed, progress=progress)
         ideal_seconds = time.perf_counter() - start
+        real = None if config.lens is None else RealLensCamera(camera=camera, lens=config.lens)
+        optics = camera if real is None else real
         extra = {
             "scene": {k: v for k, v in config.to_dict().items() if k not in ("camera", "pose", "port")},
             "derived": {
-                "micro_image_pitch_px": camera.micro_image_pitch_px,
-                "micro_image_radius_px": camera.micro_image_radius_px,
-                "micro_image_scale": camera.micro_image_scale,
+                "micro_image_pitch_px": camera.mla.pitch_m * optics.micro_image_scale / camera.sensor.pixel_pitch_m,
+                "micro_image_radius_px": optics.micro_image_radius_px,
+                "micro_image_scale": optics.micro_image_scale,
                 "aperture_radius_m": camera.aperture_radius_m,
+                "main_lens": None if real is None else _lens_summary(real),
                 "lens_count": len(truth.lenses["lens_index"]),
                 "port_radiance_scale": None if config.port is None else config.port.radiance_scale,
                 **geometry,
@@ -192,6 +242,8 @@ def render_job(
             metadata=extra,
             kind=RENDER_KIND,
         )
+        if write_rays:
+            write_chief_rays(stage / RAYS_NAME, camera if real is None else real)
         if write_previews:
             previews.write_all(stage / "previews", raw=raw, ideal=truth.ideal, depth_m=truth.depth_m, camera=camera)
     return RenderResult(Path(out_dir), raw_seconds, ideal_seconds, metadata)

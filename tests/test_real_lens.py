@@ -88,3 +88,37 @@ def test_round_trips_through_a_dict(tiny_dg):
     assert again == tiny_dg
     with pytest.raises(ParameterError, match="unknown"):
         RealLensCamera.from_dict({**tiny_dg.to_dict(), "extra": 1})
+
+
+@pytest.mark.parametrize("lens_name", ["double-gauss", "wide-angle"])
+def test_paraxial_limit_is_the_thin_lens_of_the_same_first_order_data(lens_name):
+    """Near the axis a real lens maps a ray at its rear principal plane (z = 0) to the thin lens's
+    ray, moved to the front principal plane: same height there, same direction. The difference
+    falls as the cube of the heights and angles (third-order aberrations): 10x smaller ones give a
+    difference about 1000x smaller, so the relative difference vanishes in the paraxial limit."""
+    real = RealLensCamera.from_preset(camera_preset("tiny"), lens_name)
+    camera = real.camera
+    rng = np.random.default_rng(3)
+    errors = []
+    for scale in (1.0, 0.1):
+        # The axial microlens: pixel offsets from its micro-image centre set the heights on the main
+        # lens, offsets on the MLA the field; both shrink together.
+        n = 400
+        uv = real.micro_image_centres_px(np.zeros((n, 2), dtype=np.int64)) + scale * rng.uniform(-1.0, 1.0, (n, 2))
+        offsets = scale * 0.3 * camera.mla.pitch_m * rng.uniform(-1.0, 1.0, (n, 2))
+        thin = camera.rays_through_lenses(uv, lens_offsets_m=offsets)
+        thick = real.rays_through_lenses(uv, lens_offsets_m=offsets)
+        assert thin.in_aperture.all()
+        assert thick.in_aperture.all()
+        np.testing.assert_array_equal(thin.lens_indices, thick.lens_indices)
+        z_h = real.first_order.front_principal_z_m
+        o, d = thick.origins_cam, thick.directions_cam
+        at_h = o + ((z_h - o[:, 2]) / d[:, 2])[:, None] * d
+        height_err = np.abs(at_h[:, :2] - thin.origins_cam[:, :2]).max()
+        direction_err = np.abs(d - thin.directions_cam).max()
+        errors.append((height_err, direction_err))
+    (h1, d1), (h2, d2) = errors
+    assert h1 < 2e-5
+    assert d1 < 2e-3
+    assert h2 < h1 / 300, errors
+    assert d2 < d1 / 300, errors
