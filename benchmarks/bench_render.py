@@ -9,13 +9,16 @@ memory (max RSS) is its own. Prints seconds, Msamples/s, peak memory and the rat
 
     python benchmarks/bench_render.py                  # tiny and illum, 16 spp
     python benchmarks/bench_render.py --cameras tiny --spp 64 --geometry
+    python benchmarks/bench_render.py --lenses double-gauss wide-angle   # real main lenses too
 
 Targets (issue 2): ratio <= 1.1; full Illum at 16 spp in <= 30 s on the 2-core CI machine.
+Target (issue 14): a real-lens Illum raw at 16 spp within 2x the thin-lens time and 2.5 GB.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import platform
@@ -28,7 +31,7 @@ import numpy as np
 
 
 def _worker(camera_name: str, sensor_kind: str, spp: int, band_pixels: int) -> dict:
-    from lfrefract import camera_preset
+    from lfrefract.optics import RealLensCamera, camera_preset
     from simulator.backend import load_mitsuba, versions
     from simulator.config import RenderSettings, load_scene
     from simulator.render import render_bands
@@ -39,6 +42,13 @@ def _worker(camera_name: str, sensor_kind: str, spp: int, band_pixels: int) -> d
     camera = camera_preset(camera_name)
     port_model = "geometry" if sensor_kind == "plenoptic-geometry" else "sensor"
     config = load_scene().with_overrides(camera=camera, render=RenderSettings(spp=spp, port_model=port_model))
+    lens = None
+    if sensor_kind.startswith("plenoptic+"):  # a real main lens: the port moved out to clear it if needed
+        real = RealLensCamera.from_preset(camera, sensor_kind.split("+", 1)[1])
+        lens = real.lens
+        clear_m = real.extent_z_m[1] + max(s.semi_aperture_m for s in lens.surfaces) + 1e-3
+        port = dataclasses.replace(config.port, distance_m=max(config.port.distance_m, clear_m))
+        config = config.with_overrides(port=port, lens=lens)
     scene = build_scene(mi, config, port_geometry=port_model == "geometry")
     width, height = camera.sensor.width_px, camera.sensor.height_px
 
@@ -46,7 +56,7 @@ def _worker(camera_name: str, sensor_kind: str, spp: int, band_pixels: int) -> d
         sensor_port = config.port if port_model == "sensor" else None
 
         def sensor_for_crop(crop):
-            return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port)
+            return plenoptic_sensor_dict(mi, camera, config.pose, spp=spp, crop=crop, port=sensor_port, lens=lens)
 
     else:
         # Mitsuba's camera looks along +z with +x left and +y up: OpenCV frame = diag(-1, -1, 1).
@@ -107,6 +117,12 @@ def main() -> int:
     parser.add_argument(
         "--geometry", action="store_true", help="also render with the port as scene geometry (the slow reference)"
     )
+    parser.add_argument(
+        "--lenses",
+        nargs="*",
+        default=[],
+        help="also render with these real main lenses (lfsim lenses); the port is moved out to clear a long lens",
+    )
     args = parser.parse_args()
     from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
@@ -125,6 +141,7 @@ def main() -> int:
     for name in args.cameras:
         row = {}
         kinds = ("perspective", "plenoptic", "plenoptic-geometry") if args.geometry else ("perspective", "plenoptic")
+        kinds = (*kinds, *(f"plenoptic+{lens}" for lens in args.lenses))
         for kind in kinds:
             cmd = [
                 sys.executable,
@@ -143,6 +160,8 @@ def main() -> int:
             r = row[kind]
             ratio = r["seconds"] / row["perspective"]["seconds"]
             shown = f"{ratio:6.2f}" if kind != "perspective" else ""
+            if kind.startswith("plenoptic+"):
+                shown += f"  ({r['seconds'] / row['plenoptic']['seconds']:.2f} x thin lens)"
             print(
                 f"{name:8} {kind:19} {r['pixels']:>12,} {r['seconds']:9.2f} {r['msamples_per_s']:10.2f} "
                 f"{r['peak_rss_mb']:9.0f} {shown:>6}"
