@@ -749,7 +749,8 @@ def trace_lens(
     Raises
     ------
     ParameterError
-        For arrays of the wrong shape, non-finite values or a zero direction.
+        For arrays of the wrong shape, non-finite values, a zero direction, or a direction that
+        does not point the way ``toward`` says (it would never reach the lens).
     """
     toward = one_of("toward", toward, ("image", "object"))  # type: ignore[assignment]
     lam = _wavelength(wavelength_m)
@@ -763,6 +764,15 @@ def trace_lens(
     if np.any(norm == 0.0):
         raise ParameterError("directions_cam must not hold zero vectors")
     d = d / norm
+    # A ray aimed away from the lens never meets it: that is a caller's mistake, not vignetting.
+    away = d[:, 2] >= 0.0 if toward == "image" else d[:, 2] <= 0.0
+    if np.any(away):
+        k = int(np.flatnonzero(away)[0])
+        sense = "-z (towards the image)" if toward == "image" else "+z (towards the object)"
+        raise ParameterError(
+            f"directions_cam[{k}]={d[k].tolist()} does not point along {sense}, as toward={toward!r} needs: "
+            "the ray would never reach the lens"
+        )
     z_front = lens.first_order().front_vertex_z_m
     curvature = np.array([s.curvature_per_m for s in lens.surfaces])
     vertex_t = lens.vertex_t_m

@@ -488,6 +488,18 @@ def test_trace_refuses_bad_arrays():
         trace_lens(lens, np.zeros((1, 3)), np.ones((1, 3)), toward="sideways")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(("toward", "z_direction"), [("image", 1.0), ("image", 0.0), ("object", -1.0)])
+def test_trace_refuses_rays_aimed_away_from_the_lens(toward, z_direction):
+    """Such a ray never meets the lens: it used to be reported as vignetted at the first surface."""
+    lens = lens_preset("double-gauss")
+    fo = lens.first_order()
+    z = fo.front_vertex_z_m + 0.01 if toward == "image" else fo.rear_vertex_z_m - 0.01
+    origins = np.array([[0.0, 0.0, z], [0.0, 0.0, z]])
+    directions = np.array([[0.0, 0.0, -1.0 if toward == "image" else 1.0], [0.1, 0.0, z_direction]])
+    with pytest.raises(ParameterError, match=r"directions_cam\[1\].*toward"):
+        trace_lens(lens, origins, directions, toward=toward)
+
+
 # ----------------------------------------------------------------------------- exit pupil bounds
 
 
