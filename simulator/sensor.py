@@ -282,7 +282,7 @@ def register(mi: ModuleType) -> None:
             the ray's quadratic is taken in the form that is stable for any curvature (a plane at
             ``c = 0``). A path is stopped where it misses a sphere, falls outside a clear aperture or
             is totally reflected. Returns the point on the front surface, the direction into the
-            scene and whether the path got through.
+            scene and whether the path got through (stopped paths: the origin and +z, finite).
             """
             passed = mi.Bool(True)
             for vertex_z, c, aperture2, n_from, n_to in self._lens:
@@ -304,6 +304,9 @@ def register(mi: ModuleType) -> None:
                 cos_t = dr.safe_sqrt(1.0 - sin2_t)
                 direction = dr.normalize(eta * direction + (cos_t - eta * cos_i) * normal)
                 origin = hit + mi.Vector3f(0.0, 0.0, vertex_z)
+            # A stopped path may hold NaN (a missed sphere): give it a finite ray (it gets weight 0 anyway).
+            origin = dr.select(passed, origin, mi.Point3f(0.0))
+            direction = dr.select(passed, direction, mi.Vector3f(0.0, 0.0, 1.0))
             return origin, direction, passed
 
         def sample_lens_offset(self, aperture_sample):

@@ -196,3 +196,15 @@ def test_plenoptic_sensor_refuses_a_lens_of_another_focal_length(mi, tiny):
     lens = lens_preset("double-gauss", focal_length_m=1.1 * tiny.focal_length_m, f_number=tiny.f_number)
     with pytest.raises(ParameterError, match="effective focal length"):
         plenoptic_sensor_dict(mi, tiny, Pose(), spp=1, lens=lens)
+
+
+def test_stopped_real_lens_paths_get_finite_zero_length_rays(mi, tiny):
+    """Paths that miss a sphere would carry NaN from the quadratic: the ray handed to Mitsuba is finite."""
+    real = RealLensCamera.from_preset(tiny, "wide-angle")
+    sensor = mi.load_dict(plenoptic_sensor_dict(mi, tiny, Pose(), spp=1, lens=real.lens))
+    _, _, ray, weight = _sample_random_paths(mi, sensor, tiny, seed=11)
+    stopped = _arrays(weight)[:, 0] == 0
+    assert stopped.mean() > 0.5
+    assert np.all(np.isfinite(_arrays(ray.o)))
+    assert np.all(np.isfinite(_arrays(ray.d)))
+    assert np.all(np.asarray(ray.maxt)[stopped] == 0.0)
