@@ -423,6 +423,50 @@ class LightFieldCamera:
         return self.sensor.image_plane_to_pixels(self.mla.centres_m(indices) * self.micro_image_scale)
 
     # ----------------------------------------------------------------- rays
+    def paths_leaving_mla(
+        self, uv: np.ndarray, *, lens_offsets_m: np.ndarray | None = None, micro_image_scale: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Light paths from raw-pixel positions as they leave their microlens, before the main lens.
+
+        A path starts at sensor point ``uv``, passes the microlens whose micro-image holds it (the
+        micro-image centres being the lens centres times ``micro_image_scale``, default
+        :attr:`micro_image_scale`; a real lens's is about its exit pupil) at image-plane offset
+        ``lens_offsets_m`` from that lens's centre, and leaves it parallel to the lens's chief ray
+        from that sensor point (the sensor is at the microlenses' focal plane).
+
+        Parameters
+        ----------
+        uv : array_like, shape (N, 2)
+            Raw pixel coordinates (column, row), pixel centres at integers.
+        lens_offsets_m : array_like, shape (N, 2), optional
+            Image-plane offsets from the lens centre where each path crosses the MLA, metres.
+            Default: zero (the chief ray of the microlens).
+        micro_image_scale : float, optional
+            Micro-image centre over lens centre, for assigning pixels to microlenses.
+
+        Returns
+        -------
+        through_xy : ndarray, shape (N, 2)
+            Camera-frame (x, y) where each path crosses the MLA plane (z = :attr:`mla_z_m`), metres.
+        slope_xy : ndarray, shape (N, 2)
+            Its direction's (dx/dz, dy/dz) in the camera frame, towards +z.
+        lens_indices : ndarray of int, shape (N, 2)
+            Lattice index of each path's microlens.
+        """
+        uv_arr = as_points("uv", uv, 2)
+        n = uv_arr.shape[0]
+        offsets = np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
+        if offsets.shape[0] != n:
+            raise ParameterError(f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows")
+        scale = self.micro_image_scale if micro_image_scale is None else micro_image_scale
+        sensor_img = self.sensor.pixels_to_image_plane(uv_arr)
+        idx = self.mla.nearest_indices(sensor_img / scale)
+        centre_img = self.mla.centres_m(idx)
+        # Image-plane quantities -> camera frame: x = -xi, y = -eta; after the microlens every path
+        # from this sensor point is parallel to its chief ray.
+        slope_xy = (sensor_img - centre_img) / self.mla.focal_length_m
+        return -(centre_img + offsets), slope_xy, idx
+
     def rays_through_lenses(self, uv: np.ndarray, *, lens_offsets_m: np.ndarray | None = None) -> CapturedRays:
         """Trace light paths from raw-pixel positions out through the optics into the air.
 
@@ -445,22 +489,8 @@ class LightFieldCamera:
         CapturedRays
             Rays in the camera frame leaving the main lens.
         """
-        uv_arr = as_points("uv", uv, 2)
-        n = uv_arr.shape[0]
-        offsets = np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
-        if offsets.shape[0] != n:
-            raise ParameterError(f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows")
-        f_mla = self.mla.focal_length_m
-        sensor_img = self.sensor.pixels_to_image_plane(uv_arr)
-        idx = self.mla.nearest_indices(sensor_img / self.micro_image_scale)
-        centre_img = self.mla.centres_m(idx)
-        through_img = centre_img + offsets
-        # Image-plane quantities -> camera frame: x = -xi, y = -eta.
-        sensor_xy = -sensor_img
-        centre_xy = -centre_img
-        through_xy = -through_img
-        # After the microlens every path from this sensor point is parallel to its chief ray.
-        slope_in = (centre_xy - sensor_xy) / f_mla
+        through_xy, slope_in, idx = self.paths_leaving_mla(uv, lens_offsets_m=lens_offsets_m)
+        n = through_xy.shape[0]
         hit_xy = through_xy + slope_in * self.lens_to_mla_m
         in_aperture = np.sum(hit_xy**2, axis=1) <= self.aperture_radius_m**2
         slope_out = slope_in - hit_xy / self.focal_length_m

@@ -185,19 +185,12 @@ class RealLensCamera:
             aperture or totally reflected inside the lens (their origin and direction are NaN).
         """
         cam = self.camera
-        uv_arr = as_points("uv", uv, 2)
-        n = uv_arr.shape[0]
-        offsets = np.zeros((n, 2)) if lens_offsets_m is None else as_points("lens_offsets_m", lens_offsets_m, 2)
-        if offsets.shape[0] != n:
-            raise ParameterError(f"lens_offsets_m must have one row per uv row ({n}), got {offsets.shape[0]} rows")
-        sensor_img = cam.sensor.pixels_to_image_plane(uv_arr)
-        idx = cam.mla.nearest_indices(sensor_img / self.micro_image_scale)
-        centre_img = cam.mla.centres_m(idx)
-        # Image plane -> camera frame: x = -xi, y = -eta; every path from one sensor point leaves
-        # the microlens parallel to its chief ray.
-        slope = (sensor_img - centre_img) / cam.mla.focal_length_m
-        origins = np.column_stack([-(centre_img + offsets), np.full(n, cam.mla_z_m)])
-        directions = np.column_stack([slope, np.ones(n)])
+        through_xy, slope_xy, idx = cam.paths_leaving_mla(
+            uv, lens_offsets_m=lens_offsets_m, micro_image_scale=self.micro_image_scale
+        )
+        n = through_xy.shape[0]
+        origins = np.column_stack([through_xy, np.full(n, cam.mla_z_m)])
+        directions = np.column_stack([slope_xy, np.ones(n)])
         trace = trace_lens(self.lens, origins, directions, toward="object")
         return CapturedRays(
             origins_cam=trace.points_cam,
