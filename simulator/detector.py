@@ -44,6 +44,7 @@ from scipy import fft as sp_fft
 from scipy import ndimage, signal, special
 
 from lfrefract.errors import ParameterError
+from lfrefract.formats.mosaic import CFA_PATTERNS, RawMosaic, cfa_channels
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import (
     bounded_float,
@@ -59,13 +60,10 @@ from lfrefract.validate import (
 from simulator.seeds import seed as checked_seed
 
 __all__ = [
-    "CFA_PATTERNS",
     "DEMOSAIC_METHODS",
     "DETECTOR_PRESETS",
     "PSF_MODELS",
     "DetectorConfig",
-    "Mosaic",
-    "cfa_channels",
     "demosaic",
     "detector_preset",
     "edge_width_px",
@@ -76,15 +74,11 @@ __all__ = [
     "white_frames",
 ]
 
-#: Bayer tiles, named by their 2 x 2 top-left block read row by row.
-CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 #: Point-spread functions of the optics in front of the pixels (``"none"``: no optical blur).
 PSF_MODELS = ("airy", "gaussian", "none")
 #: Demosaicing methods of :func:`demosaic` (OpenCV's bilinear and edge-aware interpolation).
 DEMOSAIC_METHODS = ("bilinear", "edge_aware")
 
-#: Index of each colour letter in an RGB triple.
-_CHANNEL = {"R": 0, "G": 1, "B": 2}
 #: OpenCV's conversion code for each pattern (OpenCV's 4-letter names are the top-left 2 x 2 block
 #: read row by row, as here; its 2-letter aliases name the second row's second and third pixels).
 _CV_CODES = {
@@ -427,80 +421,6 @@ def detector_preset(name: str) -> DetectorConfig:
     return DETECTOR_PRESETS[one_of("detector preset", name, tuple(DETECTOR_PRESETS))]
 
 
-# ---------------------------------------------------------------------------------------- mosaic
-@dataclass(frozen=True, kw_only=True)
-class Mosaic:
-    """A Bayer mosaic of digital numbers, as the sensor writes it.
-
-    Attributes
-    ----------
-    counts : ndarray of uint16, shape (H, W)
-        Digital numbers, each in ``[0, 2**bit_depth - 1]`` (read-only).
-    cfa_pattern : {"RGGB", "BGGR", "GRBG", "GBRG"}
-        Bayer tile of ``counts[0:2, 0:2]``, row by row.
-    black_level_dn, white_level_dn : int
-        Digital numbers of no light and of saturation.
-    bit_depth : int
-        Bits per pixel, 8 to 16.
-    """
-
-    counts: np.ndarray
-    cfa_pattern: str
-    black_level_dn: int
-    white_level_dn: int
-    bit_depth: int
-
-    def __post_init__(self) -> None:
-        one_of("cfa_pattern", self.cfa_pattern, CFA_PATTERNS)
-        bits = bounded_int("bit_depth", self.bit_depth, 8, 16)
-        white = bounded_int("white_level_dn", self.white_level_dn, 1, 2**bits - 1)
-        black = bounded_int("black_level_dn", self.black_level_dn, 0, 2**bits - 1)
-        if black >= white:
-            raise ParameterError(
-                f"black_level_dn must be below white_level_dn = {white}, got {shown(self.black_level_dn)}"
-            )
-        counts = np.asarray(self.counts)
-        if counts.dtype != np.uint16 or counts.ndim != 2 or min(counts.shape) < 2:
-            raise ParameterError(f"counts must be uint16 of shape (H, W), H, W >= 2, got {counts.dtype} {counts.shape}")
-        if counts.size and int(counts.max()) > 2**bits - 1:
-            raise ParameterError(f"counts must be at most 2**bit_depth - 1 = {2**bits - 1}, got {int(counts.max())}")
-        counts = counts.copy()
-        counts.setflags(write=False)
-        for name, value in (
-            ("counts", counts),
-            ("bit_depth", bits),
-            ("white_level_dn", white),
-            ("black_level_dn", black),
-        ):
-            object.__setattr__(self, name, value)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """``(H, W)``."""
-        return (int(self.counts.shape[0]), int(self.counts.shape[1]))
-
-    def channel_index(self) -> np.ndarray:
-        """Colour channel (0 R, 1 G, 2 B) of every pixel, int8 of shape (H, W)."""
-        return cfa_channels(self.cfa_pattern, self.shape)
-
-    @property
-    def saturated(self) -> np.ndarray:
-        """Pixels at the white level, bool (H, W)."""
-        return self.counts >= self.white_level_dn
-
-    def normalised(self) -> np.ndarray:
-        """``(counts - black) / (white - black)``, float64 (H, W): 0 no light, 1 the white level."""
-        return (self.counts.astype(np.float64) - self.black_level_dn) / (self.white_level_dn - self.black_level_dn)
-
-
-def cfa_channels(pattern: str, shape: tuple[int, int]) -> np.ndarray:
-    """Colour channel (0 R, 1 G, 2 B) of every pixel of a ``pattern`` mosaic of ``shape`` (H, W), int8."""
-    one_of("cfa_pattern", pattern, CFA_PATTERNS)
-    tile = np.array([[_CHANNEL[pattern[0]], _CHANNEL[pattern[1]]], [_CHANNEL[pattern[2]], _CHANNEL[pattern[3]]]])
-    h, w = shape
-    return np.tile(tile, ((h + 1) // 2, (w + 1) // 2))[:h, :w].astype(np.int8)
-
-
 # ---------------------------------------------------------------------------------------- blur
 def _gaussian_pixel_weights(sigma_px: float, half: int) -> np.ndarray:
     """Share of a 1-D Gaussian centred on pixel 0 that falls in pixels -half..half (unnormalised)."""
@@ -636,8 +556,8 @@ def _digitised(mean_e: np.ndarray, config: DetectorConfig, rng: np.random.Genera
     return np.clip(dn, 0.0, float(config.white_level_dn))
 
 
-def _mosaic(counts: np.ndarray, config: DetectorConfig) -> Mosaic:
-    return Mosaic(
+def _mosaic(counts: np.ndarray, config: DetectorConfig) -> RawMosaic:
+    return RawMosaic(
         counts=counts.astype(np.uint16),
         cfa_pattern=config.cfa_pattern,
         black_level_dn=config.black_level_dn,
@@ -646,7 +566,7 @@ def _mosaic(counts: np.ndarray, config: DetectorConfig) -> Mosaic:
     )
 
 
-def simulate_mosaic(radiance_rgb: np.ndarray, config: DetectorConfig, *, seed: int) -> Mosaic:
+def simulate_mosaic(radiance_rgb: np.ndarray, config: DetectorConfig, *, seed: int) -> RawMosaic:
     """One exposure of the sensor: the Bayer mosaic of digital numbers for a rendered raw image.
 
     Parameters
@@ -660,14 +580,14 @@ def simulate_mosaic(radiance_rgb: np.ndarray, config: DetectorConfig, *, seed: i
 
     Returns
     -------
-    Mosaic
+    RawMosaic
         ``counts`` of shape (H, W), uint16.
     """
     rng = np.random.default_rng(np.random.SeedSequence(checked_seed("seed", seed)))
     return _mosaic(_digitised(expected_electrons(radiance_rgb, config), config, rng), config)
 
 
-def white_frames(radiance_rgb: np.ndarray, config: DetectorConfig, *, frames: int, seed: int) -> Mosaic:
+def white_frames(radiance_rgb: np.ndarray, config: DetectorConfig, *, frames: int, seed: int) -> RawMosaic:
     """A white image as a camera ships it: the mean of ``frames`` exposures, rounded to digital numbers.
 
     Parameters
@@ -682,7 +602,7 @@ def white_frames(radiance_rgb: np.ndarray, config: DetectorConfig, *, frames: in
 
     Returns
     -------
-    Mosaic
+    RawMosaic
         The per-pixel mean of the frames' digital numbers, rounded to the nearest integer (the
         shot and read noise shrink by ``sqrt(frames)``; each frame is clipped and quantised).
     """
@@ -695,12 +615,12 @@ def white_frames(radiance_rgb: np.ndarray, config: DetectorConfig, *, frames: in
     return _mosaic(np.rint(total / count), config)
 
 
-def demosaic(mosaic: Mosaic, *, method: str = "bilinear") -> np.ndarray:
+def demosaic(mosaic: RawMosaic, *, method: str = "bilinear") -> np.ndarray:
     """Linear camera RGB of every pixel from a Bayer mosaic (OpenCV's demosaicing).
 
     Parameters
     ----------
-    mosaic : Mosaic
+    mosaic : RawMosaic
     method : {"bilinear", "edge_aware"}
         OpenCV's bilinear interpolation or its edge-aware variant.
 
@@ -712,8 +632,8 @@ def demosaic(mosaic: Mosaic, *, method: str = "bilinear") -> np.ndarray:
         ``white - black``: 0 no light, 1 the white level. The counts are shifted to 16 bits before
         OpenCV interpolates them, so its integer rounding costs at most ``2**(bit_depth - 17)`` DN.
     """
-    if not isinstance(mosaic, Mosaic):
-        raise ParameterError(f"mosaic must be a Mosaic, got {shown(mosaic)}")
+    if not isinstance(mosaic, RawMosaic):
+        raise ParameterError(f"mosaic must be a RawMosaic, got {shown(mosaic)}")
     code = _CV_CODES[one_of("method", method, DEMOSAIC_METHODS)][mosaic.cfa_pattern]
     shift = 16 - mosaic.bit_depth
     rgb = cv2.cvtColor(np.ascontiguousarray(mosaic.counts << shift, dtype=np.uint16), code).astype(np.float64)

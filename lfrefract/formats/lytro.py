@@ -14,8 +14,9 @@ for real files of the same layout). ``docs/lytro-files.md`` describes every fiel
 * **F01 RAW** (:func:`write_f01_raw`, :func:`read_f01_raw`): 12-bit packed big-endian (every 2 pixels in
   3 bytes, high bits first) with the frame metadata JSON beside it (``<stem>.json`` or ``.txt``).
 
-Mosaics are :class:`RawMosaic`: digital numbers (H, W) uint16 with their bit depth, black and white
-levels and colour-filter pattern (``"GRBG"``: the upper-left 2 x 2 tile is G R / B G).
+Mosaics are :class:`~lfrefract.formats.mosaic.RawMosaic` (re-exported here): digital numbers (H, W)
+uint16 with their bit depth, black and white levels and colour-filter pattern (``"GRBG"``: the
+upper-left 2 x 2 tile is G R / B G).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.mosaic import CFA_PATTERNS, RawMosaic
 from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import GridType, LightFieldCamera, MicrolensArray, SensorGeometry
 from lfrefract.validate import bounded_float, bounded_int, finite_float, one_of, shown, text
@@ -69,8 +71,6 @@ LFC_MAGIC = b"\x89LFC\r\n\x1a\n\x00\x00\x00\x00"
 #: Data sections in an Illum LFR, before its table of contents. imageio's reader walks exactly this many.
 ILLUM_DATA_SECTIONS = 11
 
-#: Colour-filter patterns: the upper-left 2 x 2 tile, row by row (Illum ``GRBG``, F01 ``BGGR``).
-CFA_PATTERNS = ("GRBG", "RGGB", "GBRG", "BGGR")
 # Lytro names the pattern by its canonical tile "r,gr:gb,b" and the colour of the upper-left pixel.
 _UPPER_LEFT = {"GRBG": "gr", "RGGB": "r", "GBRG": "gb", "BGGR": "b"}
 _TILE = "r,gr:gb,b"
@@ -84,75 +84,6 @@ _ALIGN = 16  # sections start on 16-byte boundaries; the gap is zeros
 _MAX_FILE_BYTES = 2**31 - 1  # the section size is a signed 32-bit integer
 _ILLUM_BITS = 10
 _F01_BITS = 12
-
-
-# =============================================================================== mosaics
-@dataclass(frozen=True, eq=False, kw_only=True)
-class RawMosaic:
-    """A sensor's output: one digital number per pixel, under a colour-filter array.
-
-    Parameters
-    ----------
-    counts : numpy.ndarray
-        Digital numbers, shape (H, W), any integer dtype with values in ``[0, 2**bit_depth - 1]``;
-        stored as a read-only uint16 copy. Row 0 is the top of the raw image, column 0 its left.
-    bit_depth : int
-        Bits per pixel of the analogue-to-digital converter, 1 to 16 (Illum 10, F01 12).
-    black_level, white_level : int
-        The digital number of no light and of saturation, ``0 <= black < white <= 2**bit_depth - 1``.
-    cfa : str
-        The colour-filter pattern, one of :data:`CFA_PATTERNS`.
-
-    Raises
-    ------
-    ParameterError
-        If ``counts`` is not a 2-D integer array, a value is out of range, or a level or the
-        pattern is impossible; the message names the parameter and its value.
-    """
-
-    counts: np.ndarray = field(repr=False)
-    bit_depth: int
-    black_level: int
-    white_level: int
-    cfa: str
-
-    def __post_init__(self) -> None:
-        bits = bounded_int("bit_depth", self.bit_depth, 1, 16)
-        top = 2**bits - 1
-        white = bounded_int("white_level", self.white_level, 1, top)
-        black = bounded_int("black_level", self.black_level, 0, top)
-        if black >= white:
-            raise ParameterError(f"black_level={black} must be below white_level={white}")
-        one_of("cfa", self.cfa, CFA_PATTERNS)
-        counts = self.counts
-        if not isinstance(counts, np.ndarray) or counts.ndim != 2 or not np.issubdtype(counts.dtype, np.integer):
-            raise ParameterError(
-                f"counts must be a 2-D integer array (H, W), got "
-                f"{getattr(counts, 'dtype', type(counts).__name__)} of shape {getattr(counts, 'shape', None)}"
-            )
-        if counts.size == 0:
-            raise ParameterError(f"counts must not be empty, got shape {counts.shape}")
-        low, high = int(counts.min()), int(counts.max())
-        if low < 0 or high > top:
-            raise ParameterError(f"counts must lie in [0, {top}] for bit_depth={bits}, got values in [{low}, {high}]")
-        stored = np.array(counts, dtype=np.uint16, order="C", copy=True)
-        stored.setflags(write=False)
-        object.__setattr__(self, "counts", stored)
-        object.__setattr__(self, "bit_depth", bits)
-        object.__setattr__(self, "black_level", black)
-        object.__setattr__(self, "white_level", white)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(H, W), pixels."""
-        return (int(self.counts.shape[0]), int(self.counts.shape[1]))
-
-    def normalised(self) -> np.ndarray:
-        """The counts as float64 over the full scale ``2**bit_depth - 1``, shape (H, W).
-
-        This is what imageio's Lytro readers return (counts / 1023 for the Illum, / 4095 for the F01).
-        """
-        return np.divide(self.counts, float(2**self.bit_depth - 1)).astype(np.float64)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -426,7 +357,7 @@ def illum_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroS
     settings = LytroSettings() if settings is None else settings
     _check_mosaic(mosaic, camera, _ILLUM_BITS, "Illum LFR")
     height, width = mosaic.shape
-    mosaic_table = {"tile": _TILE, "upperLeftPixel": _UPPER_LEFT[mosaic.cfa]}
+    mosaic_table = {"tile": _TILE, "upperLeftPixel": _UPPER_LEFT[mosaic.cfa_pattern]}
     gains = dict(zip(_CHANNELS, settings.white_balance_gain, strict=True))
     mla_table, lens_table = _mla_and_lens(camera, settings)
     return {
@@ -438,8 +369,8 @@ def illum_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroS
             "orientation": 1,
             "pixelPacking": {"bitsPerPixel": _ILLUM_BITS, "endianness": "little"},
             "pixelFormat": {
-                "black": _per_channel(mosaic.black_level),
-                "white": _per_channel(mosaic.white_level),
+                "black": _per_channel(mosaic.black_level_dn),
+                "white": _per_channel(mosaic.white_level_dn),
                 "rightShift": 0,
             },
             "mosaic": mosaic_table,
@@ -476,7 +407,7 @@ def f01_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroSet
     settings = LytroSettings() if settings is None else settings
     _check_mosaic(mosaic, camera, _F01_BITS, "F01 RAW")
     height, width = mosaic.shape
-    mosaic_table = {"tile": _TILE, "upperLeftPixel": _UPPER_LEFT[mosaic.cfa]}
+    mosaic_table = {"tile": _TILE, "upperLeftPixel": _UPPER_LEFT[mosaic.cfa_pattern]}
     gains = dict(zip(_CHANNELS, settings.white_balance_gain, strict=True))
     mla_table, lens_table = _mla_and_lens(camera, settings)
     return {
@@ -491,8 +422,8 @@ def f01_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroSet
             "rawDetails": {
                 "pixelFormat": {
                     "rightShift": 0,
-                    "black": _per_channel(mosaic.black_level),
-                    "white": _per_channel(mosaic.white_level),
+                    "black": _per_channel(mosaic.black_level_dn),
+                    "white": _per_channel(mosaic.white_level_dn),
                 },
                 "pixelPacking": {"endianness": "big", "bitsPerPixel": _F01_BITS},
                 "mosaic": mosaic_table,
@@ -602,9 +533,9 @@ def _mosaic_from_metadata(counts: np.ndarray, metadata: dict, format_table: str,
         return RawMosaic(
             counts=counts,
             bit_depth=bits,
-            black_level=levels["black"],
-            white_level=levels["white"],
-            cfa=patterns[upper_left],
+            black_level_dn=levels["black"],
+            white_level_dn=levels["white"],
+            cfa_pattern=patterns[upper_left],
         )
     except ParameterError as exc:
         raise FileFormatError(f"{where}: {exc}") from None
@@ -622,19 +553,19 @@ def _thumbnail_jpeg(mosaic: RawMosaic, settings: LytroSettings, *, max_side_px: 
     # Per axis: a long, narrow sensor has fewer tiles across than the long side's factor.
     fy, fx = min(factor, cells[0]), min(factor, cells[1])
     size = (cells[1] // fx, cells[0] // fy)  # (width, height), as OpenCV takes it
-    scale = 1.0 / float(mosaic.white_level - mosaic.black_level)
+    scale = 1.0 / float(mosaic.white_level_dn - mosaic.black_level_dn)
     gains = dict(zip(_CHANNELS, settings.white_balance_gain, strict=True))
     # The pattern's four sites in tile order (0, 0), (0, 1), (1, 0), (1, 1); a green is named by its row's other colour.
     plane = {}
-    for k, letter in enumerate(mosaic.cfa):
+    for k, letter in enumerate(mosaic.cfa_pattern):
         row, col = divmod(k, 2)
-        row_partner = mosaic.cfa[2 * row + (1 - col)]
+        row_partner = mosaic.cfa_pattern[2 * row + (1 - col)]
         channel = {"R": "r", "B": "b"}.get(letter) or ("gr" if row_partner == "R" else "gb")
         # Mean of factor x factor blocks of this colour's sites (the last partial blocks are left out).
         sites = counts[row : 2 * size[1] * fy : 2, col : 2 * size[0] * fx : 2]
         sums = sites.reshape(size[1], fy, size[0], fx).sum(axis=(1, 3), dtype=np.uint32)
         mean = sums.astype(np.float32) / float(fy * fx)
-        plane[channel] = (mean - mosaic.black_level) * (scale * gains[channel])
+        plane[channel] = (mean - mosaic.black_level_dn) * (scale * gains[channel])
     rgb = np.stack([plane["r"], 0.5 * (plane["gr"] + plane["gb"]), plane["b"]], axis=-1)
     rgb = rgb @ np.asarray(settings.color_matrix, dtype=np.float32).reshape(3, 3).T
     display = np.clip(rgb, 0.0, 1.0) ** (1.0 / 2.2)

@@ -47,7 +47,7 @@ def full_scale_mosaic(shape, bits, black, pattern, seed) -> RawMosaic:
     top = 2**bits - 1
     counts = rng.integers(0, top + 1, size=shape, dtype=np.uint16)
     counts.reshape(-1)[:4] = (0, top, 1, top - 1)
-    return RawMosaic(counts=counts, bit_depth=bits, black_level=black, white_level=top, cfa=pattern)
+    return RawMosaic(counts=counts, bit_depth=bits, black_level_dn=black, white_level_dn=top, cfa_pattern=pattern)
 
 
 def tilted_tiny():
@@ -70,6 +70,7 @@ def test_imageio_reads_our_illum_lfr_exactly(tmp_path):
     assert image.dtype == np.float64
     assert image.shape == (5368, 7728)
     assert np.array_equal(image, mosaic.counts / 1023.0)
+    assert np.array_equal(image, mosaic.full_scale())
     assert np.array_equal(np.rint(image * 1023.0).astype(np.uint16), mosaic.counts)
     meta = image.meta
     assert meta["metadata"] == illum_metadata(mosaic, cam, settings)
@@ -80,7 +81,7 @@ def test_imageio_reads_our_illum_lfr_exactly(tmp_path):
 
     back = read_lfr(path)
     assert np.array_equal(back.mosaic.counts, mosaic.counts)
-    assert (back.mosaic.bit_depth, back.mosaic.black_level, back.mosaic.white_level, back.mosaic.cfa) == (
+    assert (back.mosaic.bit_depth, back.mosaic.black_level_dn, back.mosaic.white_level_dn, back.mosaic.cfa_pattern) == (
         10,
         64,
         1023,
@@ -109,7 +110,7 @@ def test_imageio_reads_our_f01_raw_exactly(tmp_path):
 
     back = read_f01_raw(raw_path)
     assert np.array_equal(back.mosaic.counts, mosaic.counts)
-    assert (back.mosaic.black_level, back.mosaic.white_level, back.mosaic.cfa) == (168, 4095, "BGGR")
+    assert (back.mosaic.black_level_dn, back.mosaic.white_level_dn, back.mosaic.cfa_pattern) == (168, 4095, "BGGR")
     assert back.camera == dataclasses.replace(cam, name="lytro-metadata")
 
 
@@ -167,7 +168,7 @@ def test_lfr_round_trip_of_a_small_camera(tmp_path, pattern):
     path = write_lfr(tmp_path / "c.lfr", mosaic, cam)
     back = read_lfr(path)
     assert np.array_equal(back.mosaic.counts, mosaic.counts)
-    assert back.mosaic.cfa == pattern
+    assert back.mosaic.cfa_pattern == pattern
     assert back.camera == cam
     # The metadata alone describes the same camera (the name aside): rotation, offset, gap, pupil.
     assert camera_from_metadata(back.metadata) == dataclasses.replace(cam, name="lytro-metadata")
@@ -185,7 +186,7 @@ def test_thumbnail_shows_the_colour_that_was_lit(tmp_path, pattern):
     counts = np.full((360, 480), 32, dtype=np.uint16)
     counts[row::2, col::2] = 1023
     path = write_lfr(
-        tmp_path / "red.lfr", RawMosaic(counts=counts, bit_depth=10, black_level=32, white_level=1023, cfa=pattern), cam
+        tmp_path / "red.lfr", RawMosaic(counts=counts, bit_depth=10, black_level_dn=32, white_level_dn=1023, cfa_pattern=pattern), cam
     )
     bgr = cv2.imdecode(np.frombuffer(read_lfr(path).thumbnail_jpeg, dtype=np.uint8), cv2.IMREAD_COLOR)
     b, g, r = (float(bgr[..., k].mean()) for k in range(3))
@@ -365,7 +366,7 @@ def test_writes_are_atomic_and_leave_nothing_behind(tmp_path):
     with pytest.raises(ParameterError, match="bit_depth"):
         write_lfr(
             path,
-            RawMosaic(counts=mosaic.counts, bit_depth=12, black_level=64, white_level=4095, cfa="GRBG"),
+            RawMosaic(counts=mosaic.counts, bit_depth=12, black_level_dn=64, white_level_dn=4095, cfa_pattern="GRBG"),
             camera_preset("tiny"),
         )
     assert path.read_bytes() == before
@@ -383,15 +384,16 @@ def test_writes_are_atomic_and_leave_nothing_behind(tmp_path):
         ({"counts": np.full((4, 4), 1024)}, r"\[0, 1023\]"),
         ({"counts": np.full((4, 4), -1)}, r"\[0, 1023\]"),
         ({"counts": np.zeros(16, dtype=np.uint16)}, "2-D"),
-        ({"black_level": 1023}, "below white_level"),
-        ({"white_level": 1024}, "white_level"),
-        ({"cfa": "RGBG"}, "cfa"),
+        ({"black_level_dn": 1023}, "below white_level"),
+        ({"white_level_dn": 1024}, "white_level"),
+        ({"cfa_pattern": "RGBG"}, "cfa_pattern"),
+        ({"counts": np.zeros((1, 4), dtype=np.uint16)}, "2 x 2"),
         ({"bit_depth": 17}, "bit_depth"),
     ],
 )
 def test_mosaic_parameters_are_validated(kwargs, match):
-    args = {"counts": np.zeros((4, 4), dtype=np.uint16), "bit_depth": 10, "black_level": 64, "white_level": 1023}
-    args |= {"cfa": "GRBG"} | kwargs
+    args = {"counts": np.zeros((4, 4), dtype=np.uint16), "bit_depth": 10, "black_level_dn": 64, "white_level_dn": 1023}
+    args |= {"cfa_pattern": "GRBG"} | kwargs
     with pytest.raises(ParameterError, match=match):
         RawMosaic(**args)
 

@@ -13,11 +13,10 @@ from scipy import integrate, special
 
 from lfrefract.calibration import calibrate_mla
 from lfrefract.errors import ParameterError
+from lfrefract.formats.mosaic import CFA_PATTERNS, RawMosaic
 from simulator.detector import (
-    CFA_PATTERNS,
     DETECTOR_PRESETS,
     DetectorConfig,
-    Mosaic,
     demosaic,
     detector_preset,
     edge_width_px,
@@ -152,7 +151,7 @@ def test_black_level_white_level_and_saturation():
     assert counts.min() == 0
     assert counts.max() > 10
     assert (
-        Mosaic(counts=counts, cfa_pattern="RGGB", black_level_dn=10, white_level_dn=4095, bit_depth=12)
+        RawMosaic(counts=counts, cfa_pattern="RGGB", black_level_dn=10, white_level_dn=4095, bit_depth=12)
         .normalised()
         .min()
         < 0
@@ -264,7 +263,7 @@ def test_demosaic_of_a_known_colour_returns_it(pattern, method):
     value = {"R": 300, "G": 500, "B": 700}
     for k, letter in enumerate(pattern):
         counts[k // 2 :: 2, k % 2 :: 2] = value[letter]
-    mosaic = Mosaic(counts=counts, cfa_pattern=pattern, black_level_dn=64, white_level_dn=1023, bit_depth=10)
+    mosaic = RawMosaic(counts=counts, cfa_pattern=pattern, black_level_dn=64, white_level_dn=1023, bit_depth=10)
     rgb = demosaic(mosaic, method=method)
     assert rgb.shape == (12, 16, 3)
     expected = (np.array([300, 500, 700]) - 64) / (1023 - 64)
@@ -345,7 +344,7 @@ def test_bad_tables_and_images_are_refused():
     with pytest.raises(ParameterError, match="frames"):
         white_frames(np.ones((8, 8, 3)), plain(), frames=0, seed=0)
     with pytest.raises(ParameterError, match="counts"):
-        Mosaic(
+        RawMosaic(
             counts=np.full((4, 4), 5000, np.uint16),
             cfa_pattern="RGGB",
             black_level_dn=0,
@@ -392,6 +391,6 @@ def test_any_finite_radiance_saturates_instead_of_failing():
 
 
 def test_detector_types_take_keywords_only():
-    from simulator.detector import DetectorConfig, Mosaic
+    from simulator.detector import DetectorConfig
 
-    assert all(f.kw_only for cls in (DetectorConfig, Mosaic) for f in dataclasses.fields(cls))
+    assert all(f.kw_only for cls in (DetectorConfig, RawMosaic) for f in dataclasses.fields(cls))
