@@ -186,7 +186,9 @@ def test_thumbnail_shows_the_colour_that_was_lit(tmp_path, pattern):
     counts = np.full((360, 480), 32, dtype=np.uint16)
     counts[row::2, col::2] = 1023
     path = write_lfr(
-        tmp_path / "red.lfr", RawMosaic(counts=counts, bit_depth=10, black_level_dn=32, white_level_dn=1023, cfa_pattern=pattern), cam
+        tmp_path / "red.lfr",
+        RawMosaic(counts=counts, bit_depth=10, black_level_dn=32, white_level_dn=1023, cfa_pattern=pattern),
+        cam,
     )
     bgr = cv2.imdecode(np.frombuffer(read_lfr(path).thumbnail_jpeg, dtype=np.uint8), cv2.IMREAD_COLOR)
     b, g, r = (float(bgr[..., k].mean()) for k in range(3))
