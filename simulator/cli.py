@@ -1,10 +1,13 @@
 """``lfsim``: the simulator's command line.
 
-    lfsim render [SCENE] --out DIR [--camera PRESET] [--spp N] [--ideal-spp N] [--seed S] [--overwrite]
+    lfsim render [SCENE] --out DIR [--camera PRESET] [--lens LENS] [--sensor PRESET] [--frames N] [--lfr]
+                 [--rays] [--spp N] [--ideal-spp N] [--seed S] [--overwrite]
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
-    lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA]
+    lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA] [--lens LENS]
                      [--port-distance-m D] [--thickness-m T] [--tilts-deg T1,T2] [--f-numbers N1,N2]
                      [--overwrite]
+    lfsim whites --out DIR [--camera PRESET] [--sensor PRESET] [--lens LENS] [--focal-lengths-mm F1,F2]
+                 [--focus-m D1,inf] [--frames N] [--spp N] [--seed S] [--overwrite]
     lfsim demo [--out DIR] [--overwrite]
     lfsim dataset run SPEC --out DIR [--workers N | --scheduler ADDRESS] [--threads T] [--retries R]
                           [--variant V] [--quiet]
@@ -31,12 +34,25 @@ from pathlib import Path
 
 from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
-from lfrefract.formats.outputs import terminate_cleanly
+from lfrefract.formats.outputs import MANIFEST_NAME, terminate_cleanly
 from lfrefract.optics.lens import LENS_PRESETS
-from simulator.config import DEFAULT_IDEAL_SPP, PORT_MODELS, THIN_LENS, embedded_scenes, load_scene, main_lens
+from simulator.config import (
+    DEFAULT_IDEAL_SPP,
+    PORT_MODELS,
+    THIN_LENS,
+    SensorSettings,
+    embedded_scenes,
+    load_scene,
+    main_lens,
+    sensor_model,
+)
+from simulator.detector import DETECTOR_PRESETS
 from simulator.render import DEFAULT_MAX_BAND_PIXELS
 
 __all__ = ["main"]
+
+#: ``lfsim render --sensor none``: no sensor model (raw.exr only), whatever the scene says.
+NO_SENSOR = "none"
 
 
 def _scene_path(arg: str | None) -> Path | None:
@@ -154,6 +170,24 @@ def _parser() -> argparse.ArgumentParser:
         help="also write rays.npz: the object-space chief ray of every raw pixel (float32, 24 bytes a pixel)",
     )
     render.add_argument(
+        "--sensor",
+        choices=[NO_SENSOR, *sorted(DETECTOR_PRESETS)],
+        help="sensor model replacing the scene's [sensor]: a detector preset (its pixel pitch and microlens "
+        "f-number the camera's), or 'none'; with one, mosaic.npz holds the sensor's integer counts",
+    )
+    render.add_argument(
+        "--frames",
+        type=int,
+        help="exposures the sensor averages into mosaic.npz (default: the scene's sensor.frames, else 1; "
+        "64 for a white image as Lytro ships it)",
+    )
+    render.add_argument(
+        "--lfr",
+        action="store_true",
+        help="also write the Lytro file of the sensor's bit depth: capture.lfr (10 bits, Illum) or "
+        "capture.raw + capture.json (12 bits, F01)",
+    )
+    render.add_argument(
         "--port-model", choices=list(PORT_MODELS), help="how the port is rendered (default: the scene's)"
     )
     render.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant")
@@ -196,8 +230,40 @@ def _parser() -> argparse.ArgumentParser:
         help="port tilts about x, degrees, separated by commas (a negative first one: --tilts-deg=-10,0)",
     )
     exp.add_argument("--f-numbers", type=_numbers, help="main-lens f-numbers, separated by commas")
+    exp.add_argument(
+        "--lens",
+        choices=[THIN_LENS, *sorted(LENS_PRESETS)],
+        help="main lens every rig camera renders through (the core still assumes a thin lens)",
+    )
     exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
     exp.add_argument("--quiet", action="store_true", help="no progress bars")
+    whites = _command(
+        sub,
+        "whites",
+        help="white images per zoom/focus setting through the sensor model, as a Lytro camera ships them",
+        description="Render the white image (uniform radiance, no port) at every focal length x focus distance, "
+        "through the sensor model with --frames exposures averaged, and write each as the camera does: Illum "
+        ".raw + .txt (10-bit sensor) or F01 .raw + .json (12-bit), with its true micro-image centres "
+        "(.lenses.npz) and an index, whites.json (docs/simulator.md, 'White images').",
+    )
+    whites.add_argument("--out", required=True, type=Path, help="output directory (absent or empty)")
+    whites.add_argument("--camera", choices=sorted(PRESETS), default="illum", help="camera preset")
+    whites.add_argument(
+        "--sensor", choices=sorted(DETECTOR_PRESETS), help="detector preset (default: the camera's name)"
+    )
+    whites.add_argument("--lens", choices=[THIN_LENS, *sorted(LENS_PRESETS)], default=THIN_LENS, help="main lens")
+    whites.add_argument(
+        "--focal-lengths-mm", type=_numbers, help="zoom settings, focal lengths in mm (default: the camera's)"
+    )
+    whites.add_argument(
+        "--focus-m", type=_numbers, default=(float("inf"),), help="focus distances from the lens, metres ('inf')"
+    )
+    whites.add_argument("--frames", type=int, default=64, help="exposures averaged into each white image")
+    whites.add_argument("--spp", type=int, default=64, help="samples per pixel of each white render")
+    whites.add_argument("--seed", type=int, default=0, help="render seed of the first setting (then +1 each)")
+    whites.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], help="Mitsuba variant")
+    whites.add_argument("--overwrite", action="store_true", help="replace an earlier white-image set (only that)")
+    whites.add_argument("--quiet", action="store_true", help="no progress bars")
     demo = _command(sub, "demo", help="the main job: stereo behind a glass wall by every method, with a report")
     demo.add_argument("--out", type=Path, default=Path("demo"), help="output directory")
     demo.add_argument("--overwrite", action="store_true", help="replace an earlier demo output")
@@ -276,6 +342,7 @@ def _experiment(args: argparse.Namespace) -> int:
         thickness_m=args.thickness_m,
         tilts_deg=args.tilts_deg,
         f_numbers=args.f_numbers,
+        lens=args.lens,
     )
     result = run_experiment(args.name, out=args.out, options=options, progress=not args.quiet, overwrite=args.overwrite)
     if result.summary:
@@ -301,6 +368,38 @@ def _rig(args: argparse.Namespace) -> int:
     out = render_rig(rig, args.out, overwrite=args.overwrite, progress=not quiet, write_previews=previews)
     names = " ".join(f"{c.name}/" for c in rig.cameras)
     print(f"rendered rig {rig.name!r}: {len(rig.cameras)} cameras; wrote {out}/: {names} meta.json")
+    return 0
+
+
+def _whites(args: argparse.Namespace) -> int:
+    from simulator.whites import render_whites, white_settings
+
+    camera = camera_preset(args.camera)
+    sensor_name = args.sensor or args.camera
+    if sensor_name not in DETECTOR_PRESETS:
+        raise ParameterError(f"--sensor: camera {args.camera!r} has no detector preset of its name; pass --sensor NAME")
+    base = sensor_model(sensor_name, camera)
+    sensor = SensorSettings(detector=base.detector, frames=args.frames)
+    zooms = None if args.focal_lengths_mm is None else [f * 1e-3 for f in args.focal_lengths_mm]
+    settings = white_settings(camera, focal_lengths_m=zooms, focus_distances_m=args.focus_m)
+    entries = render_whites(
+        args.out,
+        camera=camera,
+        settings=settings,
+        sensor=sensor,
+        lens=None if args.lens == THIN_LENS else args.lens,
+        spp=args.spp,
+        seed=args.seed,
+        variant=args.variant,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
+    for entry in entries:
+        print(
+            f"{entry['file']}	zoom_step {entry['zoom_step']}	focus_step {entry['focus_step']}	"
+            f"f = {entry['focal_length_m'] * 1e3:.3f} mm	lens-MLA {entry['lens_to_mla_m'] * 1e3:.4f} mm"
+        )
+    print(f"wrote {args.out}/: {len(entries)} white images, whites.json")
     return 0
 
 
@@ -340,6 +439,8 @@ def _run(args: argparse.Namespace) -> int:
             return 0
         if args.command == "lenses":
             return _lenses()
+        if args.command == "whites":
+            return _whites(args)
         if args.command == "dataset":
             return _dataset(args)
         if args.command == "rig":
@@ -354,7 +455,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"\nwrote {report} (figures, table.csv, point clouds beside it)")
             return 0
         config = load_scene(_scene_path(args.scene))
-        changes = {}
+        changes: dict[str, object] = {}
         if args.camera:
             changes["camera"] = camera_preset(args.camera)
         lens_name = args.lens
@@ -362,6 +463,13 @@ def _run(args: argparse.Namespace) -> int:
             lens_name = config.lens.name  # the scene's preset lens, scaled to the new camera
         if lens_name is not None:
             changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
+        sensor = config.sensor if args.sensor is None else None if args.sensor == NO_SENSOR else args.sensor
+        if args.frames is not None:
+            if sensor is None:
+                raise ParameterError(f"--frames {args.frames} needs a sensor model: pass --sensor NAME")
+            sensor = SensorSettings(detector=sensor_model(sensor, config.camera).detector, frames=args.frames)
+        if sensor is not None or args.sensor is not None:  # a preset name, or the scene's moved to --camera
+            changes["sensor"] = None if sensor is None else sensor_model(sensor, changes.get("camera", config.camera))
         given = {"spp": args.spp, "ideal_spp": args.ideal_spp, "seed": args.seed, "port_model": args.port_model}
         overrides = {key: value for key, value in given.items() if value is not None}
         if overrides:
@@ -379,6 +487,7 @@ def _run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             write_previews=not args.no_previews,
             write_rays=args.rays,
+            write_lfr=args.lfr,
         )
     except (ParameterError, FileFormatError, OSError) as exc:
         # OSError covers refusals (FileExistsError), missing files and failed writes (read-only, disk full):
@@ -392,8 +501,8 @@ def _run(args: argparse.Namespace) -> int:
         f"{config.render.spp} spp) in {result.raw_seconds:.2f} s; ground truth ({config.render.ideal_spp} spp) "
         f"in {result.ideal_seconds:.2f} s"
     )
-    rays = " rays.npz" if args.rays else ""
-    print(f"wrote {result.out_dir}/: raw.exr ideal.exr depth.exr lenses.npz{rays} meta.json previews/")
+    written = sorted(p.name + ("/" if p.is_dir() else "") for p in result.out_dir.iterdir() if p.name != MANIFEST_NAME)
+    print(f"wrote {result.out_dir}/: {' '.join(written)}")
     return 0
 
 

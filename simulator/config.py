@@ -23,6 +23,12 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
     absorption_per_m = [0.4, 0.07, 0.02]  # sigma_a, 1/m, one number or RGB (default 0)
     scattering_per_m = 0.1            # sigma_s, 1/m, one number or RGB (default 0)
     phase_g = 0.9                     # Henyey-Greenstein asymmetry in (-1, 1) (default 0)
+    [sensor]                          # optional: the sensor model (simulator.detector), which turns
+    preset = "illum"                  #   raw.exr into mosaic.npz; a detector preset ("illum", "f01",
+    iso = 320.0                       #   "tiny") and/or any DetectorConfig field but pixel_pitch_m and
+    frames = 1                        #   microlens_f_number (the camera's); frames: exposures averaged
+                                      #   (64 for a white image as Lytro ships it); sensor = "illum"
+                                      #   is short for a preset alone
     [render]
     spp = 16                          # samples per pixel of the raw image
     seed = 0
@@ -132,6 +138,7 @@ from lfrefract.validate import (
     text,
 )
 from simulator import assets, seeds
+from simulator.detector import DetectorConfig
 from simulator.seeds import SEED_LIMIT
 
 __all__ = [
@@ -142,6 +149,7 @@ __all__ = [
     "MAX_INTENSITY_W_SR",
     "MAX_MESH_SCALE",
     "MAX_RADIANCE",
+    "MAX_SENSOR_FRAMES",
     "MAX_SIZE_M",
     "MAX_SPP",
     "MAX_TEXTURE_PX",
@@ -165,6 +173,7 @@ __all__ = [
     "PointLight",
     "RenderSettings",
     "SceneConfig",
+    "SensorSettings",
     "TexturedPlane",
     "Water",
     "apply_water_index",
@@ -175,6 +184,7 @@ __all__ = [
     "parse_scene",
     "read_toml",
     "scene_files",
+    "sensor_model",
 ]
 
 
@@ -206,6 +216,14 @@ MAX_TEXTURE_PX = 8192
 MAX_WATER_COEFFICIENT_PER_M = 1e3
 #: Largest magnitude of the water's Henyey-Greenstein asymmetry ``phase_g``.
 MAX_ABS_PHASE_G = 0.99
+#: Most exposures a ``[sensor]`` averages (``frames``): Lytro's white images average some tens;
+#: each frame costs a Poisson draw of the whole sensor (about 2 s for an Illum).
+MAX_SENSOR_FRAMES = 4096
+#: ``DetectorConfig`` fields that a scene's ``[sensor]`` takes from its camera, never states.
+_CAMERA_SENSOR_KEYS = ("pixel_pitch_m", "microlens_f_number")
+#: Relative difference allowed between a sensor's pixel pitch or microlens f-number and its camera's
+#: (both derive from the same numbers; 1e-9 allows the f-number's division only).
+_SENSOR_CAMERA_RTOL = 1e-9
 #: Largest scene, rig or sweep TOML file: such files are a few KiB; 16 MiB refuses a wrong file
 #: (an image, a mesh, a huge sparse file) from its size before reading it.
 MAX_TOML_BYTES = 16 * 2**20
@@ -708,10 +726,16 @@ OBJECT_TYPES: dict[str, type] = {
 LIGHT_TYPES: dict[str, type] = {"point": PointLight, "constant": ConstantLight}
 
 
-def _check_real_lens(camera: LightFieldCamera, lens: LensPrescription, port: FlatPort | None) -> None:
+def _check_real_lens(
+    camera: LightFieldCamera, lens: LensPrescription, port: FlatPort | None, *, has_objects: bool
+) -> None:
     """A real main lens must fit the camera (:class:`RealLensCamera`) and sit in air behind a port
-    that clears its front: a lens prescription is designed for air in front of it."""
+    that clears its front: a lens prescription is designed for air in front of it. A scene without
+    objects (a white image: uniform radiance from every direction) needs no port, since no ray's
+    direction in front of the lens changes what it sees."""
     real = RealLensCamera(camera=camera, lens=lens)
+    if port is None and not has_objects:
+        return
     if port is None:
         raise ParameterError(
             f"camera.lens={lens.name!r} needs a [port]: a real lens is designed for air in front of it, "
@@ -748,6 +772,7 @@ class SceneConfig:
     objects: tuple[SceneObject, ...] = ()
     render: RenderSettings = field(default_factory=RenderSettings)
     water: Water | None = None
+    sensor: SensorSettings | None = None
     name: str = "scene"
     source: str = "<memory>"
 
@@ -761,7 +786,9 @@ class SceneConfig:
         if not self.lights:
             raise ParameterError("the scene has no [[light]]: it would render black")
         if self.lens is not None:
-            _check_real_lens(self.camera, self.lens, self.port)
+            _check_real_lens(self.camera, self.lens, self.port, has_objects=bool(self.objects))
+        if self.sensor is not None:
+            _check_sensor(self.sensor, self.camera)
         _position("camera.pose.position_m", self.pose.position_m)
         water = self.water
         if water is not None and not isinstance(water, Water):
@@ -817,6 +844,7 @@ class SceneConfig:
             "objects": plain(self.objects),
             "render": plain(self.render),
             "water": None if self.water is None else self.water.to_dict(),
+            "sensor": None if self.sensor is None else self.sensor.to_dict(),
         }
 
 
@@ -875,6 +903,87 @@ def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path
         kind = one_of(f"{label}.type", table.pop("type"), sorted(kinds))
         out.append(_build(kinds[kind], table, f"{label} ({kind})", base_dir))
     return tuple(out)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorSettings:
+    """The sensor behind the microlenses (a scene's ``[sensor]``): what turns ``raw.exr`` into counts.
+
+    Parameters
+    ----------
+    detector : simulator.detector.DetectorConfig
+        The detector model; its ``pixel_pitch_m`` and ``microlens_f_number`` are the camera's
+        (:func:`sensor_model` sets them).
+    frames : int
+        Exposures averaged into the mosaic, 1 to :data:`MAX_SENSOR_FRAMES`: 1 for a capture, some
+        tens for a white image as Lytro's factory calibration holds them
+        (:func:`simulator.detector.white_frames`).
+    """
+
+    detector: DetectorConfig
+    frames: int = 1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.detector, DetectorConfig):
+            raise ParameterError(f"sensor.detector must be a DetectorConfig, got {shown(self.detector)}")
+        object.__setattr__(self, "frames", bounded_int("sensor.frames", self.frames, 1, MAX_SENSOR_FRAMES))
+
+    def to_dict(self) -> dict:
+        """Plain data: ``frames`` and every detector field."""
+        return {"frames": self.frames, **self.detector.to_dict()}
+
+
+def _camera_sensor_fields(camera: LightFieldCamera) -> dict[str, float]:
+    return {
+        "pixel_pitch_m": camera.sensor.pixel_pitch_m,
+        "microlens_f_number": camera.mla.focal_length_m / camera.mla.pitch_m,
+    }
+
+
+def sensor_model(value: Any, camera: LightFieldCamera) -> SensorSettings:
+    """The sensor a scene's ``sensor`` value names, for ``camera``.
+
+    Parameters
+    ----------
+    value : str, mapping or SensorSettings
+        A detector preset's name (``"illum"``, ``"f01"``, ``"tiny"``); a ``[sensor]`` table:
+        ``frames`` (default 1), optionally ``preset``, and any field of
+        :class:`simulator.detector.DetectorConfig` but ``pixel_pitch_m`` and ``microlens_f_number``
+        (without a preset, every other field without a default); or an existing sensor, moved to
+        ``camera`` (as ``lfsim render --camera`` does).
+    camera : LightFieldCamera
+        Gives the pixel pitch and the microlens f-number (MLA focal length over pitch).
+
+    Raises
+    ------
+    ParameterError
+        For an unknown preset or key, a camera-given key, or an invalid value (named).
+    """
+    if isinstance(value, SensorSettings):
+        detector = dataclasses.replace(value.detector, **_camera_sensor_fields(camera))
+        return SensorSettings(detector=detector, frames=value.frames)
+    table = {"preset": value} if isinstance(value, str) else dict(as_table("[sensor]", value))
+    stated = [key for key in _CAMERA_SENSOR_KEYS if key in table]
+    if stated:
+        raise ParameterError(
+            f"sensor.{stated[0]} is the camera's (its pixel pitch, or MLA focal length over lens pitch): "
+            "leave it out of [sensor]"
+        )
+    frames = table.pop("frames", 1)
+    detector = DetectorConfig.from_dict(table | _camera_sensor_fields(camera), where="sensor")
+    return SensorSettings(detector=detector, frames=frames)
+
+
+def _check_sensor(sensor: SensorSettings, camera: LightFieldCamera) -> None:
+    if not isinstance(sensor, SensorSettings):
+        raise ParameterError(f"sensor must be a SensorSettings or None, got {shown(sensor)}")
+    for key, expected in _camera_sensor_fields(camera).items():
+        value = getattr(sensor.detector, key)
+        if not math.isclose(value, expected, rel_tol=_SENSOR_CAMERA_RTOL):
+            raise ParameterError(
+                f"sensor.{key}={value!r} is not the camera's ({expected!r}): build the sensor for this camera "
+                "(simulator.config.sensor_model)"
+            )
 
 
 def main_lens(value: Any, camera: LightFieldCamera) -> LensPrescription | None:
@@ -941,7 +1050,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     """
     base = Path(base_dir)
     data = as_table("scene", data)
-    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water"})
+    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water", "sensor"})
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
     camera, pose, lens = _camera(data["camera"])
@@ -959,6 +1068,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
         lights=_typed_entries(data.get("light", []), LIGHT_TYPES, "light", base),
         objects=_typed_entries(data.get("object", []), OBJECT_TYPES, "object", base),
         render=render,
+        sensor=sensor_model(data["sensor"], camera) if "sensor" in data else None,
     )
 
 

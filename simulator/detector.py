@@ -44,6 +44,7 @@ from scipy import fft as sp_fft
 from scipy import ndimage, signal, special
 
 from lfrefract.errors import ParameterError
+from lfrefract.formats.lytro import LytroSettings
 from lfrefract.formats.mosaic import CFA_PATTERNS, RawMosaic, cfa_channels
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import (
@@ -68,6 +69,7 @@ __all__ = [
     "detector_preset",
     "edge_width_px",
     "expected_electrons",
+    "lytro_settings",
     "pixel_psf_kernel",
     "radial_profile",
     "simulate_mosaic",
@@ -414,6 +416,39 @@ DETECTOR_PRESETS: dict[str, DetectorConfig] = {
     # in Illum pixels (sigma = 0.42 * 530 nm * 1.8 = 0.40 um = 0.29 px).
     "tiny": _preset("tiny", **_ILLUM, extra_blur_sigma_m=2.9e-6),
 }
+
+
+def lytro_settings(config: DetectorConfig, **fields: Any) -> LytroSettings:
+    """What a Lytro file records of this sensor: its colour matrix, white balance and ISO.
+
+    The white balance makes white radiance grey: each filter's gain is the green filter's signal for
+    white (the row sums of ``cfa_response``) over its own. The colour matrix maps white-balanced
+    camera RGB back to the renderer's linear RGB, scaled so that each row sums to 1 (as a camera's
+    matrix to sRGB does). For the ``illum`` and ``f01`` presets these are the captures' own matrices.
+
+    Parameters
+    ----------
+    config : DetectorConfig
+    **fields
+        Any other :class:`lfrefract.formats.lytro.LytroSettings` field (``exit_pupil_offset_m``,
+        ``zoom_step``, ``focus_step``, ``serial_number``).
+
+    Returns
+    -------
+    LytroSettings
+        ``iso`` and ``base_iso`` rounded to integers (the files hold integers).
+    """
+    response = np.array(config.cfa_response)
+    white = response.sum(axis=1)
+    gains = white[1] / white
+    matrix = white[1] * np.linalg.inv(gains[:, None] * response)
+    return LytroSettings(
+        color_matrix=tuple(float(v) for v in matrix.ravel()),
+        white_balance_gain=(float(gains[0]), float(gains[1]), float(gains[1]), float(gains[2])),
+        iso=round(config.iso),
+        base_iso=round(config.base_iso),
+        **fields,
+    )
 
 
 def detector_preset(name: str) -> DetectorConfig:

@@ -11,20 +11,126 @@ import numpy as np
 
 import lfrefract
 from lfrefract import LightFieldCamera, PinholeCamera, virtual_camera_for
+from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import CaptureTruth, write_capture_files
+from lfrefract.formats.lytro import write_f01_raw, write_lfr
+from lfrefract.formats.mosaic import RawMosaic, write_mosaic_npz
 from lfrefract.formats.outputs import staged_directory
 from lfrefract.optics.real_lens import RealLensCamera
 from simulator import backend, groundtruth, previews
-from simulator.config import SceneConfig, scene_files
+from simulator.config import SceneConfig, SensorSettings, scene_files
+from simulator.detector import lytro_settings, white_frames
 from simulator.render import DEFAULT_MAX_BAND_PIXELS, render_bands
 from simulator.scene import build_scene, check_geometry, integrator, water_medium
 from simulator.sensor import plenoptic_sensor_dict
 
-__all__ = ["RENDER_KIND", "RenderResult", "render_job", "render_raw", "scene_inputs"]
+__all__ = [
+    "LFR_NAME",
+    "LYTRO_RAW_NAME",
+    "MOSAIC_NAME",
+    "RAYS_NAME",
+    "RENDER_KIND",
+    "SENSOR_NOISE_STREAM",
+    "RenderResult",
+    "lens_steps",
+    "render_job",
+    "render_raw",
+    "scene_inputs",
+    "sensor_mosaic",
+    "write_lytro_file",
+]
 
 
 #: Name of the per-raw-pixel ground-truth rays written with ``write_rays``.
 RAYS_NAME = "rays.npz"
+#: Name of the sensor's mosaic (integer counts), written when the scene has a ``[sensor]``.
+MOSAIC_NAME = "mosaic.npz"
+#: The Lytro capture written with ``write_lfr``: an Illum LFR for a 10-bit sensor, ...
+LFR_NAME = "capture.lfr"
+#: ... an F01 frame (with ``capture.json`` beside it) for a 12-bit one.
+LYTRO_RAW_NAME = "capture.raw"
+#: Bit depths of the Lytro files: the Illum LFR stores 10 bits, the F01 raw 12.
+_LYTRO_FILE_BITS = {10: LFR_NAME, 12: LYTRO_RAW_NAME}
+#: Pixels a Lytro file packs together in a row (4 in 5 bytes at 10 bits, 2 in 3 bytes at 12 bits).
+_LYTRO_PACK_GROUP = {10: 4, 12: 2}
+#: The noise stream of the sensor: SeedSequence([seed, stream, frame]) (the renders use 0 and 1).
+SENSOR_NOISE_STREAM = 2
+
+
+def sensor_mosaic(raw: np.ndarray, sensor: SensorSettings, *, seed: int) -> RawMosaic:
+    """The sensor's mosaic of a rendered raw image: ``sensor.frames`` exposures averaged.
+
+    Parameters
+    ----------
+    raw : ndarray, shape (H, W, 3)
+        The rendered radiance (``raw.exr``).
+    sensor : SensorSettings
+    seed : int
+        The render seed. The noise seed is ``SeedSequence([seed, 2]).generate_state(1)[0] >> 1``
+        (stream 2, :data:`SENSOR_NOISE_STREAM`, apart from the renders' streams 0 and 1), and frame
+        ``k`` draws from ``SeedSequence([noise_seed, k])``.
+
+    Returns
+    -------
+    RawMosaic
+    """
+    noise_seed = int(np.random.SeedSequence([seed, SENSOR_NOISE_STREAM]).generate_state(1)[0] >> 1)
+    return white_frames(raw, sensor.detector, frames=sensor.frames, seed=noise_seed)
+
+
+def lens_steps(camera: LightFieldCamera) -> tuple[int, int]:
+    """The simulated lens motors' positions recorded in Lytro files: ``(zoom_step, focus_step)``.
+
+    A simulated lens has no motors; the steps are physical instead, so that white images and
+    captures of the same setting carry the same pair: zoom is the focal length in micrometres,
+    focus the lens's extension beyond infinity focus (``lens_to_mla_m - focal_length_m``) in
+    micrometres.
+    """
+    return round(camera.focal_length_m * 1e6), round((camera.lens_to_mla_m - camera.focal_length_m) * 1e6)
+
+
+def _check_lytro_file(config: SceneConfig) -> None:
+    """Raise before rendering if ``config``'s sensor cannot be written as a Lytro file."""
+    if config.sensor is None:
+        raise ParameterError("a Lytro file (--lfr) needs a sensor model: add a [sensor] table or pass --sensor NAME")
+    bits = config.sensor.detector.bit_depth
+    if bits not in _LYTRO_FILE_BITS:
+        raise ParameterError(
+            f"sensor.bit_depth={bits}: Lytro files hold 10-bit (Illum LFR) or 12-bit (F01 raw) mosaics"
+        )
+    width = config.camera.sensor.width_px
+    if width % _LYTRO_PACK_GROUP[bits]:
+        raise ParameterError(
+            f"camera.sensor.width_px={width}: a {bits}-bit Lytro file packs {_LYTRO_PACK_GROUP[bits]} pixels of a row "
+            "together, so the width must be a multiple of that"
+        )
+
+
+def write_lytro_file(
+    out_dir: Path, mosaic: RawMosaic, config: SceneConfig, *, exit_pupil_offset_m: float | None = None
+) -> list[Path]:
+    """Write the capture as the Lytro camera of its bit depth does, in ``out_dir``.
+
+    10 bits: ``capture.lfr`` (Illum LFR, :func:`lfrefract.formats.lytro.write_lfr`); 12 bits:
+    ``capture.raw`` and ``capture.json`` (F01, :func:`lfrefract.formats.lytro.write_f01_raw`).
+    The colour matrix, white balance and ISO are the sensor's
+    (:func:`simulator.detector.lytro_settings`), the lens steps :func:`lens_steps`, the exit pupil
+    the real lens's (or the thin lens itself when ``exit_pupil_offset_m`` is None).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
+    _check_lytro_file(config)
+    assert config.sensor is not None  # checked above
+    zoom, focus = lens_steps(config.camera)
+    settings = lytro_settings(
+        config.sensor.detector, exit_pupil_offset_m=exit_pupil_offset_m, zoom_step=zoom, focus_step=focus
+    )
+    if config.sensor.detector.bit_depth == 10:
+        return [write_lfr(out_dir / LFR_NAME, mosaic, config.camera, settings=settings)]
+    return list(write_f01_raw(out_dir / LYTRO_RAW_NAME, mosaic, config.camera, settings=settings))
 
 
 def _lens_summary(real: RealLensCamera) -> dict:
@@ -151,6 +257,7 @@ def render_job(
     progress: bool = True,
     write_previews: bool = True,
     write_rays: bool = False,
+    write_lfr: bool = False,
 ) -> RenderResult:
     """Render a scene and its ground truth into ``out_dir``, a capture folder of kind ``lfsim.render``.
 
@@ -159,9 +266,11 @@ def render_job(
     ``config.render.ideal_spp`` samples per pixel), ``depth.exr`` (camera-frame z of the ideal
     image's pixel centres, metres, +inf where no surface), ``lenses.npz`` (microlens ground truth),
     ``meta.json`` (every parameter, the seed, versions) and PNG previews; with ``write_rays``
-    also ``rays.npz``, the object-space ray of every raw pixel (:func:`write_chief_rays`). The directory is assembled
-    in a staging directory and appears only when complete; a bad scene raises before anything is
-    rendered.
+    also ``rays.npz``, the object-space ray of every raw pixel (:func:`write_chief_rays`). With a
+    ``[sensor]``, ``mosaic.npz`` holds the sensor's integer counts (:func:`sensor_mosaic`), and with
+    ``write_lfr`` the Lytro file of its bit depth (:func:`write_lytro_file`). The directory is
+    assembled in a staging directory and appears only when complete; a bad scene raises before
+    anything is rendered.
 
     Parameters
     ----------
@@ -180,12 +289,18 @@ def render_job(
         Show progress bars.
     write_previews : bool
         Also write PNG figures under ``previews/``.
+    write_rays : bool
+        Also write ``rays.npz``.
+    write_lfr : bool
+        Also write the Lytro file (needs a ``[sensor]`` of 10 or 12 bits).
 
     Returns
     -------
     RenderResult
     """
     geometry = check_geometry(config)
+    if write_lfr:
+        _check_lytro_file(config)
     camera: LightFieldCamera = config.camera
     pinhole = ideal if ideal is not None else virtual_camera_for(camera)
     spp, ideal_spp, seed = config.render.spp, config.render.ideal_spp, config.render.seed
@@ -219,6 +334,10 @@ def render_job(
                 "seed": seed,
                 "band_seed": "numpy.random.SeedSequence([seed, stream, band]).generate_state(1, uint32); "
                 "stream 0 raw, 1 ideal",
+                "sensor_seed": None
+                if config.sensor is None
+                else "numpy.random.SeedSequence([seed, 2]).generate_state(1)[0] >> 1; frame k of the mosaic draws "
+                "from SeedSequence([sensor_seed, k])",
                 "max_band_pixels": max_band_pixels,
                 "port_model": config.render.port_model,
                 "integrator_raw": integrator(config.port if port_geometry else None, water=config.water),
@@ -244,6 +363,12 @@ def render_job(
         )
         if write_rays:
             write_chief_rays(stage / RAYS_NAME, camera if real is None else real)
+        if config.sensor is not None:
+            mosaic = sensor_mosaic(raw, config.sensor, seed=seed)
+            write_mosaic_npz(stage / MOSAIC_NAME, mosaic)
+            if write_lfr:
+                pupil = None if real is None else real.exit_pupil_distance_m
+                write_lytro_file(stage, mosaic, config, exit_pupil_offset_m=pupil)
         if write_previews:
             previews.write_all(stage / "previews", raw=raw, ideal=truth.ideal, depth_m=truth.depth_m, camera=camera)
     return RenderResult(Path(out_dir), raw_seconds, ideal_seconds, metadata)

@@ -104,6 +104,8 @@ class LytroSettings:
         The lens motors' positions (a simulated lens has none: 0 unless told).
     iso : int
         The sensitivity recorded (Illum base ISO 80).
+    base_iso : int
+        The sensor's base ISO; the metadata's ``analogGain`` is ``iso / base_iso`` (1 at the base ISO).
     serial_number : str
         The camera's serial (printable ASCII). Decoders tell the Illum from the F01 by its first
         letter (Illum ``B``, F01 ``A``): the writers prefix ``"B-"`` or ``"A-"`` to one that lacks it.
@@ -120,6 +122,7 @@ class LytroSettings:
     zoom_step: int = 0
     focus_step: int = 0
     iso: int = 80
+    base_iso: int = 80
     serial_number: str = "lfrefract-simulated"
 
     def __post_init__(self) -> None:
@@ -138,6 +141,7 @@ class LytroSettings:
         object.__setattr__(self, "zoom_step", bounded_int("zoom_step", self.zoom_step, -(2**31), 2**31 - 1))
         object.__setattr__(self, "focus_step", bounded_int("focus_step", self.focus_step, -(2**31), 2**31 - 1))
         object.__setattr__(self, "iso", bounded_int("iso", self.iso, 1, 10**6))
+        object.__setattr__(self, "base_iso", bounded_int("base_iso", self.base_iso, 1, 10**6))
         serial = text("serial_number", self.serial_number)
         if not serial.isprintable() or not serial.isascii():
             raise ParameterError(f"serial_number must be printable ASCII, got {shown(serial)}")
@@ -387,8 +391,8 @@ def illum_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroS
                 "pixelHeight": height,
                 "bitsPerPixel": _ILLUM_BITS,
                 "mosaic": mosaic_table,
-                "analogGain": _per_channel(1.0),
-                "baseIso": settings.iso,
+                "analogGain": _per_channel(settings.iso / settings.base_iso),
+                "baseIso": settings.base_iso,
             },
             "mla": mla_table,
             "lens": lens_table,
@@ -437,7 +441,7 @@ def f01_metadata(mosaic: RawMosaic, camera: LightFieldCamera, settings: LytroSet
                 "bitsPerPixel": _F01_BITS,
                 "mosaic": mosaic_table,
                 "iso": settings.iso,
-                "analogGain": _per_channel(1.0),
+                "analogGain": _per_channel(settings.iso / settings.base_iso),
                 "pixelPitch": camera.sensor.pixel_pitch_m,
             },
             "lens": lens_table,

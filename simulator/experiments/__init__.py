@@ -39,9 +39,11 @@ from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import SIDECAR_NAME
 from lfrefract.formats.jsonio import write_json, write_text_atomically
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.lens import LENS_PRESETS
 from lfrefract.optics.port import MAX_DISTANCE_M, MAX_THICKNESS_M
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import bounded_float, finite_float, one_of, positive_float, shown
+from simulator.config import THIN_LENS
 
 __all__ = [
     "EXPERIMENTS",
@@ -70,6 +72,7 @@ OPTION_FLAGS = {
     "thickness_m": "--thickness-m",
     "tilts_deg": "--tilts-deg",
     "f_numbers": "--f-numbers",
+    "lens": "--lens",
 }
 
 
@@ -120,6 +123,11 @@ class ExperimentOptions:
     f_numbers : tuple of float, optional
         Main-lens f-numbers that ``fov`` evaluates (each checked against the camera when it runs:
         the image-side f-number may not fall below the microlenses').
+    lens : str, optional
+        The main lens every camera of a stereo rig renders through: ``"thin"`` or a lens preset
+        (``lfsim lenses``), scaled and stopped to the camera. The core is not told: it keeps its
+        thin-lens model of the camera (what ``planes`` and ``objects`` then measure is the cost of
+        that assumption).
     """
 
     scale: str = "tiny"
@@ -129,6 +137,7 @@ class ExperimentOptions:
     thickness_m: float | None = None
     tilts_deg: tuple[float, ...] | None = None
     f_numbers: tuple[float, ...] | None = None
+    lens: str | None = None
 
     def __post_init__(self) -> None:
         one_of("scale", self.scale, SCALES)
@@ -158,6 +167,8 @@ class ExperimentOptions:
             object.__setattr__(self, "tilts_deg", _floats("tilts_deg", self.tilts_deg, _tilt_deg))
         if self.f_numbers is not None:
             object.__setattr__(self, "f_numbers", _floats("f_numbers", self.f_numbers, positive_float))
+        if self.lens is not None:
+            one_of("lens", self.lens, (THIN_LENS, *sorted(LENS_PRESETS)))
 
     def given(self) -> tuple[str, ...]:
         """Names of the fields set (not ``None``), ``scale`` left out."""

@@ -56,6 +56,8 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
+from lfrefract.optics.lens import trace_lens
+from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.synthesis.warp_map import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
 from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
 
@@ -260,6 +262,56 @@ def exact_mask(
     options = options if options is not None else SynthesisOptions()
     radius = required_aperture_radius(camera, port, output, supersample=options.supersample)
     return radius <= camera.usable_aperture_radius_m(options.rim_margin_px)
+
+
+def real_lens_exact_mask(
+    real: RealLensCamera, port: FlatPort, output: PinholeCamera | None = None, *, supersample: int = 2
+) -> np.ndarray:
+    """Output pixels whose every necessary ray a camera with a real main lens records, shape (height, width).
+
+    The real lens's refraction-free image is the central projection from the centre of its
+    entrance pupil (where every recorded ray's object-space line, extended, crosses the axis on
+    average), with the pinhole ``output`` (default :func:`~lfrefract.optics.pinhole.virtual_camera_for`
+    the camera) placed there. Each of a pixel's ``supersample x supersample`` lines of sight is
+    traced back through the port into the air (:func:`~lfrefract.synthesis.warp_map.necessary_air_rays`,
+    in a frame centred on the entrance pupil), then exactly through every surface of the lens
+    (:func:`~lfrefract.optics.lens.trace_lens`), to the MLA; the pixel is exact when every one passes
+    every clear aperture and lands, through its microlens, on the sensor. No rim margin: compare it
+    with the thin lens's ``required_aperture_radius(...) <= camera.aperture_radius_m``.
+    """
+    camera = real.camera
+    output = output if output is not None else virtual_camera_for(camera)
+    pupil_cam = np.array([0.0, 0.0, real.first_order.entrance_pupil_z_m])
+    # The same port seen from the pupil: n . (X' + c) = d, so d' = d - n . c.
+    local = dataclasses.replace(port, distance_m=port.distance_m - float(port.normal @ pupil_cam))
+    s = supersample
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    width, height = camera.sensor.width_px, camera.sensor.height_px
+    out = np.empty((output.height_px, output.width_px), dtype=bool)
+    rows = max(1, BLOCK_RAYS // (output.width_px * s * s))
+    for r0 in range(0, output.height_px, rows):
+        r1 = min(r0 + rows, output.height_px)
+        v = np.arange(r0, r1)[:, None, None, None] + offsets[None, None, :, None]
+        u = np.arange(output.width_px)[None, :, None, None] + offsets[None, None, None, :]
+        uu, vv = np.broadcast_arrays(u, v)
+        points, dirs, _, valid = necessary_air_rays(
+            local, output.pixel_directions(np.stack([uu.ravel(), vv.ravel()], 1))
+        )
+        ok = valid & np.all(np.isfinite(points), axis=1)
+        passed = np.zeros(len(points), dtype=bool)
+        if np.any(ok):
+            trace = trace_lens(real.lens, points[ok] + pupil_cam, -dirs[ok], toward="image")
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t = (camera.mla_z_m - trace.points_cam[:, 2]) / trace.directions_cam[:, 2]
+                mla_xy = trace.points_cam[:, :2] + t[:, None] * trace.directions_cam[:, :2]
+                # Image-plane coordinates are the camera frame's x, y negated (the image is inverted).
+                px = camera.sensor.image_plane_to_pixels(-mla_xy * real.micro_image_scale)
+                on_sensor = (
+                    (px[:, 0] >= -0.5) & (px[:, 0] <= width - 0.5) & (px[:, 1] >= -0.5) & (px[:, 1] <= height - 0.5)
+                )
+            passed[ok] = trace.passed & on_sensor
+        out[r0:r1] = passed.reshape(r1 - r0, output.width_px, s * s).all(axis=2)
+    return out
 
 
 # ----------------------------------------------------------------------------- angles

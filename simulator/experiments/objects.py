@@ -316,7 +316,7 @@ def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray], order: lis
     return path
 
 
-@register("objects", options=("methods", "camera", "port_distance_m", "thickness_m"))
+@register("objects", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"))
 def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
     """A textured bowl and figurine reconstructed by every method (paper Fig. 7)."""
     return run_objects(out_dir, options=options, progress=progress)

@@ -387,7 +387,7 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...], 
     return tuple(paths)
 
 
-@register("planes", options=("methods", "camera", "port_distance_m", "thickness_m"))
+@register("planes", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"))
 def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
     """Stereo on a slanted textured plane at three depths, by method (paper Figs. 5-6)."""
     return run_planes(out_dir, options=options, progress=progress)

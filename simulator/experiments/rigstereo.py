@@ -33,7 +33,7 @@ from lfrefract.stereo.geometry import Rectification, StereoCalibration, calibrat
 from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, build_warp_map
 from simulator.boards import CALIBRATION_ROTATIONS_DEG, PATTERN, SQUARES, chessboard_corners_world, find_corners
-from simulator.config import Chessboard, Placement, PointLight, RenderSettings, SceneObject
+from simulator.config import Chessboard, Placement, PointLight, RenderSettings, SceneObject, main_lens
 from simulator.experiments import ExperimentOptions
 from simulator.experiments.methods import (
     BUILTIN_METHODS,
@@ -119,8 +119,9 @@ class RigSetup:
 def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) -> RigConfig:
     """The embedded rig ``setup.rig`` with the experiment's lights (:data:`LIGHTS`), render settings
     (``setup.spp``, seed 0), no objects, and the options that apply: ``camera`` replaces every
-    camera's optics; ``port_distance_m`` / ``thickness_m`` move the wall's air-side plane / change
-    its glass (each camera's port follows from its pose).
+    camera's optics; ``lens`` its main lens (scaled and stopped to the camera); ``port_distance_m``
+    / ``thickness_m`` move the wall's air-side plane / change its glass (each camera's port follows
+    from its pose).
 
     Raises
     ------
@@ -141,9 +142,12 @@ def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) ->
     cameras = []
     for camera in rig.cameras:
         scene = camera.scene
+        optics = scene.camera if options.camera is None else options.camera
+        lens = scene.lens if options.lens is None else main_lens(options.lens, optics)
         scene = scene.with_overrides(
             name=f"experiment-{setup.rig}-{camera.name}",
-            camera=scene.camera if options.camera is None else options.camera,
+            camera=optics,
+            lens=lens,
             port=wall.port_for(scene.pose) if changes else scene.port,
             lights=LIGHTS,
             objects=(),

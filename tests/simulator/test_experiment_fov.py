@@ -270,3 +270,24 @@ def test_a_negative_tilt_keeps_its_sign(tmp_path):
     assert 0 < down["exact_share"] < 1
     for key in ("exact_share", "perfect_fov_h_deg", "perfect_fov_v_deg", "perfect_fov_equiv_deg"):
         assert down[key] == pytest.approx(up[key], abs=1e-9), key
+
+
+@pytest.mark.parametrize("tilt_x_deg", [0.0, 10.0, 20.0])
+def test_a_real_lens_records_no_necessary_ray_the_thin_lens_misses(tilt_x_deg):
+    """The double Gauss has the thin lens's focal length and entrance pupil diameter; its other
+    apertures only vignette, so its exact region lies inside the thin lens's full-aperture one, is
+    mirror-symmetric for a port tilted about x, and moves up with the tilt as the thin lens's does."""
+    from lfrefract.optics.real_lens import RealLensCamera
+    from simulator.experiments.fov import real_lens_exact_mask
+
+    setup = setup_for("tiny")
+    camera, port = setup.camera, setup.port(tilt_x_deg)
+    output = virtual_camera_for(camera)
+    thin = required_aperture_radius(camera, port, output) <= camera.aperture_radius_m
+    real = real_lens_exact_mask(RealLensCamera.from_preset(camera, "double-gauss"), port, output)
+    assert real.shape == thin.shape
+    assert not np.any(real & ~thin)
+    assert 0.5 * thin.mean() < real.mean() < thin.mean()
+    assert np.array_equal(real, real[:, ::-1])
+    rows, rows_thin = np.nonzero(real)[0], np.nonzero(thin)[0]
+    assert abs(rows.mean() - rows_thin.mean()) < 3.0  # pixels

@@ -79,6 +79,7 @@ def test_camera_file(tmp_path, capsys):
         ("objects", "--f-numbers", "2.8"),
         ("averaging", "--methods", "proposed"),
         ("averaging", "--tilts-deg", "5"),
+        ("fov", "--lens", "double-gauss"),
     ],
 )
 def test_an_option_that_does_not_apply_is_refused(tmp_path, capsys, experiment, option, value):
@@ -106,6 +107,21 @@ def test_invalid_option_values_name_the_option(tmp_path, capsys, argv, message):
     assert sim_cli.main(["experiment", "fov", "--out", str(out), "--quiet", *argv]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_lens_reaches_every_rig_camera_and_a_bad_one_is_named():
+    from lfrefract.errors import ParameterError
+    from simulator.experiments.planes import setup_for
+    from simulator.experiments.rigstereo import experiment_rig
+
+    rig = experiment_rig(setup_for("tiny"), ExperimentOptions(lens="double-gauss"))
+    assert [c.scene.lens.name for c in rig.cameras] == ["double-gauss", "double-gauss"]
+    assert all(c.scene.lens is None for c in experiment_rig(setup_for("tiny"), ExperimentOptions()).cameras)
+    assert all(c.scene.lens is None for c in experiment_rig(setup_for("tiny"), ExperimentOptions(lens="thin")).cameras)
+    with pytest.raises(ParameterError, match="lens"):
+        ExperimentOptions(lens="tessar")
+    with pytest.raises(ParameterError, match="does not clear the main lens 'wide-angle'"):
+        experiment_rig(setup_for("tiny"), ExperimentOptions(lens="wide-angle"))
 
 
 def test_options_are_one_frozen_dataclass():
