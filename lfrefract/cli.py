@@ -97,6 +97,7 @@ from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
 from lfrefract.formats.paramfile import read_camera_file
 from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
+from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
 from lfrefract.synthesis.views import VIEW_KINDS, naive_view, subaperture_stack, view_stack_bytes
@@ -175,8 +176,10 @@ def _option_files(args: argparse.Namespace) -> list[Path]:
 
 def _capture_files(path: str | Path) -> list[Path]:
     """A raw image and the sidecar beside it: what a command reads of a capture (given as the raw
-    image or as its folder, as :func:`read_capture` takes it)."""
+    image or as its folder, as :func:`read_capture` takes it; a Lytro ``.raw`` with its metadata)."""
     raw = Path(path) / RAW_NAME if Path(path).is_dir() else Path(path)
+    if is_lytro_file(raw):
+        return [raw, raw.with_suffix(".json"), raw.with_suffix(".txt")]
     return [raw, raw.parent / SIDECAR_NAME]
 
 
@@ -206,6 +209,7 @@ def synth(args: argparse.Namespace) -> int:
         camera=_given_camera(args),
         port=port_from_file(args.port) if args.port is not None else None,
         nonfinite=args.nonfinite,
+        white=args.white,
     )
     camera = _known(capture.camera, capture.raw_path)
     if args.mla:
@@ -309,7 +313,7 @@ def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
 def naive(args: argparse.Namespace) -> int:
     """``lfrefract naive``: conventional view with no refraction handling."""
     out = _exr_out(args)
-    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
+    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
     prepare_output_files(
         {out: ExpectedKind(exr_role=f"naive_{args.kind}")},
         inputs=[*_capture_files(args.raw), *_option_files(args)],
@@ -324,7 +328,7 @@ def naive(args: argparse.Namespace) -> int:
 
 def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
-    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite)
+    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
     camera, output = _known(capture.camera, capture.raw_path), capture.output
     if isinstance(args.grid, int) and args.grid >= 3 and args.grid % 2:  # else subaperture_stack names the grid
         require_memory(
@@ -401,9 +405,9 @@ def _board_inputs(args: argparse.Namespace) -> list[Path]:
     return [f for path in args.boards for f in _capture_files(path)] + _option_files(args)
 
 
-def _board_raw(path: str, camera: LightFieldCamera) -> np.ndarray:
+def _board_raw(path: str, camera: LightFieldCamera, white: str | None = None) -> np.ndarray:
     """One board capture's raw image, checked (read one at a time: an Illum raw image is 0.5 GB)."""
-    return read_capture(path, camera=camera).raw
+    return read_capture(path, camera=camera, white=white).raw
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:
@@ -445,7 +449,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     for path in args.boards:
         board_view = board_view_from_light_field(
             camera,
-            _board_raw(path, camera),
+            _board_raw(path, camera, args.white),
             pattern=pattern,
             square_size_m=args.square_size_m,
             view=view,
@@ -487,7 +491,7 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
     )
     conventional = ConventionalView(camera=camera, view=virtual_camera_for(camera))
-    images = [conventional.apply(_board_raw(path, camera)) for path in args.boards]
+    images = [conventional.apply(_board_raw(path, camera, args.white)) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
     result.save(out)
@@ -558,6 +562,17 @@ def _capture_options(parser: argparse.ArgumentParser) -> None:
         default=NONFINITE_POLICIES[0],
         help=f"raw images with NaN, infinite or negative values: {NONFINITE_POLICIES[0]} them (default), or "
         "mask those pixels as unrecorded (no weight in the output; the output says how many)",
+    )
+    _white_option(parser)
+
+
+def _white_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--white",
+        metavar="FILE|FOLDER",
+        help="for a Lytro capture (.lfr, or .raw with its .json/.txt): its white image, or a folder of them "
+        "(the one of the nearest zoom and focus steps is taken), to devignette it; without one the capture is "
+        "only black-subtracted",
     )
 
 
@@ -646,6 +661,7 @@ def _board_arguments(parser: argparse.ArgumentParser, target: str) -> None:
     parser.add_argument("--out", required=True, help="output JSON")
     parser.add_argument("--overwrite", action="store_true", help=f"replace an earlier {target} calibration in --out")
     _camera_option(parser)
+    _white_option(parser)
 
 
 def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:

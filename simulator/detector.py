@@ -38,14 +38,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import cv2
 import numpy as np
 from scipy import fft as sp_fft
 from scipy import ndimage, signal, special
 
 from lfrefract.errors import ParameterError
 from lfrefract.formats.lytro import LytroSettings
-from lfrefract.formats.mosaic import CFA_PATTERNS, RawMosaic, cfa_channels
+from lfrefract.formats.mosaic import CFA_PATTERNS, DEMOSAIC_METHODS, RawMosaic, cfa_channels, demosaic
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import (
     bounded_float,
@@ -78,15 +77,6 @@ __all__ = [
 
 #: Point-spread functions of the optics in front of the pixels (``"none"``: no optical blur).
 PSF_MODELS = ("airy", "gaussian", "none")
-#: Demosaicing methods of :func:`demosaic` (OpenCV's bilinear and edge-aware interpolation).
-DEMOSAIC_METHODS = ("bilinear", "edge_aware")
-
-#: OpenCV's conversion code for each pattern (OpenCV's 4-letter names are the top-left 2 x 2 block
-#: read row by row, as here; its 2-letter aliases name the second row's second and third pixels).
-_CV_CODES = {
-    "bilinear": {p: getattr(cv2, f"COLOR_Bayer{p}2RGB") for p in CFA_PATTERNS},
-    "edge_aware": {p: getattr(cv2, f"COLOR_Bayer{p}2RGB_EA") for p in CFA_PATTERNS},
-}
 #: First zero of the Bessel function J1: the Airy pattern's first dark ring is at v = 3.8317,
 #: r = 3.8317 / pi * lambda * N = 1.2197 lambda N.
 _AIRY_FIRST_ZERO = 3.8317059702075125
@@ -648,31 +638,6 @@ def white_frames(radiance_rgb: np.ndarray, config: DetectorConfig, *, frames: in
     for k in range(count):  # frames, each one vectorised
         total += _digitised(mean_e, config, np.random.default_rng(np.random.SeedSequence([base, k])))
     return _mosaic(np.rint(total / count), config)
-
-
-def demosaic(mosaic: RawMosaic, *, method: str = "bilinear") -> np.ndarray:
-    """Linear camera RGB of every pixel from a Bayer mosaic (OpenCV's demosaicing).
-
-    Parameters
-    ----------
-    mosaic : RawMosaic
-    method : {"bilinear", "edge_aware"}
-        OpenCV's bilinear interpolation or its edge-aware variant.
-
-    Returns
-    -------
-    ndarray of float64, shape (H, W, 3)
-        Camera R, G, B (the filters' channels, not yet colour-corrected: see
-        :meth:`DetectorConfig.radiance_from_camera_rgb`), black subtracted and divided by
-        ``white - black``: 0 no light, 1 the white level. The counts are shifted to 16 bits before
-        OpenCV interpolates them, so its integer rounding costs at most ``2**(bit_depth - 17)`` DN.
-    """
-    if not isinstance(mosaic, RawMosaic):
-        raise ParameterError(f"mosaic must be a RawMosaic, got {shown(mosaic)}")
-    code = _CV_CODES[one_of("method", method, DEMOSAIC_METHODS)][mosaic.cfa_pattern]
-    shift = 16 - mosaic.bit_depth
-    rgb = cv2.cvtColor(np.ascontiguousarray(mosaic.counts << shift, dtype=np.uint16), code).astype(np.float64)
-    return (rgb / 2**shift - mosaic.black_level_dn) / (mosaic.white_level_dn - mosaic.black_level_dn)
 
 
 # ---------------------------------------------------------------------------------------- measuring

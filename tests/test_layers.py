@@ -37,6 +37,13 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract.formats.ply": (*_BASE, *_LOW_FORMATS),
     "lfrefract.formats.mosaic": (*_BASE, *_LOW_FORMATS),
     "lfrefract.formats.lytro": (*_BASE, *_LOW_FORMATS, "lfrefract.formats.mosaic", "lfrefract.optics"),
+    "lfrefract.formats.whites": (
+        *_BASE,
+        *_LOW_FORMATS,
+        "lfrefract.formats.mosaic",
+        "lfrefract.formats.lytro",
+        "lfrefract.optics",
+    ),
     "lfrefract.optics": (*_BASE, "lfrefract.optics"),
     "lfrefract.formats.flatport": (*_BASE, *_LOW_FORMATS, "lfrefract.optics"),
     "lfrefract.formats.paramfile": (*_BASE, *_LOW_FORMATS, "lfrefract.optics", "lfrefract.formats.flatport"),
@@ -53,6 +60,9 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract.formats.capture": (
         *_BASE,
         *_LOW_FORMATS,
+        "lfrefract.formats.mosaic",
+        "lfrefract.formats.lytro",
+        "lfrefract.formats.whites",
         "lfrefract.optics",
         "lfrefract.formats.flatport",
         "lfrefract.formats.paramfile",

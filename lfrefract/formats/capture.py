@@ -50,6 +50,14 @@ from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.outputs import atomic_file, staged_directory
 from lfrefract.formats.paramfile import read_camera_file, read_port_file
+from lfrefract.formats.whites import (
+    WhiteImage,
+    develop,
+    find_white_images,
+    is_lytro_file,
+    read_lytro_file,
+    select_white_image,
+)
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
@@ -77,7 +85,9 @@ __all__ = [
     "port_from_file",
     "read_capture",
     "read_ground_truth",
+    "read_lytro_capture",
     "read_sidecar",
+    "white_for",
     "write_capture",
     "write_capture_files",
 ]
@@ -370,7 +380,9 @@ class Capture:
         """What was masked, for sidecars (None when nothing was): the counts and the policy."""
         if self.recorded is None:
             return None
-        return {"policy": "masked as unrecorded (--nonfinite mask)", **self.unrecorded.to_dict()}
+        lytro = bool(self.sidecar) and "lytro" in (self.sidecar or {})
+        policy = "a Lytro capture's saturated pixels and its white image's bad pixels" if lytro else "--nonfinite mask"
+        return {"policy": f"masked as unrecorded ({policy})", **self.unrecorded.to_dict()}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -413,6 +425,18 @@ def capture_parameters(
     if port is not None and not isinstance(port, FlatPort):
         raise ParameterError(f"port must be a FlatPort, got {port!r}")
     raw_path = Path(raw_path)
+    if is_lytro_file(raw_path):  # the file is the whole capture: its metadata, no sidecar
+        lytro = read_lytro_file(raw_path)
+        return CaptureParameters(
+            raw_path=raw_path,
+            camera=lytro.camera if camera is None else camera,
+            port=port,
+            ideal=None,
+            pose=None,
+            sidecar_path=None,
+            sidecar=None,
+            camera_source="the camera given" if camera is not None else f"the metadata of {str(raw_path)!r}",
+        )
     if raw_path.is_dir():  # a capture folder: its raw image
         raw_path = raw_path / RAW_NAME
     sidecar_path = raw_path.parent / SIDECAR_NAME
@@ -457,14 +481,16 @@ def read_capture(
     port: FlatPort | None = None,
     nonfinite: str = "refuse",
     camera_required: bool = True,
+    white: str | os.PathLike | WhiteImage | None = None,
 ) -> Capture:
-    """Read a capture: the raw image and the sidecar ``meta.json`` beside it, or a bare raw image.
+    """Read a capture: the raw image and the sidecar ``meta.json`` beside it, a bare raw image, or a
+    Lytro file (:func:`read_lytro_capture`).
 
     Parameters
     ----------
     raw_path : path-like
-        The raw lenslet image (OpenEXR, float, (H, W) or (H, W, 3)), or a capture folder (its
-        ``raw.exr``).
+        The raw lenslet image (OpenEXR, float, (H, W) or (H, W, 3)), a capture folder (its
+        ``raw.exr``), or a Lytro file (``.lfr``, or ``.raw`` with its metadata beside it).
     camera : LightFieldCamera, optional
         The camera, replacing the sidecar's (needed when there is no sidecar, or it has no camera).
     port : FlatPort, optional
@@ -474,6 +500,8 @@ def read_capture(
         unrecorded (:attr:`Capture.recorded`).
     camera_required : bool
         Whether a capture without a camera is an error (``lfrefract calibrate mla`` needs none).
+    white : path-like or WhiteImage, optional
+        For a Lytro file: its white image, or a folder of them (:func:`read_lytro_capture`).
 
     Returns
     -------
@@ -489,10 +517,102 @@ def read_capture(
         For an invalid option.
     """
     one_of("nonfinite", nonfinite, NONFINITE_POLICIES)
+    if is_lytro_file(raw_path):
+        return read_lytro_capture(raw_path, camera=camera, port=port, white=white)
+    if white is not None:
+        raise ParameterError(
+            f"a white image ({str(white)!r}) develops a Lytro capture (.lfr, .raw); {str(raw_path)!r} is a linear "
+            "raw image already"
+        )
     parameters = capture_parameters(raw_path, camera=camera, port=port, camera_required=camera_required)
     raw = read_exr(parameters.raw_path)
     fields = {f.name: getattr(parameters, f.name) for f in dataclasses.fields(CaptureParameters)}
     return Capture(raw=raw, nonfinite=nonfinite, **fields)
+
+
+def white_for(
+    white: str | os.PathLike | WhiteImage, *, zoom_step: int, focus_step: int, capture: Path | None = None
+) -> WhiteImage:
+    """The white image ``white`` names: a white-image file, or a folder of them (the one whose lens
+    steps are nearest ``zoom_step`` and ``focus_step``, :func:`lfrefract.formats.whites.select_white_image`;
+    the ``capture`` itself is never its own white, should it lie in the folder)."""
+    if isinstance(white, WhiteImage):
+        return white
+    path = Path(white)
+    if path.is_dir():
+        found = find_white_images(path)
+        if capture is not None:
+            found = [w for w in found if w.path.resolve() != capture.resolve()]
+        if not found:
+            raise FileFormatError(f"white-image folder {str(path)!r} holds no white image but the capture itself")
+        return select_white_image(found, zoom_step=zoom_step, focus_step=focus_step)
+    if capture is not None and path.resolve() == capture.resolve():
+        raise FileFormatError(f"{str(path)!r} is the capture itself, not its white image")
+    return WhiteImage.from_file(path)
+
+
+def read_lytro_capture(
+    path: str | os.PathLike,
+    *,
+    camera: LightFieldCamera | None = None,
+    port: FlatPort | None = None,
+    white: str | os.PathLike | WhiteImage | None = None,
+) -> Capture:
+    """Read a Lytro capture (Illum ``.lfr``, or ``.raw`` with its metadata) and develop it for the core.
+
+    The file is the whole capture: its camera comes from its metadata (unless ``camera`` is given),
+    and no ``meta.json`` is read. The mosaic is developed (:func:`lfrefract.formats.whites.develop`):
+    black subtracted, devignetted by the white image when one is given (a file, or a folder of white
+    images from which the one of the nearest zoom and focus steps is taken), demosaiced to camera
+    RGB; its saturated pixels and the white's bad pixels are unrecorded (NaN, with
+    :attr:`Capture.recorded` False: the commands give them no weight and report them).
+
+    Returns
+    -------
+    Capture
+        ``raw`` (H, W, 3) float32; ``sidecar`` holds ``lytro``: the file, the metadata's lens steps,
+        the white image used (with its steps) and the counts of saturated and bad pixels.
+
+    Raises
+    ------
+    FileFormatError
+        If a file is missing or malformed, or the white image does not match the capture's sensor.
+    """
+    path = Path(path)
+    lytro = read_lytro_file(path)
+    lens = lytro.metadata.get("devices", {}).get("lens", {})
+    steps = {key: lens.get(key) for key in ("zoomStep", "focusStep")}
+    chosen = None
+    white_mosaic = None
+    if white is not None:
+        known_steps = all(isinstance(v, int) and not isinstance(v, bool) for v in steps.values())
+        if not known_steps and not isinstance(white, WhiteImage) and Path(white).is_dir():
+            raise FileFormatError(f"{str(path)!r} has no lens steps (devices.lens): name the white image itself")
+        chosen = white_for(white, zoom_step=steps["zoomStep"] or 0, focus_step=steps["focusStep"] or 0, capture=path)
+        white_mosaic = chosen.read().mosaic
+    try:
+        developed = develop(lytro.mosaic, white_mosaic, white_image=chosen)
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r}: {exc}") from None
+    summary = {
+        "file": str(path),
+        "zoom_step": steps["zoomStep"],
+        "focus_step": steps["focusStep"],
+        "white": None
+        if chosen is None
+        else {"file": str(chosen.path), "zoom_step": chosen.zoom_step, "focus_step": chosen.focus_step},
+        "saturated_pixels": int(developed.saturated.sum()),
+        "bad_white_pixels": int(developed.bad.sum()),
+    }
+    return Capture(
+        raw_path=path,
+        raw=developed.image,
+        camera=lytro.camera if camera is None else camera,
+        port=port,
+        sidecar={"lytro": summary},
+        camera_source="the camera given" if camera is not None else f"the metadata of {str(path)!r}",
+        nonfinite="mask",
+    )
 
 
 def _json_key(path: Path, key: str, what: str) -> dict:

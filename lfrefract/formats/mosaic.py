@@ -17,17 +17,21 @@ import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.outputs import atomic_file
-from lfrefract.validate import bounded_int, one_of
+from lfrefract.validate import bounded_int, one_of, shown
 
 __all__ = [
     "CFA_PATTERNS",
+    "DEMOSAIC_METHODS",
     "MOSAIC_NPZ_KEYS",
     "RawMosaic",
     "cfa_channels",
+    "demosaic",
+    "demosaic_values",
     "read_mosaic_npz",
     "write_mosaic_npz",
 ]
@@ -36,6 +40,14 @@ __all__ = [
 CFA_PATTERNS = ("GRBG", "RGGB", "GBRG", "BGGR")
 #: Index of each colour letter in an RGB triple.
 _CHANNEL = {"R": 0, "G": 1, "B": 2}
+#: Demosaicing methods (OpenCV's bilinear and edge-aware interpolation).
+DEMOSAIC_METHODS = ("bilinear", "edge_aware")
+#: OpenCV's conversion code for each pattern (OpenCV's 4-letter names are the top-left 2 x 2 block
+#: read row by row, as here; its 2-letter aliases name the second row's second and third pixels).
+_CV_CODES = {
+    "bilinear": {p: getattr(cv2, f"COLOR_Bayer{p}2RGB") for p in CFA_PATTERNS},
+    "edge_aware": {p: getattr(cv2, f"COLOR_Bayer{p}2RGB_EA") for p in CFA_PATTERNS},
+}
 #: Arrays of a ``mosaic.npz`` file.
 MOSAIC_NPZ_KEYS = ("counts", "cfa_pattern", "black_level_dn", "white_level_dn", "bit_depth")
 
@@ -141,6 +153,66 @@ class RawMosaic:
         F01): the black level is not subtracted.
         """
         return np.divide(self.counts, float(2**self.bit_depth - 1)).astype(np.float64)
+
+
+def demosaic(mosaic: RawMosaic, *, method: str = "bilinear") -> np.ndarray:
+    """Linear camera RGB of every pixel from a Bayer mosaic (OpenCV's demosaicing).
+
+    Parameters
+    ----------
+    mosaic : RawMosaic
+    method : {"bilinear", "edge_aware"}
+        OpenCV's bilinear interpolation or its edge-aware variant.
+
+    Returns
+    -------
+    ndarray of float64, shape (H, W, 3)
+        Camera R, G, B (the filters' channels, not colour-corrected), black subtracted and divided
+        by ``white - black``: 0 no light, 1 the white level. The counts are shifted to 16 bits
+        before OpenCV interpolates them, so its integer rounding costs at most
+        ``2**(bit_depth - 17)`` DN.
+    """
+    if not isinstance(mosaic, RawMosaic):
+        raise ParameterError(f"mosaic must be a RawMosaic, got {shown(mosaic)}")
+    code = _CV_CODES[one_of("method", method, DEMOSAIC_METHODS)][mosaic.cfa_pattern]
+    shift = 16 - mosaic.bit_depth
+    rgb = cv2.cvtColor(np.ascontiguousarray(mosaic.counts << shift, dtype=np.uint16), code).astype(np.float64)
+    return (rgb / 2**shift - mosaic.black_level_dn) / (mosaic.white_level_dn - mosaic.black_level_dn)
+
+
+#: Levels of the 16-bit quantisation :func:`demosaic_values` hands OpenCV (whose Bayer conversions
+#: take 8- or 16-bit integers only): values are rounded to 1 / 65535 of their largest.
+_DEMOSAIC_LEVELS = 65535
+
+
+def demosaic_values(values: np.ndarray, cfa_pattern: str, *, method: str = "bilinear") -> np.ndarray:
+    """Camera RGB of every pixel from one linear value per pixel under ``cfa_pattern`` (e.g. a devignetted mosaic).
+
+    Parameters
+    ----------
+    values : array_like, shape (H, W)
+        Finite values >= 0, any linear scale.
+    cfa_pattern : str
+        One of :data:`CFA_PATTERNS`.
+    method : {"bilinear", "edge_aware"}
+
+    Returns
+    -------
+    ndarray of float64, shape (H, W, 3)
+        On the scale of ``values``. OpenCV interpolates 16-bit integers: the values are quantised to
+        1 / 65535 of their largest first (a relative error of at most 7.6e-6 of the largest).
+    """
+    image = np.asarray(values, dtype=np.float64)
+    if image.ndim != 2 or min(image.shape) < 2:
+        raise ParameterError(f"values must have shape (H, W) with H, W >= 2, got {image.shape}")
+    if not np.all(np.isfinite(image)) or image.min() < 0.0:
+        raise ParameterError("values must be finite and >= 0")
+    code = _CV_CODES[one_of("method", method, DEMOSAIC_METHODS)][one_of("cfa_pattern", cfa_pattern, CFA_PATTERNS)]
+    top = float(image.max())
+    if top == 0.0:
+        return np.zeros((*image.shape, 3))
+    quantised = np.rint(image * (_DEMOSAIC_LEVELS / top)).astype(np.uint16)
+    return cv2.cvtColor(quantised, code).astype(np.float64) * (top / _DEMOSAIC_LEVELS)
 
 
 def write_mosaic_npz(path: str | os.PathLike, mosaic: RawMosaic) -> Path:

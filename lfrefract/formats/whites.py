@@ -1,0 +1,298 @@
+"""White images: find the one that matches a Lytro capture, and develop the capture with it.
+
+A Lytro camera ships white images (a diffuser in front of the lens, many exposures averaged) for a
+grid of zoom and focus settings: the Illum as bare 10-bit ``.raw`` files with their metadata in a
+``.txt`` of JSON beside each, the first-generation camera (F01) as 12-bit ``.raw`` with ``.json``;
+``lfsim whites`` writes the same. :func:`find_white_images` lists such a folder (reading only the
+metadata), :func:`select_white_image` picks the one whose lens steps are nearest a capture's (as
+LFToolbox's white-image database does: zoom first, then focus), and :func:`develop` turns a
+capture's mosaic into the linear image the core works on:
+
+1. the black level is subtracted from capture and white;
+2. each pixel is divided by the white's (devignetting: the main lens's fall-off, each micro-image's
+   edge and the colour filters' response all cancel), so 1 is the white image's brightness; where
+   the white holds less than :data:`MIN_WHITE_FRACTION` of its bright level (the gaps between
+   micro-images, a vignetted rim) there is no light to measure and the value is 0;
+3. pixels that cannot be trusted are flagged: saturated in the capture (at the white level, so their
+   value is only a lower bound) and bad in the white (:func:`bad_pixels`: saturated there, or far
+   darker than their bright neighbours);
+4. the result is demosaiced (OpenCV, :func:`lfrefract.formats.mosaic.demosaic_values`) into camera
+   RGB, and every flagged pixel with the 3 x 3 neighbourhood its value was spread to is NaN
+   (unrecorded: the core's commands give it no weight).
+
+Frames and units: images ``(H, W)`` or ``(H, W, 3)``, row ``v`` then column ``u``; lens steps are
+the metadata's ``devices.lens.zoomStep`` / ``focusStep`` (integers).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.lytro import LytroCapture, read_f01_raw, read_illum_raw, read_lfr
+from lfrefract.formats.mosaic import RawMosaic, demosaic_values
+from lfrefract.validate import bounded_float, one_of
+
+__all__ = [
+    "BAD_PIXEL_RATIO",
+    "LYTRO_SUFFIXES",
+    "MIN_WHITE_FRACTION",
+    "DevelopedCapture",
+    "WhiteImage",
+    "bad_pixels",
+    "develop",
+    "find_white_images",
+    "is_lytro_file",
+    "read_lytro_file",
+    "select_white_image",
+]
+
+#: File suffixes of Lytro captures and white images (case-insensitive).
+LYTRO_SUFFIXES = (".lfr", ".raw")
+#: Below this fraction of the white image's bright level (its 99th percentile, per colour) a pixel
+#: receives too little light to devignet: its value is set to 0. The gaps between micro-images hold
+#: a few percent; a tenth keeps the edge of every micro-image whose light is measurable.
+MIN_WHITE_FRACTION = 0.1
+#: A white pixel this many times darker than the darkest of its eight nearest neighbours, all
+#: bright, is dead (:func:`bad_pixels`; each colour relative to its bright level). Inside a
+#: micro-image a white changes by less than a factor of 2 from pixel to pixel; a dead pixel reads
+#: about 0.
+BAD_PIXEL_RATIO = 4.0
+#: Where the neighbours are bright enough to judge a pixel: this fraction of their colour's bright level.
+_JUDGED_FRACTION = 0.5
+#: Percentile of a colour's white values taken as its bright level.
+_BRIGHT_PERCENTILE = 99.0
+
+
+def is_lytro_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` names a Lytro file by its suffix (``.lfr`` or ``.raw``)."""
+    return Path(path).suffix.lower() in LYTRO_SUFFIXES
+
+
+def _raw_metadata(path: Path) -> tuple[Path, dict] | None:
+    for suffix in (".json", ".txt", ".JSON", ".TXT"):
+        meta = path.with_suffix(suffix)
+        if meta.is_file():
+            try:
+                return meta, json.loads(meta.read_text(encoding="utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise FileFormatError(f"{str(meta)!r} (the metadata of {str(path)!r}) is not JSON: {exc}") from None
+    return None
+
+
+def read_lytro_file(path: str | os.PathLike) -> LytroCapture:
+    """Read a Lytro capture or white image: an Illum ``.lfr``, or a ``.raw`` with its metadata beside it
+    (10-bit little-endian packing: the Illum's; 12-bit big-endian: the F01's).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, is no Lytro file, or its metadata is missing or malformed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"no such file: {str(path)!r}")
+    suffix = path.suffix.lower()
+    if suffix == ".lfr":
+        return read_lfr(path)
+    if suffix != ".raw":
+        raise FileFormatError(f"{str(path)!r} is no Lytro file (its suffix is none of {list(LYTRO_SUFFIXES)})")
+    found = _raw_metadata(path)
+    if found is None:
+        raise FileFormatError(f"{str(path)!r} has no metadata beside it (.json or .txt)")
+    _, metadata = found
+    image = metadata.get("image") if isinstance(metadata, dict) else None
+    if isinstance(image, dict) and isinstance(image.get("rawDetails"), dict):
+        return read_f01_raw(path)
+    return read_illum_raw(path)
+
+
+def _lens_step(metadata: dict, key: str, where: str) -> int:
+    lens = metadata.get("devices", {}).get("lens", {}) if isinstance(metadata.get("devices"), dict) else {}
+    value = lens.get(key) if isinstance(lens, dict) else None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise FileFormatError(f"{where}: the metadata has no integer devices.lens.{key}")
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class WhiteImage:
+    """A white image on disk and the lens setting it was taken at (its mosaic is read on demand).
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The ``.raw`` (metadata beside it) or ``.lfr`` file.
+    zoom_step, focus_step : int
+        The lens motors' positions of its metadata (``devices.lens``).
+    """
+
+    path: Path
+    zoom_step: int
+    focus_step: int
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> WhiteImage:
+        """The white image of ``path``, its lens steps read from its metadata (not its mosaic)."""
+        path = Path(path)
+        where = repr(str(path))
+        if path.suffix.lower() == ".lfr":
+            metadata = read_lfr(path).metadata
+        else:
+            found = _raw_metadata(path)
+            if found is None:
+                raise FileFormatError(f"{where} has no metadata beside it (.json or .txt)")
+            metadata = found[1]
+        if not isinstance(metadata, dict):
+            raise FileFormatError(f"{where}: the metadata is not a JSON object")
+        zoom, focus = _lens_step(metadata, "zoomStep", where), _lens_step(metadata, "focusStep", where)
+        return cls(path=path, zoom_step=zoom, focus_step=focus)
+
+    def read(self) -> LytroCapture:
+        """The white image's mosaic and metadata (:func:`read_lytro_file`)."""
+        return read_lytro_file(self.path)
+
+
+def find_white_images(folder: str | os.PathLike) -> list[WhiteImage]:
+    """Every white image in ``folder`` (not its sub-folders): ``.raw`` files with metadata beside them
+    and ``.lfr`` files, sorted by name; only their metadata is read.
+
+    Raises
+    ------
+    FileFormatError
+        If ``folder`` is no folder, holds no white image, or a file's metadata lacks the lens steps.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileFormatError(f"white-image folder {str(folder)!r} is not a folder")
+    files = sorted(p for p in folder.iterdir() if p.is_file() and is_lytro_file(p))
+    whites = [WhiteImage.from_file(p) for p in files if p.suffix.lower() == ".lfr" or _raw_metadata(p) is not None]
+    if not whites:
+        raise FileFormatError(f"white-image folder {str(folder)!r} holds no .raw (with metadata) or .lfr file")
+    return whites
+
+
+def select_white_image(whites: list[WhiteImage], *, zoom_step: int, focus_step: int) -> WhiteImage:
+    """The white image whose lens setting is nearest: smallest zoom difference, then focus difference.
+
+    The micro-image centres move with zoom far more than with focus, so zoom decides first, as in
+    LFToolbox's white-image database; ties go to the first by name.
+    """
+    if not whites:
+        raise ParameterError("whites must hold at least one WhiteImage")
+    return min(whites, key=lambda w: (abs(w.zoom_step - zoom_step), abs(w.focus_step - focus_step)))
+
+
+def _bright_levels(values: np.ndarray, channels: np.ndarray) -> np.ndarray:
+    """Per-pixel bright level of its colour: the colour's 99th percentile, shape (H, W)."""
+    levels = np.zeros(3)
+    for c in range(3):
+        sites = values[channels == c]
+        levels[c] = float(np.percentile(sites, _BRIGHT_PERCENTILE)) if sites.size else 0.0
+    return levels[channels]
+
+
+def bad_pixels(white: RawMosaic, *, ratio: float = BAD_PIXEL_RATIO) -> np.ndarray:
+    """Dead and hot pixels of a white image: bool (H, W).
+
+    *Hot*: at the white level (a white image is exposed below saturation: a pixel there does not
+    follow the light). *Dead*: ``ratio`` times darker than the darkest of its eight nearest
+    neighbours while they are all bright, each value black-subtracted and divided by its colour's
+    bright level (so the colours compare): at least half of it, inside a micro-image, where a white
+    image is smooth. A pixel in a gap between micro-images has a dim neighbour in the gap, however
+    narrow, and is not judged; a dead pixel is found anywhere but on a micro-image's outermost ring.
+    """
+    if not isinstance(white, RawMosaic):
+        raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
+    ratio = bounded_float("ratio", ratio, 1.0, 1e6, low_open=True)
+    values = np.maximum(white.counts.astype(np.float64) - white.black_level_dn, 0.0)
+    bright = _bright_levels(values, white.channel_index())
+    relative = np.divide(values, bright, out=np.zeros_like(values), where=bright > 0)
+    ring = np.ones((3, 3), dtype=bool)
+    ring[1, 1] = False
+    darkest = ndimage.minimum_filter(relative, footprint=ring, mode="mirror")
+    dead = (darkest >= _JUDGED_FRACTION) & (relative * ratio < darkest)
+    return dead | white.saturated
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class DevelopedCapture:
+    """A Lytro capture developed for the core (:func:`develop`).
+
+    Attributes
+    ----------
+    image : ndarray of float32, shape (H, W, 3)
+        Camera RGB relative to the white image (1: as bright as the white), or without a white
+        black-subtracted counts over ``white - black``; NaN at unrecorded pixels.
+    saturated, bad : ndarray of bool, shape (H, W)
+        Pixels at the capture's white level, and bad pixels of the white image.
+    unrecorded : ndarray of bool, shape (H, W)
+        The NaN pixels of ``image``: ``saturated | bad`` grown by one pixel (the demosaicing's reach).
+    white : WhiteImage or None
+        The white image used.
+    """
+
+    image: np.ndarray
+    saturated: np.ndarray
+    bad: np.ndarray
+    unrecorded: np.ndarray
+    white: WhiteImage | None
+
+
+def develop(
+    mosaic: RawMosaic,
+    white: RawMosaic | None = None,
+    *,
+    white_image: WhiteImage | None = None,
+    method: str = "bilinear",
+) -> DevelopedCapture:
+    """Black level, devignetting by ``white``, flags and demosaicing: the module's steps 1-4.
+
+    Parameters
+    ----------
+    mosaic : RawMosaic
+        The capture.
+    white : RawMosaic, optional
+        The white image of the same lens setting and sensor (same shape and pattern). Without one
+        the capture is only black-subtracted and scaled to its white level (not devignetted).
+    white_image : WhiteImage, optional
+        Where ``white`` came from (recorded in the result).
+    method : {"bilinear", "edge_aware"}
+        OpenCV's demosaicing.
+
+    Raises
+    ------
+    ParameterError
+        If the white does not match the capture (shape or pattern).
+    """
+    if not isinstance(mosaic, RawMosaic):
+        raise ParameterError(f"mosaic must be a RawMosaic, got {type(mosaic).__name__}")
+    one_of("method", method, ("bilinear", "edge_aware"))
+    saturated = mosaic.saturated
+    counts = np.maximum(mosaic.counts.astype(np.float64) - mosaic.black_level_dn, 0.0)
+    if white is None:
+        values = counts / (mosaic.white_level_dn - mosaic.black_level_dn)
+        bad = np.zeros(mosaic.shape, dtype=bool)
+    else:
+        if not isinstance(white, RawMosaic):
+            raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
+        if white.shape != mosaic.shape or white.cfa_pattern != mosaic.cfa_pattern:
+            raise ParameterError(
+                f"the white image ({white.shape[1]} x {white.shape[0]} px, {white.cfa_pattern}) does not match the "
+                f"capture ({mosaic.shape[1]} x {mosaic.shape[0]} px, {mosaic.cfa_pattern})"
+            )
+        lit = np.maximum(white.counts.astype(np.float64) - white.black_level_dn, 0.0)
+        usable = lit >= MIN_WHITE_FRACTION * _bright_levels(lit, white.channel_index())
+        values = np.divide(counts, lit, out=np.zeros_like(counts), where=usable)
+        bad = bad_pixels(white)
+    flagged = saturated | bad
+    image = demosaic_values(np.where(flagged, 0.0, values), mosaic.cfa_pattern, method=method).astype(np.float32)
+    unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool))
+    image[unrecorded] = np.nan
+    return DevelopedCapture(image=image, saturated=saturated, bad=bad, unrecorded=unrecorded, white=white_image)

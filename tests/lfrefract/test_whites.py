@@ -1,0 +1,145 @@
+"""White images for Lytro captures (lfrefract.formats.whites): finding, choosing, bad pixels, developing.
+
+The white images are the camera model's (tests/lfrefract/test_calibration_mla.py draws them), turned
+into 10-bit counts and written as the Illum ships its whites (.raw with a .txt of JSON).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.capture import read_capture
+from lfrefract.formats.lytro import LytroSettings, write_f01_raw, write_illum_raw, write_lfr
+from lfrefract.formats.mosaic import RawMosaic
+from lfrefract.formats.whites import (
+    WhiteImage,
+    bad_pixels,
+    develop,
+    find_white_images,
+    read_lytro_file,
+    select_white_image,
+)
+from tests.lfrefract.test_calibration_mla import small_camera, synthetic_white
+
+BLACK, WHITE_LEVEL = 64, 1023
+
+
+def white_mosaic(scale: float = 700.0, bits: int = 10, pattern: str = "GRBG") -> RawMosaic:
+    counts = np.rint(BLACK + scale * synthetic_white(small_camera())).astype(np.uint16)
+    top = 2**bits - 1
+    return RawMosaic(counts=counts, cfa_pattern=pattern, black_level_dn=BLACK, white_level_dn=top, bit_depth=bits)
+
+
+def write_white(folder, name, mosaic, *, zoom, focus):
+    settings = LytroSettings(zoom_step=zoom, focus_step=focus)
+    if mosaic.bit_depth == 12:
+        return write_f01_raw(folder / f"{name}.raw", mosaic, small_camera(), settings=settings)[0]
+    return write_illum_raw(folder / f"{name}.raw", mosaic, small_camera(), settings=settings)[0]
+
+
+def test_a_folder_of_whites_is_listed_and_the_nearest_setting_chosen(tmp_path):
+    for k, (zoom, focus) in enumerate([(6000, 0), (6000, 300), (9000, 0), (9000, 120)]):
+        write_white(tmp_path, f"MOD_{k:04d}", white_mosaic(), zoom=zoom, focus=focus)
+    (tmp_path / "notes.txt").write_text("not a white image")
+    whites = find_white_images(tmp_path)
+    assert [(w.path.name, w.zoom_step, w.focus_step) for w in whites] == [
+        ("MOD_0000.raw", 6000, 0),
+        ("MOD_0001.raw", 6000, 300),
+        ("MOD_0002.raw", 9000, 0),
+        ("MOD_0003.raw", 9000, 120),
+    ]
+    assert select_white_image(whites, zoom_step=8800, focus_step=10).path.name == "MOD_0002.raw"
+    # Zoom decides first: MOD_0003 (focus 120, 80 steps off) at the farther zoom loses to MOD_0001 (100 off).
+    assert select_white_image(whites, zoom_step=6100, focus_step=200).path.name == "MOD_0001.raw"
+    assert select_white_image(whites, zoom_step=9000, focus_step=119).path.name == "MOD_0003.raw"
+
+
+def test_lytro_files_are_told_apart_by_their_metadata(tmp_path):
+    illum = write_white(tmp_path, "illum", white_mosaic(), zoom=1, focus=2)
+    f01 = write_white(tmp_path, "f01", white_mosaic(scale=2800.0, bits=12, pattern="BGGR"), zoom=3, focus=4)
+    lfr = write_lfr(tmp_path / "w.lfr", white_mosaic(), small_camera(), settings=LytroSettings(zoom_step=5))
+    assert read_lytro_file(illum).mosaic.bit_depth == 10
+    assert read_lytro_file(f01).mosaic.cfa_pattern == "BGGR"
+    assert WhiteImage.from_file(lfr).zoom_step == 5
+    assert WhiteImage.from_file(f01).focus_step == 4
+
+
+def test_bad_paths_are_named(tmp_path):
+    with pytest.raises(FileFormatError, match="not a folder"):
+        find_white_images(tmp_path / "missing")
+    with pytest.raises(FileFormatError, match=r"holds no \.raw"):
+        find_white_images(tmp_path)
+    (tmp_path / "lonely.raw").write_bytes(b"\0" * 16)
+    with pytest.raises(FileFormatError, match="has no metadata beside it"):
+        read_lytro_file(tmp_path / "lonely.raw")
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_lytro_file(tmp_path / "none.lfr")
+    with pytest.raises(ParameterError, match="at least one"):
+        select_white_image([], zoom_step=0, focus_step=0)
+
+
+def test_dead_and_hot_pixels_of_a_white_are_found_and_nothing_else():
+    white = white_mosaic()
+    camera = small_camera()
+    centres = np.rint(camera.micro_image_centres_px(camera.lens_indices_on_sensor())).astype(int)
+    inner = centres[(centres[:, 0] > 4) & (centres[:, 0] < 195) & (centres[:, 1] > 4) & (centres[:, 1] < 145)]
+    pick = inner[np.random.default_rng(0).choice(len(inner), 12, replace=False)]
+    counts = white.counts.copy()
+    counts[pick[:6, 1], pick[:6, 0]] = BLACK  # dead: reads black
+    counts[pick[6:, 1], pick[6:, 0]] = WHITE_LEVEL  # hot: stuck at the white level
+    broken = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    assert not bad_pixels(white).any()
+    found = bad_pixels(broken)
+    assert found.sum() == 12
+    assert found[pick[:, 1], pick[:, 0]].all()
+
+
+def test_develop_devignettes_by_the_white_and_marks_what_it_cannot_trust():
+    white = white_mosaic()
+    # A capture of a grey scene of half the white's radiance through the same lens: half the white.
+    lit = white.counts.astype(np.float64) - BLACK
+    counts = np.rint(BLACK + 0.5 * lit).astype(np.uint16)
+    counts[70, 100] = WHITE_LEVEL  # one saturated pixel
+    capture = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    developed = develop(capture, white)
+    assert developed.image.shape == (150, 200, 3)
+    assert developed.saturated.sum() == 1
+    assert developed.unrecorded[69:72, 99:102].all()
+    assert np.isnan(developed.image[70, 100]).all()
+    # Inside the micro-images (the 3 x 3 neighbourhood that bilinear demosaicing mixes all lit) every
+    # colour reads 0.5, the 1-DN rounding of the counts aside.
+    core = ndimage.minimum_filter(lit, size=3) > 0.5 * lit.max()
+    bright = np.isfinite(developed.image[..., 1]) & core
+    np.testing.assert_allclose(developed.image[bright], 0.5, atol=0.01)
+    # Without a white only the black level and the white level scale it: the micro-images' edges stay.
+    plain = develop(capture)
+    assert np.nanmax(plain.image) < 0.5
+    assert np.nanstd(plain.image[bright]) > 10 * np.nanstd(developed.image[bright])
+    with pytest.raises(ParameterError, match="does not match the capture"):
+        develop(capture, white_mosaic(pattern="RGGB"))
+
+
+def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
+    camera = small_camera()
+    white_path = write_white(tmp_path, "white", white_mosaic(), zoom=6000, focus=0)
+    lit = white_mosaic().counts.astype(np.float64) - BLACK
+    counts = np.rint(BLACK + 0.25 * lit).astype(np.uint16)
+    capture_mosaic = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    path = write_lfr(tmp_path / "capture.lfr", capture_mosaic, camera, settings=LytroSettings(zoom_step=6000))
+    capture = read_capture(path, white=tmp_path)
+    assert capture.camera == camera
+    assert capture.raw.shape == (150, 200, 3)
+    assert capture.sidecar["lytro"]["white"]["file"] == str(white_path)
+    assert capture.sidecar_path is None
+    assert capture.recorded is None
+    with pytest.raises(ParameterError, match="is a linear raw image already"):
+        read_capture(tmp_path / "raw.exr", white=white_path)
