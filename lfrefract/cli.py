@@ -107,10 +107,18 @@ from lfrefract.synthesis.warp_map import (
     SEARCH_METHODS,
     SynthesisOptions,
     WarpMap,
+    apply_cfa,
     build_warp_map,
     uses_kdtree,
     warp_map_key,
 )
+
+#: How ``synth`` takes the colours of a Lytro capture: from the demosaiced image, or from each
+#: colour's own Bayer sites. Demosaicing first is the default: on the tiny camera's capture it
+#: scored 23.2 dB against 22.1-22.6 dB (docs/cli.md, "Lytro files"): each colour's nearest rays
+#: among its own sites lie farther apart than among all pixels, and the colours no longer share them.
+COLOUR_MODES = ("demosaic", "cfa")
+DEFAULT_COLOUR_MODE = "demosaic"
 
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"
@@ -220,47 +228,44 @@ def synth(args: argparse.Namespace) -> int:
             f"its sidecar {str(capture.sidecar_path)!r} has no port" if capture.sidecar_path else "it has no meta.json"
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
+    by_cfa = _colour_by_cfa(args, capture)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
     prepare_output_files(synth_outputs(out), inputs=inputs, overwrite=args.overwrite)  # before the map is built
     options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
     output = capture.output
-    key = warp_map_key(camera, port, output, options)
-    cached = Path(args.map_cache) / f"{key}.npz" if args.map_cache else None
-    building = cached is None or not cached.is_file()
-    require_memory(
-        f"synth: the warp map of a {output.width_px} x {output.height_px} px refraction-free image "
-        f"(supersample {options.supersample}, k {options.k})",
-        warp_map_bytes(
-            output_pixels=output.width_px * output.height_px,
-            raw_pixels=camera.sensor.width_px * camera.sensor.height_px,
-            channels=capture.channels,
-            supersample=options.supersample,
-            k=options.k,
-            kdtree=building and uses_kdtree(camera, options),
-            workers=available_cpus() if building else 0,
-            block_pixels=BLOCK_PIXELS,
-        ),
-    )
-    start = time.perf_counter()
-    if cached is not None and cached.is_file():
-        warp = WarpMap.load(cached, expected_key=key)
-        how = f"loaded {cached}"
+    developed = capture.developed
+    if by_cfa and developed is not None:
+        # One map per colour, each gathering from that colour's raw pixels of the developed mosaic.
+        per_colour = {
+            colour: dataclasses.replace(options, cfa_pattern=developed.cfa_pattern, cfa_colour=colour)
+            for colour in "RGB"
+        }
+        start = time.perf_counter()
+        built = {colour: _synth_map(args, camera, port, output, opts, 1) for colour, opts in per_colour.items()}
+        map_seconds = time.perf_counter() - start
+        how = "; ".join(f"{colour}: {h}" for colour, (_, h) in built.items())
+        start = time.perf_counter()
+        maps = {colour: mask_warp_map(w, ~developed.flagged) for colour, (w, _) in built.items()}
+        image = np.maximum(apply_cfa(maps, developed.values) @ developed.color_matrix.T, 0.0).astype(np.float32)
+        apply_seconds = time.perf_counter() - start
+        warp = maps["G"]  # the colours share the coverage (it is the necessary rays'); G for the figures
+        nonzeros = float(np.mean([len(m.indices) / max(1, len(m.gain)) for m in maps.values()]))
+        keys: str | dict = {colour: w.key for colour, (w, _) in built.items()}
     else:
-        warp = build_warp_map(camera, port, output=output, options=options, progress=not args.quiet)
-        how = "built"
-        if cached is not None:
-            warp.save(cached)
-            how += f", cached as {cached}"
-    map_seconds = time.perf_counter() - start
-    start = time.perf_counter()
-    warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
-    image = warp.apply(capture.raw)
-    apply_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        warp, how = _synth_map(args, camera, port, output, options, capture.channels)
+        map_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
+        image = warp.apply(capture.raw)
+        apply_seconds = time.perf_counter() - start
+        nonzeros = float(len(warp.indices) / max(1, len(warp.gain)))
+        keys = warp.key
     stats = {
         "exact_fraction": float(warp.exact.mean()),
         "filled_fraction": float(warp.filled.mean()),
         "mean_coverage": float(warp.coverage.mean()),
-        "nonzeros_per_pixel": float(len(warp.indices) / max(1, len(warp.gain))),
+        "nonzeros_per_pixel": nonzeros,
     }
     figure = out.with_suffix(".png")
     write_exr(out, image, role="refraction_free")
@@ -277,8 +282,9 @@ def synth(args: argparse.Namespace) -> int:
             "camera": camera.to_dict(),
             "port": port.to_dict(),
             "options": options.to_dict(),
-            "unrecorded_raw": capture.masked_summary(),
-            "map_key": warp.key,
+            "colour": "cfa" if by_cfa else ("demosaic" if developed is not None else "raw"),
+            "unrecorded_raw": _unrecorded_summary(capture, by_cfa),
+            "map_key": keys,
             "coverage": stats,
             "seconds": {"map": map_seconds, "apply": apply_seconds},
             "files": {"image": out.name, "coverage": out.with_suffix(".coverage.exr").name, "figure": figure.name},
@@ -290,6 +296,63 @@ def synth(args: argparse.Namespace) -> int:
         f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
     )
     return 0
+
+
+def _unrecorded_summary(capture: Capture, by_cfa: bool) -> dict | None:
+    """What ``synth`` gave no weight: the masked raw values, or with ``--colour cfa`` the flagged
+    pixels of the mosaic themselves (no demosaicing spread them)."""
+    developed = capture.developed
+    if not by_cfa or developed is None:
+        return capture.masked_summary()
+    if not developed.flagged.any():
+        return None
+    return {
+        "policy": "masked as unrecorded (a Lytro capture's saturated pixels and its white image's bad pixels)",
+        "pixels": int(developed.flagged.sum()),
+    }
+
+
+def _colour_by_cfa(args: argparse.Namespace, capture: Capture) -> bool:
+    """Whether ``synth`` gathers each colour from its own CFA pixels (``--colour cfa``) rather than
+    from the demosaiced image (the default for a Lytro capture)."""
+    if capture.developed is None:
+        if args.colour is not None:
+            raise ParameterError(
+                f"--colour {args.colour} applies to a Lytro capture (its Bayer mosaic); {args.raw!r} is a linear "
+                "raw image already"
+            )
+        return False
+    return (args.colour or DEFAULT_COLOUR_MODE) == "cfa"
+
+
+def _synth_map(
+    args: argparse.Namespace, camera: LightFieldCamera, port, output, options: SynthesisOptions, channels: int
+) -> tuple[WarpMap, str]:
+    """The warp map of ``options``: loaded from ``--map-cache`` if it holds it, else built (and cached)."""
+    key = warp_map_key(camera, port, output, options)
+    cached = Path(args.map_cache) / f"{key}.npz" if args.map_cache else None
+    building = cached is None or not cached.is_file()
+    require_memory(
+        f"synth: the warp map of a {output.width_px} x {output.height_px} px refraction-free image "
+        f"(supersample {options.supersample}, k {options.k})",
+        warp_map_bytes(
+            output_pixels=output.width_px * output.height_px,
+            raw_pixels=camera.sensor.width_px * camera.sensor.height_px,
+            channels=channels,
+            supersample=options.supersample,
+            k=options.k,
+            kdtree=building and uses_kdtree(camera, options),
+            workers=available_cpus() if building else 0,
+            block_pixels=BLOCK_PIXELS,
+        ),
+    )
+    if cached is not None and cached.is_file():
+        return WarpMap.load(cached, expected_key=key), f"loaded {cached}"
+    warp = build_warp_map(camera, port, output=output, options=options, progress=not args.quiet)
+    if cached is None:
+        return warp, "built"
+    warp.save(cached)
+    return warp, f"built, cached as {cached}"
 
 
 def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
@@ -605,6 +668,12 @@ def _synth_arguments(parser: argparse.ArgumentParser) -> None:
         help="angle weight of D, metres per radian",
     )
     parser.add_argument("--search", choices=SEARCH_METHODS, default=defaults["search"], help="candidate search")
+    parser.add_argument(
+        "--colour",
+        choices=COLOUR_MODES,
+        help="for a Lytro capture: gather from the demosaiced image (demosaic, the default) or each colour from "
+        "its own Bayer sites (cfa: nothing is interpolated across a micro-image's edge)",
+    )
     parser.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     parser.add_argument("--quiet", action="store_true", help="no progress bar while building the map")
     parser.add_argument(

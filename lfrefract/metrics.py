@@ -1,4 +1,5 @@
-"""Image comparison metrics in a region: PSNR, SSIM (Wang et al. 2004) and the aligning shift."""
+"""Comparison metrics: images in a region (PSNR, SSIM after Wang et al. 2004, the aligning shift),
+planes, depth and disparity maps, and ray models against true rays."""
 
 from __future__ import annotations
 
@@ -16,10 +17,12 @@ __all__ = [
     "DepthErrors",
     "DisparityErrors",
     "PlaneFit",
+    "RayErrors",
     "depth_errors",
     "disparity_errors",
     "fit_plane_ransac",
     "psnr",
+    "ray_errors",
     "shift_px",
     "ssim",
 ]
@@ -383,4 +386,94 @@ def disparity_errors(
         rms_px=float(np.sqrt(np.mean(err**2))) if count else nan,
         completeness=count / total,
         count=count,
+    )
+
+
+@dataclass(frozen=True)
+class RayErrors:
+    """How far a ray model's rays are from the true ones (:func:`ray_errors`).
+
+    Attributes
+    ----------
+    position_rms_m, position_max_m : float
+        RMS and largest distance, metres, between where the two rays of a pixel cross the plane.
+    angle_rms_rad, angle_max_rad : float
+        RMS and largest angle between their directions, radians.
+    count : int
+        Rays compared.
+    """
+
+    position_rms_m: float
+    position_max_m: float
+    angle_rms_rad: float
+    angle_max_rad: float
+    count: int
+
+
+def ray_errors(
+    origins_m: np.ndarray,
+    directions: np.ndarray,
+    true_origins_m: np.ndarray,
+    true_directions: np.ndarray,
+    *,
+    plane_normal: Any = (0.0, 0.0, 1.0),
+    plane_distance_m: float,
+    valid: Any = None,
+) -> RayErrors:
+    """Ray model against true rays: where each pair crosses a plane, and the angle between them.
+
+    Parameters
+    ----------
+    origins_m, directions : array_like, shape (N, 3)
+        The model's rays (any frame, metres; directions need not be unit; NaN rows are left out).
+    true_origins_m, true_directions : array_like, shape (N, 3)
+        The true rays of the same pixels, same frame.
+    plane_normal : array_like, shape (3,)
+        The plane ``n . X = d`` where positions are compared (e.g. a port's air-side face).
+    plane_distance_m : float
+        Its ``d``, metres.
+    valid : array_like of bool, shape (N,), optional
+        The pairs to compare; pairs with a non-finite value or a ray parallel to the plane are left
+        out as well.
+    """
+
+    def rows(name: str, value: Any) -> np.ndarray:  # NaN allowed: vignetted pixels have no ray
+        arr = np.asarray(value, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            raise ParameterError(f"{name} must have shape (N, 3), got shape {arr.shape}")
+        return arr
+
+    o, d = rows("origins_m", origins_m), rows("directions", directions)
+    to, td = rows("true_origins_m", true_origins_m), rows("true_directions", true_directions)
+    if not (len(o) == len(d) == len(to) == len(td)):
+        raise ParameterError(
+            f"the four ray arrays must have one row per pixel, got {len(o)}, {len(d)}, {len(to)}, {len(td)}"
+        )
+    n = np.asarray(plane_normal, dtype=np.float64)
+    if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+        raise ParameterError(f"plane_normal must be a finite non-zero 3-vector, got {plane_normal!r}")
+    n = n / np.linalg.norm(n)
+    keep = np.ones(len(o), dtype=bool) if valid is None else np.asarray(valid, dtype=bool).reshape(-1)
+    if keep.shape != (len(o),):
+        raise ParameterError(f"valid must have one entry per ray, got shape {np.shape(valid)}")
+
+    def crossing(origins, dirs):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (plane_distance_m - origins @ n) / (dirs @ n)
+        return origins + t[:, None] * dirs
+
+    p, tp = crossing(o, d), crossing(to, td)
+    keep &= np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(tp), axis=1)
+    if not np.any(keep):
+        raise ParameterError("no pair of rays to compare (none valid, finite and crossing the plane)")
+    distance = np.linalg.norm(p[keep] - tp[keep], axis=1)
+    unit = d[keep] / np.linalg.norm(d[keep], axis=1, keepdims=True)
+    true_unit = td[keep] / np.linalg.norm(td[keep], axis=1, keepdims=True)
+    angle = 2.0 * np.arcsin(np.clip(np.linalg.norm(unit - true_unit, axis=1) / 2.0, 0.0, 1.0))
+    return RayErrors(
+        position_rms_m=float(np.sqrt(np.mean(distance**2))),
+        position_max_m=float(distance.max()),
+        angle_rms_rad=float(np.sqrt(np.mean(angle**2))),
+        angle_max_rad=float(angle.max()),
+        count=int(keep.sum()),
     )

@@ -47,7 +47,14 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract.optics": (*_BASE, "lfrefract.optics"),
     "lfrefract.formats.flatport": (*_BASE, *_LOW_FORMATS, "lfrefract.optics"),
     "lfrefract.formats.paramfile": (*_BASE, *_LOW_FORMATS, "lfrefract.optics", "lfrefract.formats.flatport"),
-    "lfrefract.synthesis": (*_BASE, *_LOW_FORMATS, *_VERSION, "lfrefract._memory", "lfrefract.optics"),
+    "lfrefract.synthesis": (
+        *_BASE,
+        *_LOW_FORMATS,
+        *_VERSION,
+        "lfrefract._memory",
+        "lfrefract.formats.mosaic",
+        "lfrefract.optics",
+    ),
     "lfrefract.formats.viewstack": (*_BASE, *_LOW_FORMATS, *_VERSION, "lfrefract.optics", "lfrefract.synthesis"),
     "lfrefract.stereo": (*_BASE, "lfrefract.optics"),
     "lfrefract.calibration": (

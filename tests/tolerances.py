@@ -817,11 +817,26 @@ LENS_PARAXIAL_RELATIVE = 1e-10
 
 # Relative; a rendered Lytro capture (tiny camera, tiny sensor, 16 spp) developed with the white image
 # of its setting (8 frames) against the noiseless raw.exr, per colour, the median ratio inside the
-# micro-images: 1.000 / 1.000 / 1.043 (R, G, B) measured; blue is off by the filters' cross-talk
-# between colours. Not devignetted, the same capture reads 0.52 / 0.66 / 0.51.
+# micro-images: 1.010 / 1.015 / 1.014 (R, G, B) measured after the file's colour matrix (without
+# it, 1.000 / 1.000 / 1.043: the filters' cross-talk between colours). Not devignetted, the same
+# capture reads 0.67-0.68 (the white level's scale) with the micro-images' fall-off.
 LYTRO_DEVELOPED_RATIO = 0.06
 
 # Relative to the mean; the refraction-free image synthesized from that LFR capture against the one
 # from raw.exr, RMS over the exact coverage: 0.050 measured at 16 spp, 0.048 at 64 spp (shot and read
 # noise, and the demosaicing, which mixes each pixel with its neighbours); 0.49 not devignetted.
 LYTRO_SYNTH_RELATIVE_RMS = 0.1
+
+# Real lenslet white images (napari-LF's microscope examples, tests/lfrefract/test_real_whites.py).
+# Relative; the fitted pitch against the nominal lenslet pitch over pixel size: GUVExperim1 +0.10 %,
+# antleg +0.34 %, seaurchin +1.8 % measured (its metadata gives a 7.4 um pixel; relay optics change
+# the effective one, as the antleg README says of its own). A wrong lattice is off by 30 % or more.
+REAL_WHITE_NOMINAL_PITCH_RELATIVE = 0.03
+# Relative; GUVExperim1, whose metadata states its optics, alone: +0.10 % measured.
+REAL_WHITE_PITCH_RELATIVE = 0.003
+# Pixels; centroids about the regular lattice: 0.134 / 0.259 / 0.187 px RMS measured (a real MLA's
+# lenses off a perfect lattice, anisotropy and the flat field's own structure), against 0.02-0.05 px
+# on rendered whites.
+REAL_WHITE_RMS_PX = 0.35
+# Pixels; GUVExperim1 about the affine lattice: 0.030 px RMS measured (regular: 0.134 px).
+REAL_WHITE_AFFINE_RMS_PX = 0.06

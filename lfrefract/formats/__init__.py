@@ -6,7 +6,11 @@
 - :mod:`~lfrefract.formats.paramfile`: camera and port files (TOML, JSON, or the flat-port text).
 - :mod:`~lfrefract.formats.ply`: point clouds.
 - :mod:`~lfrefract.formats.viewstack`: sub-aperture view stacks (HCI benchmark layout).
-- :mod:`~lfrefract.formats.capture`: a capture (raw image, camera, port, ground truth) as a folder.
+- :mod:`~lfrefract.formats.capture`: a capture (raw image, camera, port, ground truth) as a folder,
+  or a Lytro file.
+- :mod:`~lfrefract.formats.mosaic`: a sensor's Bayer mosaic of integer counts, demosaicing, ``mosaic.npz``.
+- :mod:`~lfrefract.formats.lytro`: Lytro's LFR and raw files.
+- :mod:`~lfrefract.formats.whites`: white images of Lytro captures: finding, choosing, developing.
 - :mod:`~lfrefract.formats.outputs`: atomic files, staged output folders and ``--overwrite``.
 
 Import from the modules themselves; this package imports none of them, so that low layers can

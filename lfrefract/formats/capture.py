@@ -51,6 +51,7 @@ from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.outputs import atomic_file, staged_directory
 from lfrefract.formats.paramfile import read_camera_file, read_port_file
 from lfrefract.formats.whites import (
+    DevelopedCapture,
     WhiteImage,
     develop,
     find_white_images,
@@ -292,6 +293,10 @@ class Capture:
         Where the camera comes from, for messages (the sidecar, a file, a preset).
     nonfinite : {"refuse", "mask"}
         What to do with NaN, infinite and negative raw values.
+    developed : DevelopedCapture or None
+        For a Lytro capture: the developed mosaic (:func:`lfrefract.formats.whites.develop`), whose
+        per-pixel ``values`` a colour-by-colour synthesis gathers from; ``raw`` is its demosaiced
+        ``image``.
 
     Attributes
     ----------
@@ -320,6 +325,7 @@ class Capture:
     sidecar: dict | None = None
     camera_source: str = "the camera given"
     nonfinite: str = "refuse"
+    developed: DevelopedCapture | None = None
     unrecorded: UnrecordedValues = field(init=False)
     recorded: np.ndarray | None = field(init=False)
 
@@ -551,6 +557,23 @@ def white_for(
     return WhiteImage.from_file(path)
 
 
+def _lytro_colour(metadata: dict) -> tuple[np.ndarray | None, tuple[float, float, float]]:
+    """The colour matrix (``image.color.ccm``, the F01's ``ccmRgbToSrgbArray``) and the R, G, B white
+    balance gains of a Lytro file's metadata; None and ones where it has none."""
+    color = metadata.get("image", {}).get("color", {}) if isinstance(metadata.get("image"), dict) else {}
+    color = color if isinstance(color, dict) else {}
+    ccm = color.get("ccm", color.get("ccmRgbToSrgbArray"))
+    matrix = None
+    if isinstance(ccm, list) and len(ccm) == 9 and all(isinstance(v, (int, float)) for v in ccm):
+        matrix = np.asarray(ccm, dtype=np.float64).reshape(3, 3)
+    gains = color.get("whiteBalanceGain", {})
+    try:
+        rgb = (float(gains["r"]), 0.5 * (float(gains["gr"]) + float(gains["gb"])), float(gains["b"]))
+    except (KeyError, TypeError, ValueError):
+        rgb = (1.0, 1.0, 1.0)
+    return matrix, rgb
+
+
 def read_lytro_capture(
     path: str | os.PathLike,
     *,
@@ -590,8 +613,11 @@ def read_lytro_capture(
             raise FileFormatError(f"{str(path)!r} has no lens steps (devices.lens): name the white image itself")
         chosen = white_for(white, zoom_step=steps["zoomStep"] or 0, focus_step=steps["focusStep"] or 0, capture=path)
         white_mosaic = chosen.read().mosaic
+    matrix, gains = _lytro_colour(lytro.metadata)
     try:
-        developed = develop(lytro.mosaic, white_mosaic, white_image=chosen)
+        developed = develop(
+            lytro.mosaic, white_mosaic, white_image=chosen, color_matrix=matrix, white_balance_gain=gains
+        )
     except ParameterError as exc:
         raise FileFormatError(f"{str(path)!r}: {exc}") from None
     summary = {
@@ -612,6 +638,7 @@ def read_lytro_capture(
         sidecar={"lytro": summary},
         camera_source="the camera given" if camera is not None else f"the metadata of {str(path)!r}",
         nonfinite="mask",
+        developed=developed,
     )
 
 

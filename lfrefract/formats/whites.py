@@ -18,7 +18,10 @@ capture's mosaic into the linear image the core works on:
    darker than their bright neighbours);
 4. the result is demosaiced (OpenCV, :func:`lfrefract.formats.mosaic.demosaic_values`) into camera
    RGB, and every flagged pixel with the 3 x 3 neighbourhood its value was spread to is NaN
-   (unrecorded: the core's commands give it no weight).
+   (unrecorded: the core's commands give it no weight);
+5. the file's colour matrix takes the (balanced) camera RGB to linear RGB: the colour filters pass
+   mixtures of the scene's colours, which devignetting by a white alone does not undo. Its negative
+   entries can take a dark, noisy pixel's colour below 0, which is clipped to 0.
 
 Frames and units: images ``(H, W)`` or ``(H, W, 3)``, row ``v`` then column ``u``; lens steps are
 the metadata's ``devices.lens.zoomStep`` / ``focusStep`` (integers).
@@ -230,19 +233,33 @@ class DevelopedCapture:
     image : ndarray of float32, shape (H, W, 3)
         Camera RGB relative to the white image (1: as bright as the white), or without a white
         black-subtracted counts over ``white - black``; NaN at unrecorded pixels.
+    values : ndarray of float32, shape (H, W)
+        The devignetted mosaic before demosaicing: one value per pixel, of its colour
+        (``cfa_pattern``); 0 at flagged pixels.
+    cfa_pattern : str
+        The mosaic's pattern.
     saturated, bad : ndarray of bool, shape (H, W)
         Pixels at the capture's white level, and bad pixels of the white image.
+    flagged : ndarray of bool, shape (H, W)
+        ``saturated | bad``: the pixels of ``values`` not to be used.
     unrecorded : ndarray of bool, shape (H, W)
-        The NaN pixels of ``image``: ``saturated | bad`` grown by one pixel (the demosaicing's reach).
+        The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach).
     white : WhiteImage or None
         The white image used.
+    color_matrix : ndarray, shape (3, 3)
+        The colour matrix ``image`` went through (camera RGB, balanced, to linear RGB); a
+        colour-by-colour synthesis of ``values`` applies it to its result.
     """
 
     image: np.ndarray
+    values: np.ndarray
+    cfa_pattern: str
     saturated: np.ndarray
     bad: np.ndarray
+    flagged: np.ndarray
     unrecorded: np.ndarray
     white: WhiteImage | None
+    color_matrix: np.ndarray
 
 
 def develop(
@@ -250,9 +267,11 @@ def develop(
     white: RawMosaic | None = None,
     *,
     white_image: WhiteImage | None = None,
+    color_matrix: np.ndarray | None = None,
+    white_balance_gain: tuple[float, float, float] = (1.0, 1.0, 1.0),
     method: str = "bilinear",
 ) -> DevelopedCapture:
-    """Black level, devignetting by ``white``, flags and demosaicing: the module's steps 1-4.
+    """Black level, devignetting by ``white``, flags, demosaicing and colour: the module's steps 1-5.
 
     Parameters
     ----------
@@ -260,9 +279,16 @@ def develop(
         The capture.
     white : RawMosaic, optional
         The white image of the same lens setting and sensor (same shape and pattern). Without one
-        the capture is only black-subtracted and scaled to its white level (not devignetted).
+        the capture is only black-subtracted, scaled to its white level and white-balanced by
+        ``white_balance_gain`` (not devignetted).
     white_image : WhiteImage, optional
         Where ``white`` came from (recorded in the result).
+    color_matrix : array_like, shape (3, 3), optional
+        The file's colour matrix from white-balanced camera RGB to linear RGB (Lytro's ``ccm``),
+        applied to the demosaiced image (default identity). Devignetting by a white image balances
+        the colours to the white's.
+    white_balance_gain : tuple of 3 float
+        Gains of R, G, B without a white (Lytro's ``whiteBalanceGain``; the two greens' mean).
     method : {"bilinear", "edge_aware"}
         OpenCV's demosaicing.
 
@@ -276,8 +302,17 @@ def develop(
     one_of("method", method, ("bilinear", "edge_aware"))
     saturated = mosaic.saturated
     counts = np.maximum(mosaic.counts.astype(np.float64) - mosaic.black_level_dn, 0.0)
+    matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix, dtype=np.float64)
+    if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
+        raise ParameterError(f"color_matrix must be a finite 3 x 3 matrix, got shape {matrix.shape}")
+    gains = np.array(
+        [
+            bounded_float(f"white_balance_gain[{i}]", g, 0.0, 1e3, low_open=True)
+            for i, g in enumerate(white_balance_gain)
+        ],
+    )
     if white is None:
-        values = counts / (mosaic.white_level_dn - mosaic.black_level_dn)
+        values = counts / (mosaic.white_level_dn - mosaic.black_level_dn) * gains[mosaic.channel_index()]
         bad = np.zeros(mosaic.shape, dtype=bool)
     else:
         if not isinstance(white, RawMosaic):
@@ -292,7 +327,20 @@ def develop(
         values = np.divide(counts, lit, out=np.zeros_like(counts), where=usable)
         bad = bad_pixels(white)
     flagged = saturated | bad
-    image = demosaic_values(np.where(flagged, 0.0, values), mosaic.cfa_pattern, method=method).astype(np.float32)
+    kept = np.where(flagged, 0.0, values)
+    # The colour matrix has negative entries: in dark pixels noise can take a colour below 0, which is
+    # no radiance; it is clipped to 0 (a bias of a fraction of the noise there).
+    image = np.maximum(demosaic_values(kept, mosaic.cfa_pattern, method=method) @ matrix.T, 0.0).astype(np.float32)
     unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool))
     image[unrecorded] = np.nan
-    return DevelopedCapture(image=image, saturated=saturated, bad=bad, unrecorded=unrecorded, white=white_image)
+    return DevelopedCapture(
+        image=image,
+        values=kept.astype(np.float32),
+        cfa_pattern=mosaic.cfa_pattern,
+        saturated=saturated,
+        bad=bad,
+        flagged=flagged,
+        unrecorded=unrecorded,
+        white=white_image,
+        color_matrix=matrix,
+    )

@@ -58,6 +58,7 @@ class SearchQuery(NamedTuple):
     k: int  #: captured rays kept per necessary ray
     window: int  #: half-size of the pixel window searched under each candidate lens
     lam_m_per_rad: float  #: weight of the angle term of D
+    sites: np.ndarray  #: (2, 2) bool: raw pixels (u, v) used only where sites[v % 2, u % 2] (CFA colour)
 
 
 class NecessaryRays(NamedTuple):
@@ -168,6 +169,7 @@ def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
     """
     points, aim_points, dirs, usable, lens0 = rays.points, rays.aim_points, rays.dirs, rays.usable, rays.lens0
     lens_offsets, k, window, lam = query.lens_offsets, query.k, query.window, query.lam_m_per_rad
+    sites = query.sites
     f, f_prime, f_mla, pitch = camera.f_m, camera.f_prime_m, camera.f_mla_m, camera.pixel_pitch_m
     cu, cv, r_ok2 = camera.cu_px, camera.cv_px, camera.usable_radius2_m2
     width, height = camera.width_px, camera.height_px
@@ -246,7 +248,7 @@ def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
                 du_hi = min(window, int(np.ceil((half - h0x) * inv_step)) + 1)
                 for du in range(du_lo, du_hi + 1):
                     u = u0 + du
-                    if u < 0 or u >= width:
+                    if u < 0 or u >= width or not sites[v & 1, u & 1]:
                         continue
                     hx = h0x + du * step
                     # Inside the (shrunk) aperture means inside this lens's micro-image disc,

@@ -34,15 +34,29 @@ class RayTree:
         Main-lens radius inside which a pixel's ray is used (the aperture less the rim margin).
     lambda_m_per_rad : float
         Weight of the angle term of D.
+    sites : ndarray of bool, shape (2, 2), optional
+        Raw pixels ``(u, v)`` are used only where ``sites[v % 2, u % 2]`` (one colour of a CFA);
+        default all.
     """
 
-    def __init__(self, camera: LightFieldCamera, port: FlatPort, *, usable_radius_m: float, lambda_m_per_rad: float):
+    def __init__(
+        self,
+        camera: LightFieldCamera,
+        port: FlatPort,
+        *,
+        usable_radius_m: float,
+        lambda_m_per_rad: float,
+        sites: np.ndarray | None = None,
+    ):
         rays = camera.captured_rays()
         o, d = rays.origins_cam, rays.directions_cam
         n = port.normal
         cos = d @ n
         keep = np.hypot(o[:, 0], o[:, 1]) <= usable_radius_m
         keep &= cos > 0.0
+        if sites is not None:
+            v, u = np.divmod(np.arange(len(o)), camera.sensor.width_px)
+            keep &= np.asarray(sites, dtype=bool)[v % 2, u % 2]
         self.raw_index = np.flatnonzero(keep)
         t = (port.distance_m - o[keep] @ n) / cos[keep]
         self.points_cam = o[keep] + t[:, None] * d[keep]
@@ -107,9 +121,18 @@ class RayTree:
 class LazyRayTree:
     """Builds the :class:`RayTree` on first use, once, from any thread."""
 
-    def __init__(self, camera: LightFieldCamera, port: FlatPort, *, usable_radius_m: float, lambda_m_per_rad: float):
+    def __init__(
+        self,
+        camera: LightFieldCamera,
+        port: FlatPort,
+        *,
+        usable_radius_m: float,
+        lambda_m_per_rad: float,
+        sites: np.ndarray | None = None,
+    ):
         self._camera, self._port = camera, port
         self._usable_radius_m, self._lambda_m_per_rad = usable_radius_m, lambda_m_per_rad
+        self._sites = sites
         self._tree: RayTree | None = None
         self._lock = threading.Lock()
 
@@ -121,5 +144,6 @@ class LazyRayTree:
                     self._port,
                     usable_radius_m=self._usable_radius_m,
                     lambda_m_per_rad=self._lambda_m_per_rad,
+                    sites=self._sites,
                 )
             return self._tree

@@ -44,6 +44,7 @@ from tqdm import tqdm
 
 from lfrefract import __version__
 from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.mosaic import CFA_PATTERNS
 from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import LightFieldCamera, image_side_px
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -67,6 +68,8 @@ __all__ = [
     "SEARCH_METHODS",
     "SynthesisOptions",
     "WarpMap",
+    "apply_cfa",
+    "build_cfa_warp_maps",
     "build_warp_map",
     "lens_plane_hits",
     "mla_points_img",
@@ -123,6 +126,13 @@ class SynthesisOptions:
         Divide by the port's radiometric factor along the necessary ray (Fresnel transmittance
         times ``(n_air / n_water)^2``), so the output is radiance in the water, comparable with
         the simulator's ideal image.
+    cfa_pattern, cfa_colour : str or None
+        Gather from one colour of a Bayer mosaic only: the pattern (``"GRBG"``, ``"RGGB"``,
+        ``"GBRG"``, ``"BGGR"``, the upper-left 2 x 2 tile row by row) and the colour (``"R"``, ``"G"``
+        or ``"B"``); both or neither (default: every raw pixel). The map then applies to the mosaic's
+        values, one per pixel, and gives that colour without demosaicing
+        (:func:`build_cfa_warp_maps`): no value of a pixel is interpolated from its neighbours, which
+        at a micro-image's edge belong to the dark gap or to the next micro-image.
     search : {"auto", "analytic", "kdtree"}
         How candidates are found. ``"analytic"``: the lens and pixel window search above (an
         error where the port's air-side face is conjugate to the MLA, so that every pixel of a
@@ -144,6 +154,8 @@ class SynthesisOptions:
     rim_margin_px: float = 0.71
     compensate_port: bool = True
     search: str = "auto"
+    cfa_pattern: str | None = None
+    cfa_colour: str | None = None
 
     def __post_init__(self) -> None:
         positive_int("k", self.k)
@@ -156,6 +168,14 @@ class SynthesisOptions:
         if not isinstance(self.compensate_port, bool):
             raise ParameterError(f"compensate_port must be True or False, got {self.compensate_port!r}")
         one_of("search", self.search, SEARCH_METHODS)
+        if (self.cfa_pattern is None) != (self.cfa_colour is None):
+            raise ParameterError(
+                f"cfa_pattern and cfa_colour go together, got cfa_pattern={self.cfa_pattern!r}, "
+                f"cfa_colour={self.cfa_colour!r}"
+            )
+        if self.cfa_pattern is not None:
+            one_of("cfa_pattern", self.cfa_pattern, CFA_PATTERNS)
+            one_of("cfa_colour", self.cfa_colour, ("R", "G", "B"))
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             raise ParameterError(
@@ -164,8 +184,19 @@ class SynthesisOptions:
             )
 
     def to_dict(self) -> dict:
-        """Plain data for sidecars and the map key."""
-        return dataclasses.asdict(self)
+        """Plain data for sidecars and the map key (the CFA fields only when set, so that the maps
+        of every raw pixel keep their keys)."""
+        out = dataclasses.asdict(self)
+        if self.cfa_pattern is None:
+            del out["cfa_pattern"], out["cfa_colour"]
+        return out
+
+    @property
+    def sites(self) -> np.ndarray:
+        """(2, 2) bool: the raw pixels ``(u, v)`` used are those where ``sites[v % 2, u % 2]``."""
+        if self.cfa_pattern is None:
+            return np.ones((2, 2), dtype=bool)
+        return np.array([letter == self.cfa_colour for letter in self.cfa_pattern]).reshape(2, 2)
 
 
 def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
@@ -721,6 +752,7 @@ def build_warp_map(
             k=options.k,
             window=options.window,
             lam_m_per_rad=float(options.lambda_m_per_rad),
+            sites=options.sites,
         ),
         camera_scalars=_camera_scalars(camera, options.rim_margin_px),
         lattice=_lattice_scalars(camera),
@@ -730,6 +762,7 @@ def build_warp_map(
             port,
             usable_radius_m=camera.usable_aperture_radius_m(options.rim_margin_px),
             lambda_m_per_rad=options.lambda_m_per_rad,
+            sites=None if options.cfa_pattern is None else options.sites,
         ),
     )
     n_pixels = output.width_px * output.height_px
@@ -764,6 +797,71 @@ def build_warp_map(
         key=warp_map_key(camera, port, output, options),
         meta=meta,
     )
+
+
+def build_cfa_warp_maps(
+    camera: LightFieldCamera,
+    port: FlatPort,
+    cfa_pattern: str,
+    *,
+    output: PinholeCamera | None = None,
+    options: SynthesisOptions | None = None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> dict[str, WarpMap]:
+    """One warp map per colour of a Bayer mosaic, each gathering from that colour's pixels only.
+
+    Parameters
+    ----------
+    camera, port, output, workers, progress
+        As for :func:`build_warp_map`.
+    cfa_pattern : str
+        The mosaic's pattern (:data:`lfrefract.formats.mosaic.CFA_PATTERNS`).
+    options : SynthesisOptions, optional
+        Everything but the CFA fields, which are set per map.
+
+    Returns
+    -------
+    dict
+        ``{"R": map, "G": map, "B": map}`` (:func:`apply_cfa` applies them). Each colour's k
+        captured rays are the nearest of its own pixels (a quarter of the sensor for R and B, half
+        for G), so each channel averages as many rays as a map of every pixel.
+    """
+    options = options if options is not None else SynthesisOptions()
+    return {
+        colour: build_warp_map(
+            camera,
+            port,
+            output=output,
+            options=dataclasses.replace(options, cfa_pattern=cfa_pattern, cfa_colour=colour),
+            workers=workers,
+            progress=progress,
+        )
+        for colour in "RGB"
+    }
+
+
+def apply_cfa(maps: dict[str, WarpMap], values: np.ndarray) -> np.ndarray:
+    """The refraction-free RGB image of a mosaic's values: each colour's map on the same values.
+
+    Parameters
+    ----------
+    maps : dict
+        :func:`build_cfa_warp_maps` output.
+    values : ndarray, shape (H, W)
+        One linear value per raw pixel (a devignetted mosaic; pixels of other colours are ignored
+        by each map).
+
+    Returns
+    -------
+    ndarray of float32, shape (height, width, 3)
+    """
+    if set(maps) != {"R", "G", "B"}:
+        raise ParameterError(f"maps must have the colours R, G and B, got {sorted(maps)}")
+    values = np.asarray(values)
+    if values.ndim != 2:
+        raise ParameterError(f"values must be one value per raw pixel, shape (H, W), got {values.shape}")
+    return np.stack([maps[c].apply(values) for c in "RGB"], axis=-1)
 
 
 def _available_cpus() -> int:

@@ -485,7 +485,6 @@ def test_python_dash_m_runs_the_same_command_line(tmp_path):
 
 
 def test_synth_defaults_are_the_synthesis_options_defaults(tmp_path, capsys):
-    import dataclasses
 
     from lfrefract.cli import build_parser
     from lfrefract.synthesis.warp_map import SEARCH_METHODS, SynthesisOptions
@@ -507,7 +506,7 @@ def test_synth_defaults_are_the_synthesis_options_defaults(tmp_path, capsys):
     raw = make_capture(tmp_path / "cap")
     assert main(commands(raw, tmp_path / "out")["synth"]) == 0
     recorded = json.loads((tmp_path / "out" / "s.json").read_text())["options"]
-    assert recorded == dataclasses.asdict(defaults)
+    assert recorded == defaults.to_dict()
 
 
 def test_help_shows_the_defaults(capsys):

@@ -53,3 +53,23 @@ def test_bad_input():
         ssim(a, a, data_range=1.0, mask=np.zeros((4, 4), dtype=bool))
     with pytest.raises(ParameterError, match="data_range must be positive"):
         psnr(a, a + 1, data_range=0.0)
+
+
+def test_ray_errors_of_a_hand_computed_pair():
+    """Two rays from the origin, one along +z, one tilted 0.01 rad about y: at the plane z = 2 m they
+    are 2 tan(0.01) m apart and 0.01 rad; a NaN row (a vignetted pixel) is left out."""
+    from lfrefract.metrics import ray_errors
+
+    tilt = 0.01
+    origins = np.zeros((3, 3))
+    true = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [np.nan, np.nan, np.nan]])
+    model = np.array([[np.sin(tilt), 0.0, np.cos(tilt)], [0.0, 0.0, 5.0], [0.0, 0.0, 1.0]])
+    errors = ray_errors(origins, model, origins, true, plane_distance_m=2.0)
+    assert errors.count == 2
+    assert errors.position_max_m == pytest.approx(2.0 * np.tan(tilt), rel=1e-12)
+    assert errors.position_rms_m == pytest.approx(2.0 * np.tan(tilt) / np.sqrt(2.0), rel=1e-12)
+    assert errors.angle_max_rad == pytest.approx(tilt, rel=1e-9)
+    tilted = ray_errors(origins, model, origins, true, plane_normal=(0.0, 0.0, 2.0), plane_distance_m=2.0)
+    assert tilted.position_max_m == pytest.approx(errors.position_max_m, rel=1e-12)
+    with pytest.raises(ParameterError, match="no pair"):
+        ray_errors(origins, model, origins, true, plane_distance_m=2.0, valid=[False, False, False])

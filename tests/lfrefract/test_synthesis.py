@@ -475,3 +475,31 @@ def test_maps_built_in_memory_are_checked_too(warp):
         dataclasses.replace(warp, raw_shape=(warp.raw_shape[0] // 2, warp.raw_shape[1]))
     # The map as built passes, also through a file.
     assert dataclasses.replace(warp).key == warp.key
+
+
+def test_cfa_maps_gather_each_colour_from_its_own_sites_only():
+    """A map of one colour of a Bayer mosaic uses only that colour's raw pixels (analytic search and
+    k-d tree alike), keeps the coverage of the map of every pixel, and has a key of its own."""
+    from lfrefract import FlatPort, camera_preset
+    from lfrefract.formats.mosaic import cfa_channels
+    from lfrefract.synthesis.warp_map import build_cfa_warp_maps, build_warp_map
+
+    camera = camera_preset("tiny")
+    port = FlatPort.from_degrees(distance_m=0.02, thickness_m=0.006, tilt_x_deg=20.0)
+    every = build_warp_map(camera, port)
+    channels = cfa_channels("BGGR", (camera.sensor.height_px, camera.sensor.width_px)).ravel()
+    maps = build_cfa_warp_maps(camera, port, "BGGR")
+    for colour, warp in maps.items():
+        assert set(channels[warp.indices]) == {"RGB".index(colour)}
+        np.testing.assert_array_equal(warp.coverage, every.coverage)
+        assert warp.filled.mean() > 0.95 * every.filled.mean()
+        assert warp.key != every.key
+    tree = build_warp_map(
+        camera, port, options=SynthesisOptions(search="kdtree", cfa_pattern="BGGR", cfa_colour="R", k=4)
+    )
+    assert set(channels[tree.indices]) == {0}
+    with pytest.raises(ParameterError, match="go together"):
+        SynthesisOptions(cfa_pattern="BGGR")
+    with pytest.raises(ParameterError, match="cfa_colour"):
+        SynthesisOptions(cfa_pattern="BGGR", cfa_colour="Y")
+    assert "cfa_pattern" not in SynthesisOptions().to_dict()  # the maps of every pixel keep their keys
