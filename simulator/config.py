@@ -3,6 +3,9 @@
 A scene file has these tables (every length in metres, angles only in ``*_deg`` fields)::
 
     name = "..."                      # optional label
+    medium = "water"                  # optional: "water" (default) or "air": the camera and the
+                                      #   objects stand in air (in-air calibration captures): no
+                                      #   [port], no [water]; a real lens needs no port there
     [camera]                          # preset = "tiny" | "f01" | "illum", or every field of
     preset = "tiny"                   #   LightFieldCamera.to_dict() (with [camera.mla], [camera.sensor])
     lens = "thin"                     # optional main lens: "thin" (default), a lens preset
@@ -155,6 +158,7 @@ __all__ = [
     "MAX_TEXTURE_PX",
     "MAX_TOML_BYTES",
     "MAX_WATER_COEFFICIENT_PER_M",
+    "MEDIA",
     "MIN_MESH_SCALE",
     "MIN_SIZE_M",
     "MIN_TEXTURE_PX",
@@ -192,6 +196,8 @@ __all__ = [
 
 #: The ``camera.lens`` value of the thin main lens (the default).
 THIN_LENS = "thin"
+#: What the objects stand in (``medium``): water (behind a port, or with the camera in it) or air.
+MEDIA = ("water", "air")
 
 #: Largest absolute coordinate of a position (objects, point lights, the camera), metres.
 MAX_COORDINATE_M = 100.0
@@ -727,14 +733,14 @@ LIGHT_TYPES: dict[str, type] = {"point": PointLight, "constant": ConstantLight}
 
 
 def _check_real_lens(
-    camera: LightFieldCamera, lens: LensPrescription, port: FlatPort | None, *, has_objects: bool
+    camera: LightFieldCamera, lens: LensPrescription, port: FlatPort | None, *, sees_water: bool
 ) -> None:
-    """A real main lens must fit the camera (:class:`RealLensCamera`) and sit in air behind a port
-    that clears its front: a lens prescription is designed for air in front of it. A scene without
-    objects (a white image: uniform radiance from every direction) needs no port, since no ray's
-    direction in front of the lens changes what it sees."""
+    """A real main lens must fit the camera (:class:`RealLensCamera`) and sit in air: behind a port
+    that clears its front when it looks into water (``sees_water``), since a lens prescription is
+    designed for air in front of it. An in-air scene, or one without objects (a white image:
+    uniform radiance from every direction, which no ray's direction changes), needs no port."""
     real = RealLensCamera(camera=camera, lens=lens)
-    if port is None and not has_objects:
+    if port is None and not sees_water:
         return
     if port is None:
         raise ParameterError(
@@ -773,10 +779,16 @@ class SceneConfig:
     render: RenderSettings = field(default_factory=RenderSettings)
     water: Water | None = None
     sensor: SensorSettings | None = None
+    medium: str = "water"
     name: str = "scene"
     source: str = "<memory>"
 
     def __post_init__(self) -> None:
+        one_of("medium", self.medium, MEDIA)
+        if self.medium == "air" and self.port is not None:
+            raise ParameterError('medium = "air" takes no [port]: the camera looks straight into the air')
+        if self.medium == "air" and self.water is not None:
+            raise ParameterError('medium = "air" takes no [water]')
         constant = any(isinstance(light, ConstantLight) for light in self.lights)
         if self.port is not None and constant:
             raise ParameterError(
@@ -786,7 +798,9 @@ class SceneConfig:
         if not self.lights:
             raise ParameterError("the scene has no [[light]]: it would render black")
         if self.lens is not None:
-            _check_real_lens(self.camera, self.lens, self.port, has_objects=bool(self.objects))
+            # In air a real lens needs no port; in water it does (unless nothing is in front of it).
+            sees_water = self.medium == "water" and bool(self.objects)
+            _check_real_lens(self.camera, self.lens, self.port, sees_water=sees_water)
         if self.sensor is not None:
             _check_sensor(self.sensor, self.camera)
         _position("camera.pose.position_m", self.pose.position_m)
@@ -845,6 +859,7 @@ class SceneConfig:
             "render": plain(self.render),
             "water": None if self.water is None else self.water.to_dict(),
             "sensor": None if self.sensor is None else self.sensor.to_dict(),
+            "medium": self.medium,
         }
 
 
@@ -1050,7 +1065,8 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     """
     base = Path(base_dir)
     data = as_table("scene", data)
-    reject_unknown_keys("scene", data, {"name", "camera", "port", "render", "light", "object", "water", "sensor"})
+    keys = {"name", "camera", "port", "render", "light", "object", "water", "sensor", "medium"}
+    reject_unknown_keys("scene", data, keys)
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
     camera, pose, lens = _camera(data["camera"])
@@ -1069,6 +1085,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
         objects=_typed_entries(data.get("object", []), OBJECT_TYPES, "object", base),
         render=render,
         sensor=sensor_model(data["sensor"], camera) if "sensor" in data else None,
+        medium=text("medium", data["medium"]) if "medium" in data else "water",
     )
 
 

@@ -289,6 +289,7 @@ def test_every_example_file_reads():
     files = sorted(p for p in EXAMPLES.iterdir() if p.is_file())
     assert [p.name for p in files if p.suffix == ".toml"] == [
         "camera-illum.toml",
+        "port-default-scene.toml",
         "port-normal.toml",
         "port-tilted.toml",
     ]
@@ -299,6 +300,13 @@ def test_every_example_file_reads():
             read_port_file(path)
         else:
             pytest.fail(f"{path.name}: an example file must be a camera-*.toml or port-*.toml file")
+
+
+def test_the_default_scenes_port_file_is_its_port():
+    """README's Lytro example synthesizes a render of the default scene with this port file."""
+    from simulator.config import default_scene_path, load_scene
+
+    assert read_port_file(EXAMPLES / "port-default-scene.toml") == load_scene(default_scene_path()).port
 
 
 def test_docs_cli_lists_every_key_of_both_files():

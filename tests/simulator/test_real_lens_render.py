@@ -134,3 +134,21 @@ def test_cli_camera_override_rescales_the_scenes_preset_lens(tmp_path):
     lens = read_json(out / "meta.json")["scene"]["lens"]
     assert lens["name"] == "double-gauss"
     assert RealLensCamera.from_preset(camera_preset("tiny-2x"), "double-gauss").lens.to_dict() == lens
+
+
+def test_an_in_air_scene_takes_a_real_lens_without_a_port(tmp_path):
+    """In-air calibration captures: ``medium = "air"`` (no port, no water) lets a real lens look at
+    the objects directly; in water without a port it is refused, and air refuses a port."""
+    data = _with_camera(lens="double-gauss")
+    del data["port"]
+    with pytest.raises(ParameterError, match=r"needs a \[port\]"):
+        parse_scene(data)
+    data["medium"] = "air"
+    config = parse_scene(data).with_overrides(render=RenderSettings(spp=1, ideal_spp=1))
+    assert config.to_dict()["medium"] == "air"
+    out = render_job(config, tmp_path / "air", progress=False, write_previews=False)
+    assert read_json(out.out_dir / "meta.json")["scene"]["medium"] == "air"
+    with pytest.raises(ParameterError, match=r'medium = "air" takes no \[port\]'):
+        parse_scene(_with_camera() | {"medium": "air"})
+    with pytest.raises(ParameterError, match="medium must be one of"):
+        parse_scene(_with_camera() | {"medium": "oil"})
