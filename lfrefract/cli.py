@@ -75,6 +75,7 @@ from lfrefract import (
 from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.approx import KIND as APPROX_KIND
+from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
@@ -562,6 +563,49 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def calibrate_camera_command(args: argparse.Namespace) -> int:
+    """``lfrefract calibrate camera``: the camera's ray model from in-air chessboard light fields."""
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise ParameterError(f"--out must name a .json file, got {args.out!r}")
+    first = _board_parameters(args)
+    camera = _known(first.camera, first.raw_path)
+    prepare_output_files(
+        {out: ExpectedKind(json_kind=CAMERA_CALIBRATION_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
+    )
+    view = virtual_camera_for(camera)
+    pattern = (args.squares[0] - 1, args.squares[1] - 1)
+    sizes = list(args.square_size_m)
+    if len(sizes) not in (1, len(args.boards)):
+        raise ParameterError(
+            f"--square-size-m takes one size for every capture or one per capture ({len(args.boards)}), "
+            f"got {len(sizes)}"
+        )
+    sizes = sizes * len(args.boards) if len(sizes) == 1 else sizes
+    views = []
+    for path, size in zip(args.boards, sizes, strict=True):
+        found = board_view_from_light_field(
+            camera,
+            _board_raw(path, camera, args.white),
+            pattern=pattern,
+            square_size_m=size,
+            view=view,
+            name=path,
+        )
+        if found is None:
+            raise ParameterError(f"{path!r}: no {pattern[0]} x {pattern[1]} inner corners found in its central view")
+        views.append(found)
+    result = calibrate_camera(camera, views, view=view)
+    write_json(out, result.to_dict())
+    c = result.correction
+    print(
+        f"ray model from {len(views)} captures: pupil scale {c.pupil_scale:.5f}, slope scale {c.slope_scale:.5f}, "
+        f"k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm RMS from their rays (thin lens: "
+        f"{result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
+    )
+    return 0
+
+
 def describe_command(args: argparse.Namespace) -> int:
     """``lfrefract describe``: a preset's, a camera file's or a ``meta.json``'s camera (and port), as text or JSON."""
     if args.source in PRESETS:
@@ -758,6 +802,22 @@ def _calibrate_approx_arguments(parser: argparse.ArgumentParser) -> None:
     _board_arguments(parser, "approx")
 
 
+def _calibrate_camera_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("boards", nargs="+", help="raw captures in air of a chessboard (EXR with meta.json, or Lytro)")
+    parser.add_argument("--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board")
+    parser.add_argument(
+        "--square-size-m",
+        type=float,
+        nargs="+",
+        required=True,
+        help="edge of a square, metres: one for every capture, or one per capture (boards of several sizes)",
+    )
+    parser.add_argument("--out", required=True, help="output JSON")
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier camera calibration in --out")
+    _camera_option(parser)
+    _white_option(parser)
+
+
 @dataclass(frozen=True)
 class Command:
     """One ``lfrefract`` command: what runs it, what it takes, and its one-line help."""
@@ -790,6 +850,11 @@ CALIBRATE_COMMANDS: dict[str, Command] = {
         _calibrate_approx_arguments,
         "pinhole + distortion at one depth from chessboard captures",
     ),
+    "camera": Command(
+        calibrate_camera_command,
+        _calibrate_camera_arguments,
+        "the camera's ray model (pupil scale, slope scale, radial terms) from in-air chessboard captures",
+    ),
 }
 
 
@@ -814,7 +879,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_commands(sub, COMMANDS)
     cal = sub.add_parser(
-        "calibrate", help="estimate the MLA, the port or the approximation baseline", formatter_class=_HelpFormatter
+        "calibrate",
+        help="estimate the MLA, the camera's ray model, the port or the approximation baseline",
+        formatter_class=_HelpFormatter,
     )
     _add_commands(cal.add_subparsers(dest="target", required=True), CALIBRATE_COMMANDS)
     return parser

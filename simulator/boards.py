@@ -582,3 +582,42 @@ def port_from_renders(
         light_field_errors_px=np.concatenate(light_field),
         central_errors_px=np.concatenate(central),
     )
+
+
+def in_air_board_scene(board: dict, *, lens: str = "thin", spp: int = 16, seed: int = 0) -> SceneConfig:
+    """One board in air (``medium = "air"``, no port) before :data:`CAMERA` with main lens ``lens``.
+
+    Parameters
+    ----------
+    board : dict
+        The board's ``[[object]]`` table (:func:`board_table`).
+    lens : str
+        ``"thin"`` or a lens preset (``lfsim lenses``), scaled to the camera.
+    spp, seed : int
+        Samples per pixel and seed of the render.
+    """
+    data = {
+        "name": "in-air-boards",
+        "medium": "air",
+        "camera": {"preset": CAMERA, "lens": lens},
+        "render": {"spp": spp, "seed": seed},
+        "light": list(LIGHTS),
+        "object": [board],
+    }
+    config = parse_scene(data, source=_SOURCE)
+    check_geometry(config)
+    return config
+
+
+def in_air_boards(view: PinholeCamera) -> list[dict]:
+    """The camera calibration's ten boards in air: :data:`PORT_TARGETS` at :data:`PORT_DEPTHS_M`,
+    turned by :data:`PORT_ROTATIONS_DEG`, :data:`PORT_PX_PER_SQUARE` pixels per square in ``view``
+    (the refraction-free view of :data:`CAMERA`; so their squares differ, 9-20 mm), each centred on
+    its target's line of sight."""
+    k_inverse = np.linalg.inv(view.K)
+    tables = []
+    for (fx, fy), depth, rotation in zip(PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, strict=True):
+        sight = k_inverse @ np.array([view.K[0, 2] + fx * view.width_px, view.K[1, 2] + fy * view.height_px, 1.0])
+        square = PORT_PX_PER_SQUARE * depth / view.K[0, 0]
+        tables.append(board_table(depth * sight / sight[2], rotation, square))
+    return tables

@@ -1,6 +1,8 @@
-"""Calibration: what the pipeline estimates instead of knowing (port, MLA, the approximation baseline)."""
+"""Calibration: what the pipeline estimates instead of knowing (MLA, the camera's ray model, port, the
+approximation baseline)."""
 
 from lfrefract.calibration.approx import ApproxCalibration, calibrate_approx, detect_chessboard
+from lfrefract.calibration.camera import CameraCalibration, RayCorrection, calibrate_camera
 from lfrefract.calibration.corners import CornerTracks, light_field_corners
 from lfrefract.calibration.mla import LATTICE_MODELS, LENS_STATUS, MlaCalibration, calibrate_mla
 from lfrefract.calibration.port import (
@@ -18,11 +20,14 @@ __all__ = [
     "ApproxCalibration",
     "BoardView",
     "CalibrationError",
+    "CameraCalibration",
     "CornerTracks",
     "MlaCalibration",
     "PortCalibration",
+    "RayCorrection",
     "board_view_from_light_field",
     "calibrate_approx",
+    "calibrate_camera",
     "calibrate_mla",
     "calibrate_port",
     "detect_chessboard",

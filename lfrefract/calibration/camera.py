@@ -1,0 +1,277 @@
+"""The light-field camera's own ray model, calibrated from in-air chessboard light fields.
+
+The thin-lens model (:meth:`LightFieldCamera.captured_rays`) gives each raw pixel a ray that leaves
+the main-lens plane z = 0 at the aperture point ``a`` with slopes ``t = (dx / dz, dy / dz)``. A real
+main lens is not thin: its entrance pupil is magnified, and its rays bend more or less towards the
+field's edge (distortion). :class:`RayCorrection` maps the thin-lens ray to the camera's:
+
+    origin ``(m a, 0)``,  slopes ``s t (1 + k1 |t|^2 + k2 |t|^4)``,
+
+four parameters: the pupil scale ``m``, the slope (focal) scale ``s`` and two radial terms. The
+pupil's position along the axis is not among them: in-air views fix the camera only up to a shift
+of its frame along z (every board pose shifts with it), so the model keeps the thin lens's plane
+z = 0, and a port calibrated on this model measures its distance in the same frame.
+
+:func:`calibrate_camera` fits the model to chessboard corners located in the light field of in-air
+captures (:func:`lfrefract.calibration.port.board_view_from_light_field`: each corner seen from
+several aperture points, i.e. several thin-lens rays through it): nonlinear least squares (scipy)
+of the four parameters and one board pose per capture, minimising the distance from each corner to
+each of its rays (the ray reprojection error of Dansereau et al., CVPR 2013), in metres. Board poses
+start from OpenCV's ``solvePnP`` on the central view's corners.
+
+Frames and units: camera frame (OpenCV axes: x right, y down, z forward), metres; slopes are
+dimensionless; the board's own frame has its corners on z = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from lfrefract.calibration.port import BoardView
+from lfrefract.errors import CalibrationError, ParameterError
+from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
+
+__all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera"]
+
+#: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
+CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
+#: Fewest board captures a calibration takes: one pose per capture and four shared parameters need
+#: views at several distances and angles.
+MIN_VIEWS = 3
+#: The largest standard deviation of the pupil and slope scales accepted (relative): beyond, the
+#: views do not determine the model (too few, or all alike).
+MAX_SCALE_STD = 0.01
+
+
+@dataclass(frozen=True, kw_only=True)
+class RayCorrection:
+    """How a camera's rays depart from its thin-lens model (see the module docstring).
+
+    Attributes
+    ----------
+    pupil_scale : float
+        ``m``: aperture points scale by it, in (0.5, 2).
+    slope_scale : float
+        ``s``: the slopes scale by it (a focal-length correction), in (0.5, 2).
+    k1, k2 : float
+        Radial terms of the slopes, per squared and fourth power of the slope, each in [-10, 10].
+    """
+
+    pupil_scale: float = 1.0
+    slope_scale: float = 1.0
+    k1: float = 0.0
+    k2: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "pupil_scale", bounded_float("pupil_scale", self.pupil_scale, 0.5, 2.0))
+        object.__setattr__(self, "slope_scale", bounded_float("slope_scale", self.slope_scale, 0.5, 2.0))
+        object.__setattr__(self, "k1", bounded_float("k1", self.k1, -10.0, 10.0))
+        object.__setattr__(self, "k2", bounded_float("k2", self.k2, -10.0, 10.0))
+
+    @classmethod
+    def from_vector(cls, values: np.ndarray) -> RayCorrection:
+        """From ``(pupil_scale, slope_scale, k1, k2)``."""
+        m, s, k1, k2 = (float(v) for v in values)
+        return cls(pupil_scale=m, slope_scale=s, k1=k1, k2=k2)
+
+    def vector(self) -> np.ndarray:
+        """``(pupil_scale, slope_scale, k1, k2)``."""
+        return np.array([self.pupil_scale, self.slope_scale, self.k1, self.k2])
+
+    def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's rays for thin-lens rays (aperture points (N, 2), slopes (N, 2)).
+
+        Returns
+        -------
+        origins_cam : ndarray, shape (N, 3)
+            On the plane z = 0, metres.
+        directions_cam : ndarray, shape (N, 3)
+            Unit directions.
+        """
+        return _apply(self.vector(), np.asarray(aperture_points_m, float), np.asarray(slopes, float))
+
+    def to_dict(self) -> dict:
+        return {"pupil_scale": self.pupil_scale, "slope_scale": self.slope_scale, "k1": self.k1, "k2": self.k2}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> RayCorrection:
+        keys = {"pupil_scale", "slope_scale", "k1", "k2"}
+        reject_unknown_keys(where, dict(data), keys)
+        require_keys(where, dict(data), keys)
+        return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in keys})
+
+
+def _apply(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    m, s, k1, k2 = p
+    r2 = np.sum(t * t, axis=1, keepdims=True)
+    slopes = s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
+    origins = np.column_stack([m * a, np.zeros(len(a))])
+    directions = np.column_stack([slopes, np.ones(len(a))])
+    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class CameraCalibration:
+    """A camera's calibrated ray model (:func:`calibrate_camera`).
+
+    Attributes
+    ----------
+    camera : LightFieldCamera
+        The thin-lens camera the correction applies to (the nominal one the views were located with).
+    correction : RayCorrection
+    ray_rms_m : float
+        RMS distance from each corner to each of its rays at the solution, metres.
+    initial_ray_rms_m : float
+        The same for the thin-lens model (correction identity) with the poses fitted to it.
+    per_view_rms_m : tuple of float
+        The RMS per capture, metres.
+    correction_std : tuple of float
+        Standard deviations of ``(pupil_scale, slope_scale, k1, k2)`` from the fit's Jacobian.
+    poses : tuple of tuple of float
+        Each capture's board pose: rotation vector (rad) and translation (m), board to camera frame.
+    """
+
+    camera: LightFieldCamera
+    correction: RayCorrection
+    ray_rms_m: float
+    initial_ray_rms_m: float
+    per_view_rms_m: tuple[float, ...]
+    correction_std: tuple[float, ...]
+    poses: tuple[tuple[float, ...], ...]
+
+    def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
+        """The calibrated ray of each raw pixel (``uv`` (N, 2) or every pixel, as
+        :meth:`LightFieldCamera.captured_rays`)."""
+        thin = self.camera.captured_rays(uv)
+        d = thin.directions_cam
+        origins, directions = self.correction.apply(thin.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
+        return CapturedRays(
+            origins_cam=origins,
+            directions_cam=directions,
+            in_aperture=thin.in_aperture,
+            lens_indices=thin.lens_indices,
+        )
+
+    def to_dict(self) -> dict:
+        """Plain data for the JSON file (``kind`` :data:`CAMERA_CALIBRATION_KIND`)."""
+        return {
+            "kind": CAMERA_CALIBRATION_KIND,
+            "camera": self.camera.to_dict(),
+            "correction": self.correction.to_dict(),
+            "ray_rms_m": self.ray_rms_m,
+            "initial_ray_rms_m": self.initial_ray_rms_m,
+            "per_view_rms_m": list(self.per_view_rms_m),
+            "correction_std": dict(zip(("pupil_scale", "slope_scale", "k1", "k2"), self.correction_std, strict=True)),
+            "poses": [list(p) for p in self.poses],
+            "model": "origin (pupil_scale * a, 0), slopes slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) of the thin-lens "
+            "ray (a, t); lfrefract.calibration.camera",
+        }
+
+
+def _board_points(view: BoardView) -> np.ndarray:
+    return np.column_stack([view.board_points_m, np.zeros(len(view.board_points_m))])
+
+
+def _observed_rays(view: BoardView, k_inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Aperture points (N, 2) and thin-lens slopes (N, 2) of a view's corner observations."""
+    x = np.column_stack([view.corners_px, np.ones(len(view.corners_px))]) @ k_inverse.T
+    return view.centres[:, :2], x[:, :2] / x[:, 2:3]
+
+
+def _distances(p: np.ndarray, pose: np.ndarray, points: np.ndarray, a: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Components of each corner's offset from its ray, perpendicular to it, metres (N, 3)."""
+    rotation = Rotation.from_rotvec(pose[:3]).as_matrix()
+    corners = points @ rotation.T + pose[3:]
+    origins, directions = _apply(p, a, t)
+    return np.cross(corners - origins, directions)
+
+
+def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, view: PinholeCamera) -> CameraCalibration:
+    """Fit the ray model of ``camera`` to chessboard light fields taken in air.
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+        The nominal thin-lens camera (e.g. a Lytro file's metadata); the views were located with it.
+    views : sequence of BoardView
+        One per in-air capture (:func:`lfrefract.calibration.port.board_view_from_light_field`):
+        corners in the pinhole views of ``view`` seen from points of the main-lens plane.
+    view : PinholeCamera
+        The views' geometry ``K``.
+
+    Raises
+    ------
+    CalibrationError
+        With fewer than :data:`MIN_VIEWS` views, when a pose cannot be started (``solvePnP`` fails),
+        or when the scales are not determined (their standard deviation above :data:`MAX_SCALE_STD`).
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {type(camera).__name__}")
+    if not isinstance(view, PinholeCamera):
+        raise ParameterError(f"view must be a PinholeCamera, got {type(view).__name__}")
+    views = list(views)
+    if not all(isinstance(v, BoardView) for v in views):
+        raise ParameterError("views must be BoardView objects")
+    if len(views) < MIN_VIEWS:
+        raise CalibrationError(f"a camera calibration needs at least {MIN_VIEWS} board captures, got {len(views)}")
+    k_matrix = view.K
+    observed = [(_board_points(v), *_observed_rays(v, np.linalg.inv(k_matrix))) for v in views]
+    poses = []
+    for k, v in enumerate(views):
+        central = v.central if v.central.sum() >= 4 else np.ones(len(v.corners_px), dtype=bool)
+        ok, rvec, tvec = cv2.solvePnP(_board_points(v)[central], v.corners_px[central], k_matrix, None)
+        if not ok:  # OpenCV reports failure by its return value
+            raise CalibrationError(f"board capture {k}: no pose from its central view's corners (cv2.solvePnP)")
+        poses.append(np.concatenate([rvec.ravel(), tvec.ravel()]))
+    n = len(views)
+
+    def residuals(q: np.ndarray, fixed: np.ndarray | None) -> np.ndarray:
+        p = q[:4] if fixed is None else fixed
+        pose_block = q[4:] if fixed is None else q
+        parts = [
+            _distances(p, pose_block[6 * k : 6 * k + 6], points, a, t).ravel()
+            for k, (points, a, t) in enumerate(observed)
+        ]
+        return np.concatenate(parts)
+
+    identity = RayCorrection().vector()
+    # The thin-lens model's own best poses, for the starting figure and a good start.
+    start = least_squares(residuals, np.concatenate(poses), args=(identity,), x_scale="jac", method="lm")
+    initial_rms = math.sqrt(np.mean(start.fun**2) * 3.0)  # |d x u|^2 is the squared distance: 3 components
+    solution = least_squares(residuals, np.concatenate([identity, start.x]), args=(None,), x_scale="jac", method="lm")
+    p = solution.x[:4]
+    dof = max(1, len(solution.fun) - len(solution.x))
+    sigma2 = float(np.sum(solution.fun**2)) / dof
+    try:
+        covariance = np.linalg.pinv(solution.jac.T @ solution.jac) * sigma2
+        std = np.sqrt(np.clip(np.diag(covariance)[:4], 0.0, None))
+    except np.linalg.LinAlgError:
+        raise CalibrationError("the board captures do not determine the camera's ray model") from None
+    if not (std[0] <= MAX_SCALE_STD and std[1] <= MAX_SCALE_STD):
+        raise CalibrationError(
+            f"the board captures do not determine the camera's ray model: pupil and slope scales "
+            f"{p[0]:.4f} +- {std[0]:.2g} and {p[1]:.4f} +- {std[1]:.2g} (add captures at other distances and angles)"
+        )
+    per_view = []
+    for k, (points, a, t) in enumerate(observed):
+        d = _distances(p, solution.x[4 + 6 * k : 10 + 6 * k], points, a, t)
+        per_view.append(math.sqrt(np.mean(d**2) * 3.0))
+    return CameraCalibration(
+        camera=camera,
+        correction=RayCorrection.from_vector(p),
+        ray_rms_m=math.sqrt(np.mean(solution.fun**2) * 3.0),
+        initial_ray_rms_m=initial_rms,
+        per_view_rms_m=tuple(per_view),
+        correction_std=tuple(float(s) for s in std),
+        poses=tuple(tuple(float(x) for x in solution.x[4 + 6 * k : 10 + 6 * k]) for k in range(n)),
+    )

@@ -1,0 +1,80 @@
+"""The camera's ray model calibrated from in-air chessboard light fields (lfrefract.calibration.camera),
+scored against the simulator's true rays of a real main lens."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lfrefract import camera_preset, virtual_camera_for
+from lfrefract import cli as core_cli
+from lfrefract.calibration import board_view_from_light_field, calibrate_camera
+from lfrefract.errors import CalibrationError
+from lfrefract.formats.jsonio import read_json
+from lfrefract.metrics import ray_errors
+from lfrefract.optics.real_lens import RealLensCamera
+from simulator import boards
+from simulator.job import render_job, render_raw
+from tests.tolerances import (
+    CAMERA_CAL_ANGLE_GAIN,
+    CAMERA_CAL_RMS_GAIN,
+    CAMERA_CAL_THIN_K1,
+    CAMERA_CAL_THIN_SCALE,
+)
+
+CAMERA = camera_preset(boards.CAMERA)
+VIEW = virtual_camera_for(CAMERA)
+
+
+def board_views(mi, lens: str):
+    views = []
+    for table in boards.in_air_boards(VIEW):
+        raw = render_raw(mi, boards.in_air_board_scene(table, lens=lens), progress=False)
+        square = table["square_size_m"]
+        views.append(board_view_from_light_field(CAMERA, raw, pattern=boards.PATTERN, square_size_m=square, view=VIEW))
+    return views
+
+
+@pytest.mark.render
+def test_a_real_lens_is_calibrated_closer_to_its_true_rays(mi):
+    calibration = calibrate_camera(CAMERA, board_views(mi, "double-gauss"), view=VIEW)
+    assert calibration.ray_rms_m < CAMERA_CAL_RMS_GAIN * calibration.initial_ray_rms_m
+    real = RealLensCamera.from_preset(CAMERA, "double-gauss")
+    vv, uu = np.mgrid[0 : CAMERA.sensor.height_px : 3, 0 : CAMERA.sensor.width_px : 3]
+    uv = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(float)
+    true, thin, fitted = real.chief_rays(uv), CAMERA.captured_rays(uv), calibration.captured_rays(uv)
+    keep = true.in_aperture & thin.in_aperture
+    errors = {
+        name: ray_errors(
+            r.origins_cam, r.directions_cam, true.origins_cam, true.directions_cam, plane_distance_m=0.02, valid=keep
+        )
+        for name, r in (("thin", thin), ("fitted", fitted))
+    }
+    assert errors["fitted"].angle_rms_rad < CAMERA_CAL_ANGLE_GAIN * errors["thin"].angle_rms_rad
+
+
+@pytest.mark.render
+def test_the_thin_lens_calibrates_to_itself_by_the_command_line(mi, tmp_path, capsys):
+    """A thin-lens camera needs no correction: the command line finds the identity (to the corners'
+    noise) from five in-air board renders with their meta.json, and writes it."""
+    tables = boards.in_air_boards(VIEW)[:5]
+    paths = []
+    for k, table in enumerate(tables):
+        render_job(boards.in_air_board_scene(table), tmp_path / f"b{k}", progress=False, write_previews=False)
+        paths.append(str(tmp_path / f"b{k}" / "raw.exr"))
+    out = tmp_path / "camera.json"
+    sizes = [str(t["square_size_m"]) for t in tables]
+    argv = ["calibrate", "camera", *paths, "--squares", *map(str, boards.SQUARES), "--square-size-m", *sizes]
+    assert core_cli.main([*argv, "--out", str(out)]) == 0
+    assert "ray model from 5 captures" in capsys.readouterr().out
+    written = read_json(out)
+    assert written["kind"] == "lfrefract.calibrate.camera"
+    c = written["correction"]
+    assert abs(c["pupil_scale"] - 1.0) < CAMERA_CAL_THIN_SCALE
+    assert abs(c["slope_scale"] - 1.0) < CAMERA_CAL_THIN_SCALE
+    assert abs(c["k1"]) < CAMERA_CAL_THIN_K1
+    assert written["ray_rms_m"] == pytest.approx(written["initial_ray_rms_m"], rel=0.05)
+    assert core_cli.main([*argv[:-2], "--square-size-m", "0.01", "0.02", "--out", str(tmp_path / "x.json")]) == 2
+    assert "one per capture (5), got 2" in capsys.readouterr().err
+    with pytest.raises(CalibrationError, match="at least 3"):
+        calibrate_camera(CAMERA, [], view=VIEW)
