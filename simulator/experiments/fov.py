@@ -206,6 +206,23 @@ def setup_for(scale: str, options: ExperimentOptions | None = None) -> FovSetup:
 
 
 # ----------------------------------------------------------------------------- the exact mask
+def _necessary_ray_blocks(port: FlatPort, output: PinholeCamera, supersample: int):
+    """Blocks of output rows ``r0:r1`` with the necessary air rays of their ``s x s`` sub-pixel lines of
+    sight (pixel-major, as build_warp_map: rows, columns, sub-rows, sub-columns): ``(r0, r1, points,
+    dirs, valid)`` of :func:`~lfrefract.synthesis.warp_map.necessary_air_rays`."""
+    s = supersample
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    rows = max(1, BLOCK_RAYS // (output.width_px * s * s))
+    for r0 in range(0, output.height_px, rows):
+        r1 = min(r0 + rows, output.height_px)
+        v = np.arange(r0, r1)[:, None, None, None] + offsets[None, None, :, None]
+        u = np.arange(output.width_px)[None, :, None, None] + offsets[None, None, None, :]
+        uu, vv = np.broadcast_arrays(u, v)
+        directions = output.pixel_directions(np.stack([uu.ravel(), vv.ravel()], 1))
+        points, dirs, _, valid = necessary_air_rays(port, directions)
+        yield r0, r1, points, dirs, valid
+
+
 def required_aperture_radius(
     camera: LightFieldCamera, port: FlatPort, output: PinholeCamera | None = None, *, supersample: int = 2
 ) -> np.ndarray:
@@ -225,20 +242,10 @@ def required_aperture_radius(
     if port.clearance_m(camera.aperture_radius_m) <= 0.0:
         raise ParameterError(f"port.distance_m={port.distance_m!r} cuts the main-lens aperture")
     s = supersample
-    offsets = (np.arange(s) + 0.5) / s - 0.5
     f, f_prime = camera.focal_length_m, camera.lens_to_mla_m
     width, height = camera.sensor.width_px, camera.sensor.height_px
     out = np.empty((output.height_px, output.width_px))
-    rows = max(1, BLOCK_RAYS // (output.width_px * s * s))
-    for r0 in range(0, output.height_px, rows):
-        r1 = min(r0 + rows, output.height_px)
-        # Pixel-major sub-pixel grid, as build_warp_map: rows, columns, sub-rows, sub-columns.
-        v = np.arange(r0, r1)[:, None, None, None] + offsets[None, None, :, None]
-        u = np.arange(output.width_px)[None, :, None, None] + offsets[None, None, None, :]
-        uu, vv = np.broadcast_arrays(u, v)
-        points, dirs, _, valid = necessary_air_rays(
-            port, output.pixel_directions(np.stack([uu.ravel(), vv.ravel()], 1))
-        )
+    for r0, r1, points, dirs, valid in _necessary_ray_blocks(port, output, s):
         # The lens-plane crossing and the MLA point exactly as build_warp_map computes them, then
         # the micro-image position through the main-lens centre, in sensor pixels.
         hit = lens_plane_hits(points, dirs)
@@ -285,18 +292,9 @@ def real_lens_exact_mask(
     # The same port seen from the pupil: n . (X' + c) = d, so d' = d - n . c.
     local = dataclasses.replace(port, distance_m=port.distance_m - float(port.normal @ pupil_cam))
     s = supersample
-    offsets = (np.arange(s) + 0.5) / s - 0.5
     width, height = camera.sensor.width_px, camera.sensor.height_px
     out = np.empty((output.height_px, output.width_px), dtype=bool)
-    rows = max(1, BLOCK_RAYS // (output.width_px * s * s))
-    for r0 in range(0, output.height_px, rows):
-        r1 = min(r0 + rows, output.height_px)
-        v = np.arange(r0, r1)[:, None, None, None] + offsets[None, None, :, None]
-        u = np.arange(output.width_px)[None, :, None, None] + offsets[None, None, None, :]
-        uu, vv = np.broadcast_arrays(u, v)
-        points, dirs, _, valid = necessary_air_rays(
-            local, output.pixel_directions(np.stack([uu.ravel(), vv.ravel()], 1))
-        )
+    for r0, r1, points, dirs, valid in _necessary_ray_blocks(local, output, s):
         ok = valid & np.all(np.isfinite(points), axis=1)
         passed = np.zeros(len(points), dtype=bool)
         if np.any(ok):
