@@ -9,6 +9,11 @@ against the true rays of every 2nd pixel (``RealLensCamera.chief_rays``): where 
 20 mm in front of the lens (mm), after the frames are aligned along z (the model's gauge: in-air
 views fix the camera only up to a shift of its frame along its axis), and their angle (mrad).
 
+Then, for each real lens, the corner test of ``benchmarks/measure_real_lens_gap.py`` (a board at
+0.15 and 0.6 m behind a straight port and one tilted (25, 10) deg, the paper's k = 32): the
+refraction-free image's corners against the true corners' projection (px RMS), synthesized with
+the thin-lens warp map and with the calibrated one (``SynthesisOptions(ray_correction=...)``).
+
     python benchmarks/measure_camera_calibration.py [--lenses thin double-gauss] [--spp 16]
 """
 
@@ -24,9 +29,15 @@ from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.calibration import board_view_from_light_field, calibrate_camera
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.real_lens import RealLensCamera
+from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, build_warp_map
 from simulator import boards
 from simulator.backend import load_mitsuba
+from simulator.boards import chessboard_corners_world
+from simulator.config import main_lens
 from simulator.job import render_raw
+
+#: The corner test's ports and lines of sight (as benchmarks/measure_real_lens_gap.py).
+TILTS = {(0.0, 0.0): (0.0, 0.0), (25.0, 10.0): (0.16, -0.125)}
 
 #: The frame shifts along z searched when aligning a model's frame with the true one, metres.
 SHIFTS_M = np.linspace(-0.01, 0.01, 401)
@@ -103,6 +114,23 @@ def main() -> int:
                 f"  {name}: at 20 mm {e.position_rms_m * 1e3:.3f} mm RMS ({aligned * 1e3:.3f} mm with the frame "
                 f"shifted {shift * 1e3:+.2f} mm along z), angle {e.angle_rms_rad * 1e3:.2f} mrad RMS"
             )
+        print("  | port tilt (x, y), deg | board depth, m | corners, thin-lens map / calibrated map, px RMS |")
+        print("  | --- | ---: | --- |")
+        for tilt, sight in TILTS.items():
+            empty = boards.empty_scene(tilt)
+            thin_map = build_warp_map(empty.camera, empty.port, options=SynthesisOptions(k=PAPER_K))
+            options = SynthesisOptions(k=PAPER_K, ray_correction=calibration.correction)
+            fitted_map = build_warp_map(empty.camera, empty.port, options=options)
+            for depth_m in (0.15, 0.6):
+                config = boards.board_scene(tilt, boards.slanted_board(depth_m, sight, thin_map.output.focal_px))
+                config = config.with_overrides(lens=main_lens(lens, config.camera))
+                expected = thin_map.output.project(chessboard_corners_world(config.objects[0]))
+                raw = render_raw(mi, config, progress=False)
+                cells = []
+                for warp in (thin_map, fitted_map):
+                    found = boards.find_corners(warp.apply(raw))
+                    cells.append("not found" if found is None else f"{boards.corner_rms_px(found, expected):.3f}")
+                print(f"  | {tilt[0]:g}, {tilt[1]:g} | {depth_m:g} | {cells[0]} / {cells[1]} |", flush=True)
     return 0
 
 

@@ -89,6 +89,7 @@ from lfrefract.formats.capture import (
     mask_warp_map,
     mla_from_file,
     port_from_file,
+    ray_correction_from_option,
     read_capture,
     read_sidecar,
 )
@@ -232,7 +233,13 @@ def synth(args: argparse.Namespace) -> int:
     by_cfa = _colour_by_cfa(args, capture)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
     prepare_output_files(synth_outputs(out), inputs=inputs, overwrite=args.overwrite)  # before the map is built
-    options = SynthesisOptions(k=args.k, supersample=args.supersample, lambda_m_per_rad=args.lam, search=args.search)
+    options = SynthesisOptions(
+        k=args.k,
+        supersample=args.supersample,
+        lambda_m_per_rad=args.lam,
+        search=args.search,
+        ray_correction=ray_correction_from_option(args.camera),
+    )
     output = capture.output
     developed = capture.developed
     if by_cfa and developed is not None:

@@ -3,7 +3,8 @@
 The thin-lens model (:meth:`LightFieldCamera.captured_rays`) gives each raw pixel a ray that leaves
 the main-lens plane z = 0 at the aperture point ``a`` with slopes ``t = (dx / dz, dy / dz)``. A real
 main lens is not thin: its entrance pupil is magnified, and its rays bend more or less towards the
-field's edge (distortion). :class:`RayCorrection` maps the thin-lens ray to the camera's:
+field's edge (distortion). :class:`~lfrefract.optics.ray_correction.RayCorrection` maps the
+thin-lens ray to the camera's:
 
     origin ``(m a, 0)``,  slopes ``s t (1 + k1 |t|^2 + k2 |t|^4)``,
 
@@ -26,9 +27,8 @@ dimensionless; the board's own frame has its corners on z = 0.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -39,7 +39,7 @@ from lfrefract.calibration.port import BoardView
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
-from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
+from lfrefract.optics.ray_correction import RayCorrection, apply_correction
 
 __all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera"]
 
@@ -51,73 +51,6 @@ MIN_VIEWS = 3
 #: The largest standard deviation of the pupil and slope scales accepted (relative): beyond, the
 #: views do not determine the model (too few, or all alike).
 MAX_SCALE_STD = 0.01
-
-
-@dataclass(frozen=True, kw_only=True)
-class RayCorrection:
-    """How a camera's rays depart from its thin-lens model (see the module docstring).
-
-    Attributes
-    ----------
-    pupil_scale : float
-        ``m``: aperture points scale by it, in (0.5, 2).
-    slope_scale : float
-        ``s``: the slopes scale by it (a focal-length correction), in (0.5, 2).
-    k1, k2 : float
-        Radial terms of the slopes, per squared and fourth power of the slope, each in [-10, 10].
-    """
-
-    pupil_scale: float = 1.0
-    slope_scale: float = 1.0
-    k1: float = 0.0
-    k2: float = 0.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "pupil_scale", bounded_float("pupil_scale", self.pupil_scale, 0.5, 2.0))
-        object.__setattr__(self, "slope_scale", bounded_float("slope_scale", self.slope_scale, 0.5, 2.0))
-        object.__setattr__(self, "k1", bounded_float("k1", self.k1, -10.0, 10.0))
-        object.__setattr__(self, "k2", bounded_float("k2", self.k2, -10.0, 10.0))
-
-    @classmethod
-    def from_vector(cls, values: np.ndarray) -> RayCorrection:
-        """From ``(pupil_scale, slope_scale, k1, k2)``."""
-        m, s, k1, k2 = (float(v) for v in values)
-        return cls(pupil_scale=m, slope_scale=s, k1=k1, k2=k2)
-
-    def vector(self) -> np.ndarray:
-        """``(pupil_scale, slope_scale, k1, k2)``."""
-        return np.array([self.pupil_scale, self.slope_scale, self.k1, self.k2])
-
-    def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The camera's rays for thin-lens rays (aperture points (N, 2), slopes (N, 2)).
-
-        Returns
-        -------
-        origins_cam : ndarray, shape (N, 3)
-            On the plane z = 0, metres.
-        directions_cam : ndarray, shape (N, 3)
-            Unit directions.
-        """
-        return _apply(self.vector(), np.asarray(aperture_points_m, float), np.asarray(slopes, float))
-
-    def to_dict(self) -> dict:
-        return {"pupil_scale": self.pupil_scale, "slope_scale": self.slope_scale, "k1": self.k1, "k2": self.k2}
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> RayCorrection:
-        keys = {"pupil_scale", "slope_scale", "k1", "k2"}
-        reject_unknown_keys(where, dict(data), keys)
-        require_keys(where, dict(data), keys)
-        return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in keys})
-
-
-def _apply(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    m, s, k1, k2 = p
-    r2 = np.sum(t * t, axis=1, keepdims=True)
-    slopes = s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
-    origins = np.column_stack([m * a, np.zeros(len(a))])
-    directions = np.column_stack([slopes, np.ones(len(a))])
-    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -152,15 +85,7 @@ class CameraCalibration:
     def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
         """The calibrated ray of each raw pixel (``uv`` (N, 2) or every pixel, as
         :meth:`LightFieldCamera.captured_rays`)."""
-        thin = self.camera.captured_rays(uv)
-        d = thin.directions_cam
-        origins, directions = self.correction.apply(thin.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
-        return CapturedRays(
-            origins_cam=origins,
-            directions_cam=directions,
-            in_aperture=thin.in_aperture,
-            lens_indices=thin.lens_indices,
-        )
+        return self.correction.corrected(self.camera.captured_rays(uv))
 
     def to_dict(self) -> dict:
         """Plain data for the JSON file (``kind`` :data:`CAMERA_CALIBRATION_KIND`)."""
@@ -192,7 +117,7 @@ def _distances(p: np.ndarray, pose: np.ndarray, points: np.ndarray, a: np.ndarra
     """Components of each corner's offset from its ray, perpendicular to it, metres (N, 3)."""
     rotation = Rotation.from_rotvec(pose[:3]).as_matrix()
     corners = points @ rotation.T + pose[3:]
-    origins, directions = _apply(p, a, t)
+    origins, directions = apply_correction(p, a, t)
     return np.cross(corners - origins, directions)
 
 

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
@@ -64,6 +65,7 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.validate import one_of
 
 __all__ = [
@@ -84,6 +86,7 @@ __all__ = [
     "mask_warp_map",
     "mla_from_file",
     "port_from_file",
+    "ray_correction_from_option",
     "read_capture",
     "read_ground_truth",
     "read_lytro_capture",
@@ -674,6 +677,30 @@ def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
     raise ParameterError(
         f"--camera must be a preset ({', '.join(sorted(PRESETS))}) or a JSON or TOML camera file, got {str(value)!r}"
     )
+
+
+def ray_correction_from_option(value: str | os.PathLike | None) -> RayCorrection | None:
+    """The calibrated ray correction a ``--camera`` option carries: that of a camera calibration
+    (``lfrefract calibrate camera`` output, kind ``lfrefract.calibrate.camera``); None for any other
+    camera (a preset, a camera file, a ``meta.json``).
+
+    Raises
+    ------
+    FileFormatError
+        If a camera calibration's ``correction`` is missing or invalid.
+    """
+    if value is None:
+        return None
+    path = Path(value)
+    if not path.is_file() or path.suffix.lower() != ".json":
+        return None
+    data = read_json(path)
+    if data.get("kind") != CAMERA_CALIBRATION_KIND:
+        return None
+    try:
+        return RayCorrection.from_dict(_json_key(path, "correction", "--camera"), where=f"{str(path)!r}: correction")
+    except ParameterError as exc:
+        raise FileFormatError(str(exc)) from None
 
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:

@@ -21,6 +21,7 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort, PortTrace, fresnel_transmittance, refract
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.optics.water import seawater_index
 
@@ -39,6 +40,7 @@ __all__ = [
     "PinholeCamera",
     "PortTrace",
     "Pose",
+    "RayCorrection",
     "RealLensCamera",
     "SensorGeometry",
     "Surface",

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.port import FlatPort
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis._kernels import angle_from_chord
 
 __all__ = ["LazyRayTree", "RayTree"]
@@ -37,6 +38,9 @@ class RayTree:
     sites : ndarray of bool, shape (2, 2), optional
         Raw pixels ``(u, v)`` are used only where ``sites[v % 2, u % 2]`` (one colour of a CFA);
         default all.
+    correction : RayCorrection, optional
+        The camera's calibrated rays instead of its thin-lens ones (which pixels are usable is
+        still the thin-lens model's).
     """
 
     def __init__(
@@ -47,12 +51,15 @@ class RayTree:
         usable_radius_m: float,
         lambda_m_per_rad: float,
         sites: np.ndarray | None = None,
+        correction: RayCorrection | None = None,
     ):
         rays = camera.captured_rays()
+        keep = np.hypot(rays.origins_cam[:, 0], rays.origins_cam[:, 1]) <= usable_radius_m
+        if correction is not None:
+            rays = correction.corrected(rays)
         o, d = rays.origins_cam, rays.directions_cam
         n = port.normal
         cos = d @ n
-        keep = np.hypot(o[:, 0], o[:, 1]) <= usable_radius_m
         keep &= cos > 0.0
         if sites is not None:
             v, u = np.divmod(np.arange(len(o)), camera.sensor.width_px)
@@ -129,10 +136,11 @@ class LazyRayTree:
         usable_radius_m: float,
         lambda_m_per_rad: float,
         sites: np.ndarray | None = None,
+        correction: RayCorrection | None = None,
     ):
         self._camera, self._port = camera, port
         self._usable_radius_m, self._lambda_m_per_rad = usable_radius_m, lambda_m_per_rad
-        self._sites = sites
+        self._sites, self._correction = sites, correction
         self._tree: RayTree | None = None
         self._lock = threading.Lock()
 
@@ -145,5 +153,6 @@ class LazyRayTree:
                     usable_radius_m=self._usable_radius_m,
                     lambda_m_per_rad=self._lambda_m_per_rad,
                     sites=self._sites,
+                    correction=self._correction,
                 )
             return self._tree

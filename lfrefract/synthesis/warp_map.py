@@ -49,6 +49,7 @@ from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import LightFieldCamera, image_side_px
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis._kernels import (
     AirFace,
     CameraScalars,
@@ -133,6 +134,11 @@ class SynthesisOptions:
         values, one per pixel, and gives that colour without demosaicing
         (:func:`build_cfa_warp_maps`): no value of a pixel is interpolated from its neighbours, which
         at a micro-image's edge belong to the dark gap or to the next micro-image.
+    ray_correction : RayCorrection or None
+        The camera's calibrated departure from its thin-lens rays
+        (:func:`lfrefract.calibration.calibrate_camera`): candidates are then the corrected rays,
+        searched with the k-d tree (the analytic search assumes the thin lens); the exact coverage
+        is still judged on the thin-lens model. Default None: the thin-lens rays.
     search : {"auto", "analytic", "kdtree"}
         How candidates are found. ``"analytic"``: the lens and pixel window search above (an
         error where the port's air-side face is conjugate to the MLA, so that every pixel of a
@@ -156,6 +162,7 @@ class SynthesisOptions:
     search: str = "auto"
     cfa_pattern: str | None = None
     cfa_colour: str | None = None
+    ray_correction: RayCorrection | None = None
 
     def __post_init__(self) -> None:
         positive_int("k", self.k)
@@ -176,6 +183,10 @@ class SynthesisOptions:
         if self.cfa_pattern is not None:
             one_of("cfa_pattern", self.cfa_pattern, CFA_PATTERNS)
             one_of("cfa_colour", self.cfa_colour, ("R", "G", "B"))
+        if self.ray_correction is not None and not isinstance(self.ray_correction, RayCorrection):
+            raise ParameterError(f"ray_correction must be a RayCorrection or None, got {self.ray_correction!r}")
+        if self.ray_correction is not None and self.search == "analytic":
+            raise ParameterError("a ray_correction needs search='auto' or 'kdtree': the analytic search is thin-lens")
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             raise ParameterError(
@@ -189,6 +200,10 @@ class SynthesisOptions:
         out = dataclasses.asdict(self)
         if self.cfa_pattern is None:
             del out["cfa_pattern"], out["cfa_colour"]
+        if self.ray_correction is None:
+            del out["ray_correction"]
+        else:
+            out["ray_correction"] = self.ray_correction.to_dict()
         return out
 
     @property
@@ -200,9 +215,11 @@ class SynthesisOptions:
 
 
 def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
-    """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, or
-    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``)."""
-    return options.search == "kdtree" or (options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m)
+    """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, a
+    ``ray_correction``, or ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``)."""
+    if options.search == "kdtree" or options.ray_correction is not None:
+        return True
+    return options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m
 
 
 def necessary_air_rays(
@@ -763,6 +780,7 @@ def build_warp_map(
             usable_radius_m=camera.usable_aperture_radius_m(options.rim_margin_px),
             lambda_m_per_rad=options.lambda_m_per_rad,
             sites=None if options.cfa_pattern is None else options.sites,
+            correction=options.ray_correction,
         ),
     )
     n_pixels = output.width_px * output.height_px
