@@ -75,7 +75,7 @@ from lfrefract import (
 from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.approx import KIND as APPROX_KIND
-from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera
+from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
 from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
@@ -534,6 +534,9 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
                 "(or under 8 of its corners located)"
             )
         views.append(board_view)
+    correction = ray_correction_from_option(args.camera)
+    if correction is not None:  # a calibrated camera: its rays, not the thin lens's
+        views = [corrected_view(v, correction, view) for v in views]
     result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     write_json(
         out,

@@ -855,3 +855,6 @@ CAMERA_CAL_THIN_K1 = 0.02
 # board at 0.6 m: 0.313 px RMS from their true projection with the thin-lens warp map, 0.160 px with
 # the calibrated one (0.51 of it; the thin lens's own 0.108 px).
 CAMERA_CAL_CORNER_GAIN = 0.7
+# The port behind (25, 10) deg calibrated from underwater boards through the double Gauss: normal
+# 1.575 deg off on the thin-lens model, 0.457 deg on the calibrated one (0.29 of it).
+CAMERA_CAL_PORT_NORMAL_GAIN = 0.5

@@ -41,7 +41,7 @@ from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import RayCorrection, apply_correction
 
-__all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera"]
+__all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera", "corrected_view"]
 
 #: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
 CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
@@ -200,3 +200,17 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         correction_std=tuple(float(s) for s in std),
         poses=tuple(tuple(float(x) for x in solution.x[4 + 6 * k : 10 + 6 * k]) for k in range(n)),
     )
+
+
+def corrected_view(view: BoardView, correction: RayCorrection, pinhole: PinholeCamera) -> BoardView:
+    """A board view's corners as the calibrated camera sees them: each observation's thin-lens ray
+    (its view centre on z = 0 and the line of sight of its pixel in ``pinhole``) corrected, and
+    expressed again as a centre and a pixel of ``pinhole``. The port calibration
+    (:func:`lfrefract.calibration.calibrate_port`) then works on the calibrated model unchanged.
+    """
+    if not isinstance(view, BoardView):
+        raise ParameterError(f"view must be a BoardView, got {type(view).__name__}")
+    a, t = _observed_rays(view, np.linalg.inv(pinhole.K))
+    origins, directions = correction.apply(a, t)
+    pixels = (directions / directions[:, 2:3]) @ pinhole.K.T
+    return BoardView(corners_px=pixels[:, :2], board_points_m=view.board_points_m, centres_m=origins)
