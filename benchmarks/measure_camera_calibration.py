@@ -12,7 +12,10 @@ views fix the camera only up to a shift of its frame along its axis), and their 
 Then, for each real lens, the corner test of ``benchmarks/measure_real_lens_gap.py`` (a board at
 0.15 and 0.6 m behind a straight port and one tilted (25, 10) deg, the paper's k = 32): the
 refraction-free image's corners against the true corners' projection (px RMS), synthesized with
-the thin-lens warp map and with the calibrated one (``SynthesisOptions(ray_correction=...)``).
+the thin-lens warp map and with the calibrated one (``SynthesisOptions(ray_correction=...)``); and
+the port calibrated from the ten underwater boards of ``simulator.boards.port_boards`` on each model
+(``corrected_view``), its normal and distance against the true port, and the corner test again with
+each chain's own port.
 
     python benchmarks/measure_camera_calibration.py [--lenses thin double-gauss] [--spp 16]
 """
@@ -26,7 +29,8 @@ import time
 import numpy as np
 
 from lfrefract import camera_preset, virtual_camera_for
-from lfrefract.calibration import board_view_from_light_field, calibrate_camera
+from lfrefract.calibration import board_view_from_light_field, calibrate_camera, calibrate_port
+from lfrefract.calibration.camera import corrected_view
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, build_warp_map
@@ -131,7 +135,46 @@ def main() -> int:
                     found = boards.find_corners(warp.apply(raw))
                     cells.append("not found" if found is None else f"{boards.corner_rms_px(found, expected):.3f}")
                 print(f"  | {tilt[0]:g}, {tilt[1]:g} | {depth_m:g} | {cells[0]} / {cells[1]} |", flush=True)
+        _port_chain(mi, lens, calibration, view, camera)
     return 0
+
+
+def _port_chain(mi, lens: str, calibration, view, camera) -> None:
+    """The port on each model, and the corners with each chain's own port."""
+    print("  | port tilt (x, y), deg | model | normal error, deg | distance, mm (true) | corners at 0.15 / 0.6 m, px |")
+    print("  | --- | --- | ---: | --- | --- |")
+    for tilt, sight in TILTS.items():
+        truth = boards.empty_scene(tilt).port
+        views = []
+        for table in boards.port_boards(tilt, view):
+            config = boards.board_scene(tilt, table, spp=boards.PORT_SPP)
+            raw = render_raw(mi, config.with_overrides(lens=main_lens(lens, config.camera)), progress=False)
+            found = board_view_from_light_field(
+                camera, raw, pattern=boards.PATTERN, square_size_m=table["square_size_m"], view=view
+            )
+            if found is not None:
+                views.append(found)
+        known = {"thickness_m": truth.thickness_m, "n_glass": truth.n_glass, "n_water": truth.n_water}
+        for model, correction, observed in (
+            ("thin-lens", None, views),
+            ("calibrated", calibration.correction, [corrected_view(v, calibration.correction, view) for v in views]),
+        ):
+            port = calibrate_port(view, observed, **known).port
+            error = np.degrees(np.arccos(np.clip(port.normal @ truth.normal, -1.0, 1.0)))
+            warp = build_warp_map(camera, port, options=SynthesisOptions(k=PAPER_K, ray_correction=correction))
+            reference = build_warp_map(camera, truth, options=SynthesisOptions(k=PAPER_K))
+            cells = []
+            for depth_m in (0.15, 0.6):
+                config = boards.board_scene(tilt, boards.slanted_board(depth_m, sight, reference.output.focal_px))
+                config = config.with_overrides(lens=main_lens(lens, config.camera))
+                expected = reference.output.project(chessboard_corners_world(config.objects[0]))
+                found = boards.find_corners(warp.apply(render_raw(mi, config, progress=False)))
+                cells.append("not found" if found is None else f"{boards.corner_rms_px(found, expected):.3f}")
+            print(
+                f"  | {tilt[0]:g}, {tilt[1]:g} | {model} | {error:.2f} | {port.distance_m * 1e3:.1f} "
+                f"({truth.distance_m * 1e3:.1f}) | {cells[0]} / {cells[1]} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":
