@@ -517,12 +517,12 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
     views = []
-    for path in args.boards:
+    for path, size in zip(args.boards, _square_sizes(args), strict=True):
         board_view = board_view_from_light_field(
             camera,
             _board_raw(path, camera, args.white),
             pattern=pattern,
-            square_size_m=args.square_size_m,
+            square_size_m=size,
             view=view,
             method=args.corners,
             offsets_px=offsets,
@@ -573,6 +573,17 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _square_sizes(args: argparse.Namespace) -> list[float]:
+    """``--square-size-m``: one size for every board capture, or one per capture, as a list per capture."""
+    sizes = list(args.square_size_m)
+    if len(sizes) not in (1, len(args.boards)):
+        raise ParameterError(
+            f"--square-size-m takes one size for every capture or one per capture ({len(args.boards)}), "
+            f"got {len(sizes)}"
+        )
+    return sizes * len(args.boards) if len(sizes) == 1 else sizes
+
+
 def calibrate_camera_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate camera``: the camera's ray model from in-air chessboard light fields."""
     out = Path(args.out)
@@ -585,15 +596,8 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     )
     view = virtual_camera_for(camera)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
-    sizes = list(args.square_size_m)
-    if len(sizes) not in (1, len(args.boards)):
-        raise ParameterError(
-            f"--square-size-m takes one size for every capture or one per capture ({len(args.boards)}), "
-            f"got {len(sizes)}"
-        )
-    sizes = sizes * len(args.boards) if len(sizes) == 1 else sizes
     views = []
-    for path, size in zip(args.boards, sizes, strict=True):
+    for path, size in zip(args.boards, _square_sizes(args), strict=True):
         found = board_view_from_light_field(
             camera,
             _board_raw(path, camera, args.white),
@@ -777,10 +781,21 @@ def _calibrate_mla_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier MLA calibration in --out")
 
 
-def _board_arguments(parser: argparse.ArgumentParser, target: str) -> None:
-    parser.add_argument("boards", nargs="+", help="raw captures (EXR) of a chessboard, meta.json beside them")
+def _board_arguments(parser: argparse.ArgumentParser, target: str, *, sizes_per_capture: bool = False) -> None:
+    parser.add_argument(
+        "boards", nargs="+", help="raw captures of a chessboard (EXR with meta.json beside them, or Lytro files)"
+    )
     parser.add_argument("--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board")
-    parser.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
+    if sizes_per_capture:
+        parser.add_argument(
+            "--square-size-m",
+            type=float,
+            nargs="+",
+            required=True,
+            help="edge of a square, metres: one for every capture, or one per capture (boards of several sizes)",
+        )
+    else:
+        parser.add_argument("--square-size-m", type=float, required=True, help="edge of a square, metres")
     parser.add_argument("--out", required=True, help="output JSON")
     parser.add_argument("--overwrite", action="store_true", help=f"replace an earlier {target} calibration in --out")
     _camera_option(parser)
@@ -788,7 +803,7 @@ def _board_arguments(parser: argparse.ArgumentParser, target: str) -> None:
 
 
 def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
-    _board_arguments(parser, "port")
+    _board_arguments(parser, "port", sizes_per_capture=True)
     parser.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
     parser.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
     parser.add_argument("--n-water", type=float, help="water index (default: meta.json)")
@@ -813,19 +828,7 @@ def _calibrate_approx_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _calibrate_camera_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("boards", nargs="+", help="raw captures in air of a chessboard (EXR with meta.json, or Lytro)")
-    parser.add_argument("--squares", type=int, nargs=2, required=True, metavar=("C", "R"), help="squares of the board")
-    parser.add_argument(
-        "--square-size-m",
-        type=float,
-        nargs="+",
-        required=True,
-        help="edge of a square, metres: one for every capture, or one per capture (boards of several sizes)",
-    )
-    parser.add_argument("--out", required=True, help="output JSON")
-    parser.add_argument("--overwrite", action="store_true", help="replace an earlier camera calibration in --out")
-    _camera_option(parser)
-    _white_option(parser)
+    _board_arguments(parser, "camera", sizes_per_capture=True)
 
 
 @dataclass(frozen=True)
