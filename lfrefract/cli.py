@@ -68,6 +68,7 @@ from lfrefract import (
     FlatPort,
     LightFieldCamera,
     ParameterError,
+    PinholeCamera,
     __version__,
     camera_preset,
     virtual_camera_for,
@@ -76,7 +77,7 @@ from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
-from lfrefract.calibration.port import CORNER_METHODS, board_view_from_light_field
+from lfrefract.calibration.port import CORNER_METHODS, BoardView, board_view_from_light_field
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
@@ -516,24 +517,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     if step != 0 and args.corners != "views":
         raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
-    views = []
-    for path, size in zip(args.boards, _square_sizes(args), strict=True):
-        board_view = board_view_from_light_field(
-            camera,
-            _board_raw(path, camera, args.white),
-            pattern=pattern,
-            square_size_m=size,
-            view=view,
-            method=args.corners,
-            offsets_px=offsets,
-            name=str(path),
-        )
-        if board_view is None:
-            raise ParameterError(
-                f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found "
-                "(or under 8 of its corners located)"
-            )
-        views.append(board_view)
+    views = _board_views(args, camera, view, pattern, method=args.corners, offsets_px=offsets)
     correction = ray_correction_from_option(args.camera)
     if correction is not None:  # a calibrated camera: its rays, not the thin lens's
         views = [corrected_view(v, correction, view) for v in views]
@@ -584,6 +568,38 @@ def _square_sizes(args: argparse.Namespace) -> list[float]:
     return sizes * len(args.boards) if len(sizes) == 1 else sizes
 
 
+def _board_views(
+    args: argparse.Namespace,
+    camera: LightFieldCamera,
+    view: PinholeCamera,
+    pattern: tuple[int, int],
+    *,
+    method: str = "light-field",
+    offsets_px: tuple[tuple[float, float], ...] = ((0.0, 0.0),),
+) -> list[BoardView]:
+    """The corners of every board capture of ``args.boards`` (:func:`board_view_from_light_field`),
+    each with its square size; a capture where the board is not found is an error naming it."""
+    views = []
+    for path, size in zip(args.boards, _square_sizes(args), strict=True):
+        board_view = board_view_from_light_field(
+            camera,
+            _board_raw(path, camera, args.white),
+            pattern=pattern,
+            square_size_m=size,
+            view=view,
+            method=method,
+            offsets_px=offsets_px,
+            name=str(path),
+        )
+        if board_view is None:
+            raise ParameterError(
+                f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found "
+                "(or under 8 of its corners located)"
+            )
+        views.append(board_view)
+    return views
+
+
 def calibrate_camera_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate camera``: the camera's ray model from in-air chessboard light fields."""
     out = Path(args.out)
@@ -596,19 +612,7 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     )
     view = virtual_camera_for(camera)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
-    views = []
-    for path, size in zip(args.boards, _square_sizes(args), strict=True):
-        found = board_view_from_light_field(
-            camera,
-            _board_raw(path, camera, args.white),
-            pattern=pattern,
-            square_size_m=size,
-            view=view,
-            name=path,
-        )
-        if found is None:
-            raise ParameterError(f"{path!r}: no {pattern[0]} x {pattern[1]} inner corners found in its central view")
-        views.append(found)
+    views = _board_views(args, camera, view, pattern)
     result = calibrate_camera(camera, views, view=view)
     write_json(out, result.to_dict())
     c = result.correction

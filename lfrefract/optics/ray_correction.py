@@ -97,15 +97,6 @@ class RayCorrection:
         return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in keys})
 
 
-def _apply(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    m, s, k1, k2 = p
-    r2 = np.sum(t * t, axis=1, keepdims=True)
-    slopes = s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
-    origins = np.column_stack([m * a, np.zeros(len(a))])
-    directions = np.column_stack([slopes, np.ones(len(a))])
-    return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
-
-
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`RayCorrection.apply` for the parameter vector ``p = (m, s, k1, k2)`` (the fit's form)."""
     m, s, k1, k2 = p
