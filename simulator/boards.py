@@ -301,23 +301,25 @@ def calibration_boards(tilt_deg: tuple[float, float], depth_m: float, view: Pinh
         ``[[object]]`` tables.
     """
     depths = [depth_m] * len(CALIBRATION_TARGETS)
-    return boards_at_targets(tilt_deg, view, CALIBRATION_TARGETS, depths, CALIBRATION_ROTATIONS_DEG)
+    return boards_at_targets(empty_scene(tilt_deg).port, view, CALIBRATION_TARGETS, depths, CALIBRATION_ROTATIONS_DEG)
 
 
-def port_boards(tilt_deg: tuple[float, float], view: PinholeCamera) -> list[dict]:
-    """The ten port calibration boards behind the port of ``tilt_deg`` (degrees).
+def port_boards(tilt_deg: tuple[float, float] | FlatPort, view: PinholeCamera) -> list[dict]:
+    """The ten port calibration boards behind the port of ``tilt_deg`` (degrees), or behind a port.
 
     Boards at :data:`PORT_TARGETS` and :data:`PORT_DEPTHS_M`, turned by :data:`PORT_ROTATIONS_DEG`,
     with :data:`PORT_PX_PER_SQUARE` pixels per square (:func:`boards_at_targets`); ``view`` as in
-    :func:`calibration_boards`.
+    :func:`calibration_boards`. ``tilt_deg`` may be the port itself (a rig camera's wall, in its
+    frame); the tables are then in that camera's frame.
     """
+    port = tilt_deg if isinstance(tilt_deg, FlatPort) else empty_scene(tilt_deg).port
     return boards_at_targets(
-        tilt_deg, view, PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, px_per_square=PORT_PX_PER_SQUARE
+        port, view, PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, px_per_square=PORT_PX_PER_SQUARE
     )
 
 
 def boards_at_targets(
-    tilt_deg: tuple[float, float],
+    port: FlatPort,
     view: PinholeCamera,
     targets: Sequence[tuple[float, float]],
     depths_m: Sequence[float],
@@ -325,15 +327,15 @@ def boards_at_targets(
     *,
     px_per_square: float = CALIBRATION_PX_PER_SQUARE,
 ) -> list[dict]:
-    """Boards behind the port of ``tilt_deg``, each seen where it is aimed at, whatever the port.
+    """Boards behind ``port``, each seen where it is aimed at, whatever the port.
 
     Board ``i``'s centre is where the refracted line of sight of target pixel ``i`` of ``view`` (a
     pinhole in air at the main-lens centre) reaches ``z = depths_m[i]``.
 
     Parameters
     ----------
-    tilt_deg : (float, float)
-        ``(tilt_x_deg, tilt_y_deg)`` of the port, degrees.
+    port : FlatPort
+        The port, camera frame (e.g. ``empty_scene(tilt_deg).port``).
     view : PinholeCamera
         The view the targets are given in.
     targets : sequence of (float, float)
@@ -352,7 +354,7 @@ def boards_at_targets(
     list of dict
         ``[[object]]`` tables, one per target.
     """
-    flat_port = empty_scene(tilt_deg).port
+    flat_port = port
     tables = []
     for (fu, fv), depth, rotation in zip(targets, depths_m, rotations_deg, strict=True):
         square = px_per_square * depth / (flat_port.n_water / flat_port.n_air * view.focal_px)
@@ -584,8 +586,10 @@ def port_from_renders(
     )
 
 
-def in_air_board_scene(board: dict, *, lens: str = "thin", spp: int = 16, seed: int = 0) -> SceneConfig:
-    """One board in air (``medium = "air"``, no port) before :data:`CAMERA` with main lens ``lens``.
+def in_air_board_scene(
+    board: dict, *, lens: str = "thin", spp: int = 16, seed: int = 0, camera: str = CAMERA
+) -> SceneConfig:
+    """One board in air (``medium = "air"``, no port) before the camera with main lens ``lens``.
 
     Parameters
     ----------
@@ -595,11 +599,13 @@ def in_air_board_scene(board: dict, *, lens: str = "thin", spp: int = 16, seed: 
         ``"thin"`` or a lens preset (``lfsim lenses``), scaled to the camera.
     spp, seed : int
         Samples per pixel and seed of the render.
+    camera : str
+        The camera's preset (default :data:`CAMERA`).
     """
     data = {
         "name": "in-air-boards",
         "medium": "air",
-        "camera": {"preset": CAMERA, "lens": lens},
+        "camera": {"preset": camera, "lens": lens},
         "render": {"spp": spp, "seed": seed},
         "light": list(LIGHTS),
         "object": [board],

@@ -36,6 +36,7 @@ def render_rig(
     write_previews: bool = True,
     variant: str | None = None,
     metadata: dict | None = None,
+    write_lfr: bool = False,
 ) -> Path:
     """Render every camera of ``rig`` with its ground truth into ``out_dir/<name>/``.
 
@@ -44,6 +45,8 @@ def render_rig(
     translation relative to the first, and the baseline), plus the plain data of ``metadata`` (the
     caller's own keys, e.g. what the scene holds). The directory appears only when every camera is
     rendered; ``overwrite`` replaces only an earlier rig output (:func:`lfrefract.formats.outputs.staged_directory`).
+    ``write_lfr``: each camera also writes its Lytro file (cameras with a ``[sensor]`` of 10 or 12
+    bits; :func:`simulator.job.render_job`).
 
     Returns
     -------
@@ -60,7 +63,12 @@ def render_rig(
             if progress:
                 print(f"camera {index + 1}/{len(rig.cameras)}: {camera.name}")
             render_job(
-                camera.scene, stage / camera.name, variant=variant, progress=progress, write_previews=write_previews
+                camera.scene,
+                stage / camera.name,
+                variant=variant,
+                progress=progress,
+                write_previews=write_previews,
+                write_lfr=write_lfr,
             )
             rotation, translation = rig.relative_pose(index)
             cameras[camera.name] = {

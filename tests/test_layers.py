@@ -82,14 +82,16 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract": ("lfrefract",),
     "lfrefract.cli": ("lfrefract",),
     "lfrefract.__main__": ("lfrefract",),
-    # The simulator uses the whole core except its CLI; its own scene model (config, assets, geometry)
+    # The simulator uses the whole core except its CLI (but the pipeline experiment, PRIVATE_TO); its own
+    # scene model (config, assets, geometry)
     # never reaches the Mitsuba side, and only the CLI entry points import the CLI.
     "simulator": ("lfrefract", "simulator"),
 }
 
 #: Modules no module but the listed ones may import.
 PRIVATE_TO: dict[str, tuple[str, ...]] = {
-    "lfrefract.cli": ("lfrefract.__main__",),
+    # The pipeline experiment runs the core's commands as a user would (its record is the commands).
+    "lfrefract.cli": ("lfrefract.__main__", "simulator.experiments.pipeline"),
     "simulator.cli": ("simulator.__main__",),
 }
 

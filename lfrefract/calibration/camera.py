@@ -6,12 +6,13 @@ main lens is not thin: its entrance pupil is magnified, and its rays bend more o
 field's edge (distortion). :class:`~lfrefract.optics.ray_correction.RayCorrection` maps the
 thin-lens ray to the camera's:
 
-    origin ``(m a, 0)``,  slopes ``s t (1 + k1 |t|^2 + k2 |t|^4)``,
+    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m a, d |t'|^2)``,
 
-four parameters: the pupil scale ``m``, the slope (focal) scale ``s`` and two radial terms. The
-pupil's position along the axis is not among them: in-air views fix the camera only up to a shift
-of its frame along z (every board pose shifts with it), so the model keeps the thin lens's plane
-z = 0, and a port calibrated on this model measures its distance in the same frame.
+five parameters: the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms and the
+pupil's drift with the field ``d``. The pupil's position along the axis is not among them: in-air
+views fix the camera only up to a shift of its frame along z (every board pose shifts with it), so
+the model keeps the thin lens's plane z = 0, and a port calibrated on this model measures its
+distance in the same frame.
 
 :func:`calibrate_camera` fits the model to chessboard corners located in the light field of in-air
 captures (:func:`lfrefract.calibration.port.board_view_from_light_field`: each corner seen from
@@ -39,7 +40,7 @@ from lfrefract.calibration.port import BoardView
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
-from lfrefract.optics.ray_correction import RayCorrection, apply_correction
+from lfrefract.optics.ray_correction import PARAMETERS, RayCorrection, apply_correction
 
 __all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera", "corrected_view"]
 
@@ -69,7 +70,8 @@ class CameraCalibration:
     per_view_rms_m : tuple of float
         The RMS per capture, metres.
     correction_std : tuple of float
-        Standard deviations of ``(pupil_scale, slope_scale, k1, k2)`` from the fit's Jacobian.
+        Standard deviations of the correction's :data:`~lfrefract.optics.ray_correction.PARAMETERS`
+        from the fit's Jacobian.
     poses : tuple of tuple of float
         Each capture's board pose: rotation vector (rad) and translation (m), board to camera frame.
     """
@@ -96,10 +98,10 @@ class CameraCalibration:
             "ray_rms_m": self.ray_rms_m,
             "initial_ray_rms_m": self.initial_ray_rms_m,
             "per_view_rms_m": list(self.per_view_rms_m),
-            "correction_std": dict(zip(("pupil_scale", "slope_scale", "k1", "k2"), self.correction_std, strict=True)),
+            "correction_std": dict(zip(PARAMETERS, self.correction_std, strict=True)),
             "poses": [list(p) for p in self.poses],
-            "model": "origin (pupil_scale * a, 0), slopes slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) of the thin-lens "
-            "ray (a, t); lfrefract.calibration.camera",
+            "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * a, "
+            "pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); lfrefract.optics.ray_correction",
         }
 
 
@@ -159,10 +161,11 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
             raise CalibrationError(f"board capture {k}: no pose from its central view's corners (cv2.solvePnP)")
         poses.append(np.concatenate([rvec.ravel(), tvec.ravel()]))
     n = len(views)
+    npar = len(PARAMETERS)
 
     def residuals(q: np.ndarray, fixed: np.ndarray | None) -> np.ndarray:
-        p = q[:4] if fixed is None else fixed
-        pose_block = q[4:] if fixed is None else q
+        p = q[:npar] if fixed is None else fixed
+        pose_block = q[npar:] if fixed is None else q
         parts = [
             _distances(p, pose_block[6 * k : 6 * k + 6], points, a, t).ravel()
             for k, (points, a, t) in enumerate(observed)
@@ -174,12 +177,12 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
     start = least_squares(residuals, np.concatenate(poses), args=(identity,), x_scale="jac", method="lm")
     initial_rms = math.sqrt(np.mean(start.fun**2) * 3.0)  # |d x u|^2 is the squared distance: 3 components
     solution = least_squares(residuals, np.concatenate([identity, start.x]), args=(None,), x_scale="jac", method="lm")
-    p = solution.x[:4]
+    p = solution.x[:npar]
     dof = max(1, len(solution.fun) - len(solution.x))
     sigma2 = float(np.sum(solution.fun**2)) / dof
     try:
         covariance = np.linalg.pinv(solution.jac.T @ solution.jac) * sigma2
-        std = np.sqrt(np.clip(np.diag(covariance)[:4], 0.0, None))
+        std = np.sqrt(np.clip(np.diag(covariance)[:npar], 0.0, None))
     except np.linalg.LinAlgError:
         raise CalibrationError("the board captures do not determine the camera's ray model") from None
     if not (std[0] <= MAX_SCALE_STD and std[1] <= MAX_SCALE_STD):
@@ -189,7 +192,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         )
     per_view = []
     for k, (points, a, t) in enumerate(observed):
-        d = _distances(p, solution.x[4 + 6 * k : 10 + 6 * k], points, a, t)
+        d = _distances(p, solution.x[npar + 6 * k : npar + 6 + 6 * k], points, a, t)
         per_view.append(math.sqrt(np.mean(d**2) * 3.0))
     return CameraCalibration(
         camera=camera,
@@ -198,7 +201,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         initial_ray_rms_m=initial_rms,
         per_view_rms_m=tuple(per_view),
         correction_std=tuple(float(s) for s in std),
-        poses=tuple(tuple(float(x) for x in solution.x[4 + 6 * k : 10 + 6 * k]) for k in range(n)),
+        poses=tuple(tuple(float(x) for x in solution.x[npar + 6 * k : npar + 6 + 6 * k]) for k in range(n)),
     )
 
 
@@ -213,4 +216,6 @@ def corrected_view(view: BoardView, correction: RayCorrection, pinhole: PinholeC
     a, t = _observed_rays(view, np.linalg.inv(pinhole.K))
     origins, directions = correction.apply(a, t)
     pixels = (directions / directions[:, 2:3]) @ pinhole.K.T
-    return BoardView(corners_px=pixels[:, :2], board_points_m=view.board_points_m, centres_m=origins)
+    return BoardView(
+        corners_px=pixels[:, :2], board_points_m=view.board_points_m, centres_m=origins, central_rows=view.central
+    )

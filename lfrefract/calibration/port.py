@@ -80,11 +80,17 @@ class BoardView:
     centres_m : ndarray, shape (N, 3), optional
         Centre of projection of the view each corner was found in, camera frame, metres
         (default: the origin, the main-lens centre).
+    central_rows : ndarray of bool, shape (N,), optional
+        The rows seen through the centre of the main-lens aperture (the central sub-aperture
+        view), which start the calibration as one central camera (default: the rows whose centre
+        is the origin). A calibrated ray model's central rays need not start exactly at the origin
+        (:func:`lfrefract.calibration.camera.corrected_view` keeps the mask of the view it corrects).
     """
 
     corners_px: np.ndarray
     board_points_m: np.ndarray
     centres_m: np.ndarray | None = None
+    central_rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         corners = as_points("corners_px", self.corners_px, 2)
@@ -98,9 +104,19 @@ class BoardView:
         centres = np.zeros((len(corners), 3)) if self.centres_m is None else as_points("centres_m", self.centres_m, 3)
         if len(centres) != len(corners):
             raise ParameterError(f"centres_m must have one row per corner ({len(corners)}), got {len(centres)}")
+        if self.central_rows is None:
+            central = np.all(centres == 0.0, axis=1)
+        else:
+            central = np.asarray(self.central_rows)
+            if central.dtype != bool or central.shape != (len(corners),):
+                raise ParameterError(
+                    f"central_rows must be a boolean array of shape ({len(corners)},), got "
+                    f"{central.dtype} of shape {central.shape}"
+                )
         object.__setattr__(self, "corners_px", corners)
         object.__setattr__(self, "board_points_m", board)
         object.__setattr__(self, "centres_m", centres)
+        object.__setattr__(self, "central_rows", central)
 
     @property
     def centres(self) -> np.ndarray:
@@ -109,8 +125,8 @@ class BoardView:
 
     @property
     def central(self) -> np.ndarray:
-        """Rows seen from the main-lens centre, boolean (N,)."""
-        return np.all(self.centres_m == 0.0, axis=1)
+        """Rows seen through the main-lens centre, boolean (N,) (:attr:`central_rows` as constructed)."""
+        return typing.cast(np.ndarray, self.central_rows)
 
 
 @dataclass(frozen=True, eq=False)

@@ -39,7 +39,7 @@ from scipy import ndimage
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.lytro import LytroCapture, read_f01_raw, read_illum_raw, read_lfr
-from lfrefract.formats.mosaic import RawMosaic, demosaic_values
+from lfrefract.formats.mosaic import RawMosaic, cfa_channels, demosaic_values
 from lfrefract.validate import bounded_float, one_of
 
 __all__ = [
@@ -242,6 +242,9 @@ class DevelopedCapture:
         Pixels at the capture's white level, and bad pixels of the white image.
     flagged : ndarray of bool, shape (H, W)
         ``saturated | bad``: the pixels of ``values`` not to be used.
+    lit : ndarray of bool, shape (H, W)
+        Pixels the white image lights enough to devignet (every pixel without a white); elsewhere
+        ``values`` is 0.
     unrecorded : ndarray of bool, shape (H, W)
         The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach).
     white : WhiteImage or None
@@ -257,9 +260,39 @@ class DevelopedCapture:
     saturated: np.ndarray
     bad: np.ndarray
     flagged: np.ndarray
+    lit: np.ndarray
     unrecorded: np.ndarray
     white: WhiteImage | None
     color_matrix: np.ndarray
+
+    def grey(self) -> np.ndarray:
+        """The devignetted mosaic as one grey light field at full resolution, nothing interpolated.
+
+        Each colour's sites of :attr:`values` are divided by that colour's bright level (the 99th
+        percentile of its recorded sites), so that on a neutral target (a black and white
+        chessboard) the three colours agree whatever the light's colour; NaN at :attr:`flagged`
+        pixels and where the white image gives no light. Corners located on it are not moved by
+        demosaicing, which mixes each micro-image's border pixels with its dark neighbours
+        (docs/calibration.md measures the difference).
+
+        Returns
+        -------
+        ndarray of float32, shape (H, W)
+        """
+        channels = cfa_channels(self.cfa_pattern, self.values.shape)
+        recorded = self.lit & ~self.flagged
+        levels = np.zeros(3)
+        for c in range(3):
+            sites = self.values[recorded & (channels == c)]
+            levels[c] = float(np.percentile(sites, _BRIGHT_PERCENTILE)) if sites.size else 0.0
+        if not np.all(levels > 0.0):
+            raise ParameterError(
+                f"the capture has no recorded light in some colour (bright levels R, G, B {levels.tolist()}): "
+                "it cannot be turned into a grey light field"
+            )
+        grey = (self.values / levels[channels]).astype(np.float32)
+        grey[~recorded] = np.nan
+        return grey
 
 
 def develop(
@@ -314,6 +347,7 @@ def develop(
     if white is None:
         values = counts / (mosaic.white_level_dn - mosaic.black_level_dn) * gains[mosaic.channel_index()]
         bad = np.zeros(mosaic.shape, dtype=bool)
+        usable = np.ones(mosaic.shape, dtype=bool)
     else:
         if not isinstance(white, RawMosaic):
             raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
@@ -340,6 +374,7 @@ def develop(
         saturated=saturated,
         bad=bad,
         flagged=flagged,
+        lit=usable,
         unrecorded=unrecorded,
         white=white_image,
         color_matrix=matrix,

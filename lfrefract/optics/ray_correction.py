@@ -4,10 +4,16 @@ The thin-lens model (:meth:`lfrefract.optics.camera.LightFieldCamera.captured_ra
 pixel a ray leaving the main-lens plane z = 0 at the aperture point ``a`` with slopes
 ``t = (dx / dz, dy / dz)``. :class:`RayCorrection` maps it to the camera's ray:
 
-    origin ``(m a, 0)``,  slopes ``s t (1 + k1 |t|^2 + k2 |t|^4)``,
+    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)``, through the point ``(m a, d |t'|^2)``,
 
-the pupil scale ``m``, the slope (focal) scale ``s`` and two radial terms (the main lens's
-distortion). :func:`lfrefract.calibration.calibrate_camera` estimates it from in-air chessboard
+the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms (the main lens's distortion)
+and the pupil's drift ``d``: a real lens's entrance pupil moves along the axis with the field angle
+(pupil aberration), so the rays of slope ``t'`` cross the axis-normal plane ``z = d |t'|^2`` at the
+scaled aperture point (the ray is written from where it crosses z = 0: ``(m a - d |t'|^2 t', 0)``).
+The pupil's position on the axis itself is not a parameter: in-air views fix the camera only up to a
+shift of its frame along z, so the model keeps the thin lens's plane z = 0 for the field's centre.
+
+:func:`lfrefract.calibration.calibrate_camera` estimates it from in-air chessboard
 light fields; the synthesis takes it through
 :attr:`lfrefract.synthesis.warp_map.SynthesisOptions.ray_correction`.
 
@@ -25,7 +31,10 @@ import numpy as np
 from lfrefract.optics.camera import CapturedRays
 from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
 
-__all__ = ["RayCorrection", "apply_correction"]
+__all__ = ["PARAMETERS", "RayCorrection", "apply_correction"]
+
+#: The parameters, in the order of :meth:`RayCorrection.vector`.
+PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,28 +49,36 @@ class RayCorrection:
         ``s``: the slopes scale by it (a focal-length correction), in (0.5, 2).
     k1, k2 : float
         Radial terms of the slopes, per squared and fourth power of the slope, each in [-10, 10].
+    pupil_drift_m : float
+        ``d``: where the entrance pupil of the rays of slope ``t'`` lies on the axis, per ``|t'|^2``,
+        metres (positive: forward, into the scene), in [-0.5, 0.5]. Absent from a file written
+        before it was part of the model: 0 (the pupil does not move), that model's meaning.
     """
 
     pupil_scale: float = 1.0
     slope_scale: float = 1.0
     k1: float = 0.0
     k2: float = 0.0
+    pupil_drift_m: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "pupil_scale", bounded_float("pupil_scale", self.pupil_scale, 0.5, 2.0))
         object.__setattr__(self, "slope_scale", bounded_float("slope_scale", self.slope_scale, 0.5, 2.0))
         object.__setattr__(self, "k1", bounded_float("k1", self.k1, -10.0, 10.0))
         object.__setattr__(self, "k2", bounded_float("k2", self.k2, -10.0, 10.0))
+        object.__setattr__(
+            self, "pupil_drift_m", bounded_float("pupil_drift_m", self.pupil_drift_m, -0.5, 0.5, unit="m")
+        )
 
     @classmethod
     def from_vector(cls, values: np.ndarray) -> RayCorrection:
-        """From ``(pupil_scale, slope_scale, k1, k2)``."""
-        m, s, k1, k2 = (float(v) for v in values)
-        return cls(pupil_scale=m, slope_scale=s, k1=k1, k2=k2)
+        """From ``(pupil_scale, slope_scale, k1, k2, pupil_drift_m)`` (:data:`PARAMETERS`)."""
+        m, s, k1, k2, d = (float(v) for v in values)
+        return cls(pupil_scale=m, slope_scale=s, k1=k1, k2=k2, pupil_drift_m=d)
 
     def vector(self) -> np.ndarray:
-        """``(pupil_scale, slope_scale, k1, k2)``."""
-        return np.array([self.pupil_scale, self.slope_scale, self.k1, self.k2])
+        """``(pupil_scale, slope_scale, k1, k2, pupil_drift_m)`` (:data:`PARAMETERS`)."""
+        return np.array([self.pupil_scale, self.slope_scale, self.k1, self.k2, self.pupil_drift_m])
 
     def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The camera's rays for thin-lens rays (aperture points (N, 2), slopes (N, 2)).
@@ -87,21 +104,24 @@ class RayCorrection:
         )
 
     def to_dict(self) -> dict:
-        return {"pupil_scale": self.pupil_scale, "slope_scale": self.slope_scale, "k1": self.k1, "k2": self.k2}
+        """Plain data: :data:`PARAMETERS` and their values."""
+        return dict(zip(PARAMETERS, (float(v) for v in self.vector()), strict=True))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> RayCorrection:
-        keys = {"pupil_scale", "slope_scale", "k1", "k2"}
-        reject_unknown_keys(where, dict(data), keys)
-        require_keys(where, dict(data), keys)
-        return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in keys})
+        """From :meth:`to_dict`'s data (``pupil_drift_m`` optional: 0 in earlier files)."""
+        optional = {"pupil_drift_m"}
+        reject_unknown_keys(where, dict(data), set(PARAMETERS))
+        require_keys(where, dict(data), set(PARAMETERS) - optional)
+        return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in PARAMETERS if k in data})
 
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`RayCorrection.apply` for the parameter vector ``p = (m, s, k1, k2)`` (the fit's form)."""
-    m, s, k1, k2 = p
+    """:meth:`RayCorrection.apply` for the parameter vector ``p`` (:data:`PARAMETERS`; the fit's form)."""
+    m, s, k1, k2, drift = p
     r2 = np.sum(t * t, axis=1, keepdims=True)
     slopes = s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
-    origins = np.column_stack([m * a, np.zeros(len(a))])
+    shift = drift * np.sum(slopes * slopes, axis=1, keepdims=True) * slopes  # back from z = d |t'|^2 to z = 0
+    origins = np.column_stack([m * a - shift, np.zeros(len(a))])
     directions = np.column_stack([slopes, np.ones(len(a))])
     return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)

@@ -320,7 +320,7 @@ def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tup
 
 def load_experiments() -> dict[str, Experiment]:
     """Import the experiment modules (which register themselves) and return :data:`EXPERIMENTS`."""
-    from simulator.experiments import averaging, fov, objects, planes  # noqa: F401  (registration)
+    from simulator.experiments import averaging, fov, objects, pipeline, planes  # noqa: F401  (registration)
 
     return EXPERIMENTS
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,18 @@ from simulator.experiments.rigstereo import (
 )
 from simulator.rig import RigConfig
 
-__all__ = ["DEPTH_MATCHER", "PLANE_DEPTHS_M", "PLANE_ROTATION_XYZ_DEG", "run_planes", "setup_for"]
+__all__ = [
+    "DEPTH_MATCHER",
+    "PLANE_DEPTHS_M",
+    "PLANE_ROTATION_XYZ_DEG",
+    "plane_figures",
+    "plane_in_left",
+    "plane_measures",
+    "plane_rows",
+    "run_planes",
+    "setup_for",
+    "textured_plane",
+]
 
 #: Plane depths (near, medium, far), metres, per scale (world z of the plane's centre).
 PLANE_DEPTHS_M = {"tiny": (0.3, 0.45, 0.6), "illum": (0.4, 0.7, 1.0)}
@@ -148,7 +160,7 @@ def _run(
     captures = render_captures(base, jobs, work, progress=progress)
     boards = {d: [captures[f"board-{d}-{i}"] for i in range(len(BOARD_OFFSETS))] for d in (near, far)}
     planes = {d: captures[f"plane-{d}"] for d in plane_depths}
-    truth = {depth: _plane_in_left(base, textured_plane(base, depth)) for depth in plane_depths}
+    truth = {depth: plane_in_left(base, textured_plane(base, depth)) for depth in plane_depths}
 
     warps = warp_maps(base)
     rows, disparities, order = [], {}, []
@@ -161,7 +173,7 @@ def _run(
         for depth in plane_depths:
             clouds: list[tuple[Path, np.ndarray, np.ndarray]] = []
             try:
-                new = _measure(
+                new = plane_rows(
                     method,
                     planes[depth],
                     depth,
@@ -179,7 +191,7 @@ def _run(
                 for path, points, colours in clouds:
                     write_ply(path, points, colours)
             rows += new
-    figures = _figures(out_dir, rows, disparities, plane_depths, order)
+    figures = plane_figures(out_dir, rows, disparities, plane_depths, order)
     return ExperimentResult(
         name="planes",
         scale=scale,
@@ -192,7 +204,7 @@ def _run(
     )
 
 
-def _measure(
+def plane_rows(
     method: PreparedMethod,
     shot,
     depth: float,
@@ -205,7 +217,30 @@ def _measure(
     clouds: list | None,
 ) -> list[dict]:
     """The rows of one method on the plane at ``depth``: one per matcher, or one for a depth method.
-    ``clouds``: where to put the point cloud to write (path, points, colours), or None for none."""
+
+    Parameters
+    ----------
+    method : PreparedMethod
+        A method ready to measure (its rig calibrated on its images, or its depth maps).
+    shot : Shot
+        The capture of the plane.
+    depth : float
+        The plane's depth, metres (its ``depth_m`` column; the matchers' disparity range and the
+        outlier threshold follow from it).
+    truth : (ndarray, float)
+        The true plane in the left camera frame (:func:`plane_in_left`).
+    base : RigConfig
+        The rig (its true poses give the exact coverage).
+    warps : dict of str to WarpMap
+        The cameras' true warp maps (:func:`~simulator.experiments.rigstereo.warp_maps`), whose
+        exact pixels give ``exact_share``.
+    disparities : dict
+        Filled with each matcher's disparity map, keyed ``(matcher, method name, depth)``.
+    out_dir : Path
+        Where the point clouds go.
+    clouds : list, optional
+        Where to put the point cloud to write (path, points, colours), or None for none.
+    """
     if method.depth is not None:
         estimate = np.asarray(method.depth.depth(shot), dtype=np.float64)
         points = depth_points(estimate, method.depth.output)
@@ -215,10 +250,10 @@ def _measure(
                 "matcher": DEPTH_MATCHER,
                 "method": method.name,
                 "depth_m": depth,
-                **_plane_measures(points, truth, depth),
+                **plane_measures(points, truth, depth),
                 "completeness": float(np.isfinite(estimate).mean()),
                 "exact_share": float(exact.mean()) if len(exact) else math.nan,
-                **{f"exact_{k}": v for k, v in _plane_measures(points[exact], truth, depth).items()},
+                **{f"exact_{k}": v for k, v in plane_measures(points[exact], truth, depth).items()},
                 "stereo_rms_px": math.nan,
                 "boards": 0,
                 "status": "ok",
@@ -246,13 +281,13 @@ def _measure(
             cloud = Path(out_dir) / f"cloud_{file_stem(method.name)}.ply"
             clouds.append((cloud, points, (colours * 255).astype(np.uint8)))
         exact = exact_coverage(points, base, warps)
-        inside = _plane_measures(points[exact], truth, depth)
+        inside = plane_measures(points[exact], truth, depth)
         rows.append(
             {
                 "matcher": matcher,
                 "method": method.name,
                 "depth_m": depth,
-                **_plane_measures(points, truth, depth),
+                **plane_measures(points, truth, depth),
                 "completeness": float(np.isfinite(disparity).sum() / max(np.isfinite(grey(left)).sum(), 1)),
                 "exact_share": float(exact.mean()) if len(exact) else math.nan,
                 **{f"exact_{k}": v for k, v in inside.items()},
@@ -265,7 +300,7 @@ def _measure(
     return rows
 
 
-def _plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m: float) -> dict[str, float]:
+def plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m: float) -> dict[str, float]:
     """Plane-fit RMSE, mean error against the true plane (mm) and outlier share of ``points`` (N, 3)."""
     normal, offset = truth
     if len(points) < 3:  # no match at all is a result too, not a crash
@@ -278,7 +313,7 @@ def _plane_measures(points: np.ndarray, truth: tuple[np.ndarray, float], depth_m
     }
 
 
-def _plane_in_left(rig: RigConfig, plane: TexturedPlane) -> tuple[np.ndarray, float]:
+def plane_in_left(rig: RigConfig, plane: TexturedPlane) -> tuple[np.ndarray, float]:
     """The plane's normal and offset (``normal . X = offset``) in the left camera frame."""
     local = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) * 0.1
     points = rig.cameras[0].scene.pose.to_camera(plane.placement.to_world(local))
@@ -328,7 +363,26 @@ def _summary(rows: list[dict], plane_depths: tuple[float, ...], order: list[str]
     return "\n\n".join(parts)
 
 
-def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...], order: list[str]) -> tuple[Path, ...]:
+def plane_figures(
+    out_dir: Path, rows, disparities, plane_depths: Sequence[float], order: list[str], *, prefix: str = "planes"
+) -> tuple[Path, ...]:
+    """Write the disparity maps per matcher (``<prefix>_disparity_<matcher>.png``) and the errors by
+    depth and method (``<prefix>_errors.png``); the paths.
+
+    Parameters
+    ----------
+    out_dir : Path
+    rows : list of dict
+        :func:`plane_rows`'s rows.
+    disparities : dict
+        ``(matcher, method, depth) -> disparity map`` as :func:`plane_rows` fills it.
+    plane_depths : sequence of float
+        Depths, metres, in order.
+    order : list of str
+        Methods, in order.
+    prefix : str
+        The files' prefix.
+    """
     import matplotlib as mpl
 
     mpl.use("Agg")
@@ -355,7 +409,7 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...], 
                 if j == 0:
                     ax.set_ylabel(f"{depth:g} m", fontsize=9)
         fig.suptitle(f"{matcher} disparity maps (rectified left view; NaN white)", fontsize=9)
-        paths.append(Path(out_dir) / f"planes_disparity_{matcher}.png")
+        paths.append(Path(out_dir) / f"{prefix}_disparity_{matcher}.png")
         fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
         plt.close(fig)
 
@@ -381,7 +435,7 @@ def _figures(out_dir: Path, rows, disparities, plane_depths: tuple[float, ...], 
             ax.set(xticks=x, xticklabels=[f"{d:g} m" for d in depths], ylabel="mm", title=f"{matcher}: {title}")
             ax.grid(alpha=0.3, axis="y")
     axes[0, 0].legend(fontsize=8)
-    paths.append(Path(out_dir) / "planes_errors.png")
+    paths.append(Path(out_dir) / f"{prefix}_errors.png")
     fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
     plt.close(fig)
     return tuple(paths)

@@ -41,6 +41,7 @@ from simulator.experiments.methods import (
     DepthMaps,
     MethodCamera,
     MethodRig,
+    Shot,
     check_result,
     method_factories,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "RigSetup",
     "aim",
     "board_points_m",
+    "calibrate_method_rig",
     "chessboards",
     "exact_coverage",
     "experiment_rig",
@@ -228,26 +230,39 @@ def _signature(rig: RigConfig) -> list:
     return json.loads(json.dumps({"wall": rig.wall.to_dict(), "scenes": scenes}))
 
 
-def render_capture(rig: RigConfig, folder: Path) -> Capture:
+def render_capture(rig: RigConfig, folder: Path, *, write_lfr: bool = False) -> Capture:
     """Render ``rig`` into ``folder``, kept if it already holds a render of this very rig (the same
-    wall and scenes: cameras, ports, objects, lights, render settings)."""
-    signature = _signature(rig)
+    wall and scenes: cameras, ports, objects, lights, render settings, sensors) with the same files.
+    ``write_lfr``: every camera also writes its Lytro file (its scene needs a ``[sensor]``)."""
+    signature = {"rig": _signature(rig), "lfr": write_lfr}
     meta = folder / SIDECAR_NAME
     if not (meta.is_file() and read_json(meta).get("experiment_rig") == signature):
         render_rig(
-            rig, folder, progress=False, write_previews=False, overwrite=True, metadata={"experiment_rig": signature}
+            rig,
+            folder,
+            progress=False,
+            write_previews=False,
+            overwrite=True,
+            metadata={"experiment_rig": signature},
+            write_lfr=write_lfr,
         )
     return Capture(folder)
 
 
 def render_captures(
-    rig: RigConfig, jobs: Sequence[tuple[str, Sequence[SceneObject]]], work: Path, *, progress: bool
+    rig: RigConfig,
+    jobs: Sequence[tuple[str, Sequence[SceneObject]]],
+    work: Path,
+    *,
+    progress: bool,
+    write_lfr: bool = False,
+    desc: str = "rendering the rig",
 ) -> dict[str, Capture]:
     """Render ``rig`` with each ``(name, objects)`` of ``jobs`` into ``work / name`` (reusing
-    matching renders); ``{name: Capture}``."""
+    matching renders); ``{name: Capture}``. ``write_lfr``: as :func:`render_capture`."""
     return {
-        name: render_capture(with_objects(rig, objects), Path(work) / name)
-        for name, objects in tqdm(jobs, desc="rendering the rig", unit="capture", disable=not progress)
+        name: render_capture(with_objects(rig, objects), Path(work) / name, write_lfr=write_lfr)
+        for name, objects in tqdm(jobs, desc=desc, unit="capture", disable=not progress)
     }
 
 
@@ -414,36 +429,65 @@ def prepare_methods(
             if name not in factories:
                 raise ParameterError(f"method {name!r} is not registered; registered: {list(factories)}")
             result = check_result(name, factories[name](rig))
-            if isinstance(result, DepthMaps):
-                yield PreparedMethod(name=name, depth=result)
-                continue
-            for camera in (first, second):
-                if camera not in result.outputs:
-                    raise ParameterError(f"method {name!r} gave no output geometry for camera {camera!r}")
-            found = [
-                (
-                    find_corners(result.project(first, b), canonical=True),
-                    find_corners(result.project(second, b), canonical=True),
-                    squares[depth],
-                )
-                for depth in depths
-                for b in boards[depth]
-            ]
-            pairs = [(lft, rgt, square) for lft, rgt, square in found if lft is not None and rgt is not None]
-            if len(pairs) < 3:
-                raise ParameterError(
-                    f"the chessboard was found in both images of {len(pairs)} of {len(found)} board captures; "
-                    "the rig calibration needs 3 or more"
-                )
-            stereo = calibrate_stereo(
-                [p[0] for p in pairs],
-                [p[1] for p in pairs],
-                [board_points_m(p[2]) for p in pairs],
-                left=result.outputs[first],
-                right=result.outputs[second],
-            )
-            yield PreparedMethod(
-                name=name, images=result, stereo=stereo, rectification=rectify(stereo), boards=len(pairs)
-            )
         except Exception as exc:  # a failing method is a table row, not a failed run
             yield PreparedMethod(name=name, error=describe_error(exc))
+            continue
+        if isinstance(result, DepthMaps):
+            yield PreparedMethod(name=name, depth=result)
+            continue
+        shots = [(b, squares[depth]) for depth in depths for b in boards[depth]]
+        yield calibrate_method_rig(name, result, shots, cameras=(first, second))
+
+
+def calibrate_method_rig(
+    name: str, images: CentralImages, boards: Sequence[tuple[Shot, float]], *, cameras: tuple[str, str]
+) -> PreparedMethod:
+    """Calibrate and rectify a stereo pair on a method's own images of chessboard captures.
+
+    Parameters
+    ----------
+    name : str
+        The method's name (for its :class:`PreparedMethod` and errors).
+    images : CentralImages
+        The method's images; their ``K`` stay fixed in the calibration.
+    boards : sequence of (Shot, float)
+        Captures of a :data:`~simulator.boards.SQUARES` chessboard and the edge of its squares, metres.
+    cameras : (str, str)
+        The left and right cameras' names.
+
+    Returns
+    -------
+    PreparedMethod
+        With the calibrated rig and its rectification, or the error that stopped it (a projection
+        that raises, fewer than 3 captures with the board found in both images, a failed
+        calibration): a failing method is a table row, not a failed run.
+    """
+    first, second = cameras
+    try:
+        for camera in (first, second):
+            if camera not in images.outputs:
+                raise ParameterError(f"method {name!r} gave no output geometry for camera {camera!r}")
+        found = [
+            (
+                find_corners(images.project(first, shot), canonical=True),
+                find_corners(images.project(second, shot), canonical=True),
+                square,
+            )
+            for shot, square in boards
+        ]
+        pairs = [(lft, rgt, square) for lft, rgt, square in found if lft is not None and rgt is not None]
+        if len(pairs) < 3:
+            raise ParameterError(
+                f"the chessboard was found in both images of {len(pairs)} of {len(found)} board captures; "
+                "the rig calibration needs 3 or more"
+            )
+        stereo = calibrate_stereo(
+            [p[0] for p in pairs],
+            [p[1] for p in pairs],
+            [board_points_m(p[2]) for p in pairs],
+            left=images.outputs[first],
+            right=images.outputs[second],
+        )
+    except Exception as exc:  # a failing method is a table row, not a failed run
+        return PreparedMethod(name=name, error=describe_error(exc))
+    return PreparedMethod(name=name, images=images, stereo=stereo, rectification=rectify(stereo), boards=len(pairs))

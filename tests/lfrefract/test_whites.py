@@ -143,3 +143,27 @@ def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
     assert capture.recorded is None
     with pytest.raises(ParameterError, match="is a linear raw image already"):
         read_capture(tmp_path / "raw.exr", white=white_path)
+
+
+def test_the_grey_mosaic_of_a_neutral_scene_agrees_across_colours_under_coloured_light():
+    white = white_mosaic()
+    lit = white.counts.astype(np.float64) - BLACK
+    channels = white.channel_index()
+    # A black and white pattern (one neutral reflectance per pixel) under light of another colour
+    # than the white's: R, G and B reach the sensor at 0.7, 0.5 and 0.3 of the white image's.
+    rng = np.random.default_rng(3)
+    reflectance = np.where(rng.random(lit.shape) < 0.5, 0.1, 0.9)
+    counts = np.rint(BLACK + np.array([0.7, 0.5, 0.3])[channels] * reflectance * lit).astype(np.uint16)
+    capture = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    developed = develop(capture, white)
+    grey = developed.grey()
+    assert grey.shape == lit.shape
+    assert grey.dtype == np.float32
+    assert np.array_equal(np.isnan(grey), ~developed.lit | developed.flagged)
+    bright = ~np.isnan(grey) & (lit > 0.5 * lit.max())  # away from the 1-DN rounding of dim pixels
+    # Each colour divided by its bright level (the 0.9 squares): the reflectance over 0.9, whatever the colour.
+    np.testing.assert_allclose(grey[bright], reflectance[bright] / 0.9, atol=0.02)
+    # The demosaiced image keeps the light's colour, and mixes the pattern's neighbours.
+    assert abs(np.nanmean(developed.image[..., 0]) / np.nanmean(developed.image[..., 2]) - 0.7 / 0.3) < 0.2

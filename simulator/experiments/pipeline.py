@@ -1,0 +1,796 @@
+"""The ``pipeline`` experiment: a tank experiment from Lytro files alone, against today's oracle.
+
+The simulator stands in for two Lytros and a tank. Through a real main lens (default the double
+Gauss, ``ExperimentOptions.lens``) and the sensor model (Bayer mosaic, noise, 10-bit Lytro files) it
+renders what a real rig gives and nothing else:
+
+- each camera's white image (:func:`simulator.whites.render_whites`);
+- each camera's ten in-air chessboard captures (:func:`simulator.boards.in_air_boards`), for the
+  camera's ray model;
+- the stereo rig (:func:`simulator.experiments.planes.setup_for`: the default rig at ``tiny``, the
+  Illum rig at ``illum``) behind its tilted glass wall: the six chessboards at a near and a far
+  depth (:func:`~simulator.experiments.rigstereo.chessboards`; the port's and the rig's calibration),
+  two slanted test boards between them (held out: the corner error is measured on them) and the
+  ``planes`` experiment's slanted textured plane at its three depths.
+
+Only the Lytro files (``capture.lfr``, the whites' ``.raw`` + ``.txt``) are copied into the core's
+input folder, ``delivered/``; it holds no ``meta.json``, no ``lenses.npz``, no truth (checked before
+the core runs). The core then runs the documented commands on them, in process
+(:func:`lfrefract.cli.main`), per camera: ``calibrate mla`` on the white (the camera's nominal
+preset, as a user knows their camera's model), ``calibrate camera`` on the in-air boards,
+``calibrate port`` on the wall's boards and ``synth`` of every capture. The rows of ``table.csv``,
+one per ``method``:
+
+- ``oracle``: today's pipeline. The same scenes rendered through the thin lens the core models,
+  noiseless RGB raw images (``raw.exr``) with their ``meta.json``: the true camera and port;
+- ``data-only``: everything calibrated from the delivered files (MLA, camera ray model, port);
+- ``thin-lens-assumed``: the old core on the real-lens files: the MLA from the white, the port
+  calibrated on the thin-lens model (no camera calibration).
+
+For each, the rig is stereo-calibrated on its synthesized images of the twelve boards (OpenCV,
+intrinsics fixed to its ``K``), rectified, matched (ZNCC, the paper's cost, and SGBM) and
+triangulated, as in ``planes``. Columns (units in the names):
+
+- ``corner_rms_px``: the test boards' corners found in the refraction-free images against the
+  projection, by the method's own ``K``, of their true positions in each camera's frame (RMS over
+  both test boards and both cameras);
+- ``plane_rmse_mm``, ``truth_error_mm``: ``planes``'s measures (ZNCC), averaged over the three
+  plane depths; ``planes.csv`` has them per depth and matcher, with completeness and the exact
+  coverage's share;
+- ``port_normal_err_deg``, ``port_distance_err_mm``: the calibrated port against the camera's true
+  one (the wall in its frame), the larger of the two cameras' (``oracle``: given, so 0);
+- ``ray_rms_mm``, ``ray_angle_mrad``: the method's ray model of the camera against the simulator's
+  true rays (every :data:`RAY_PIXEL_STEP` th raw pixel, chief rays through the microlens centres):
+  where they cross the true port's air-side face (RMS over both cameras, in the camera frame, no
+  alignment) and the angle between them;
+- ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``.
+
+The output directory keeps what the core wrote that a user would keep (``calibration/<camera>/``:
+``mla.json``, ``camera.json``, ``port.json``, ``port-thin-lens.json``) and ``commands.txt``, every
+core command in order (paths relative to the run's work folder).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import json
+import math
+import shlex
+import shutil
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from lfrefract import cli as core_cli
+from lfrefract.errors import ParameterError
+from lfrefract.formats.capture import RAW_NAME, camera_from_option, port_from_file, ray_correction_from_option
+from lfrefract.formats.exr import read_exr
+from lfrefract.formats.jsonio import read_json, write_json, write_text_atomically
+from lfrefract.metrics import ray_errors
+from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.optics.pose import Pose
+from lfrefract.optics.real_lens import RealLensCamera
+from lfrefract.synthesis.warp_map import PAPER_K
+from simulator import boards as board_scenes
+from simulator.config import (
+    THIN_LENS,
+    Chessboard,
+    Placement,
+    PointLight,
+    RenderSettings,
+    SceneConfig,
+    SensorSettings,
+    sensor_model,
+)
+from simulator.experiments import ExperimentOptions, ExperimentResult, complete_rows, register, write_table
+from simulator.experiments.methods import CentralImages
+from simulator.experiments.planes import (
+    PLANE_DEPTHS_M,
+    plane_figures,
+    plane_in_left,
+    plane_rows,
+    setup_for,
+    textured_plane,
+)
+from simulator.experiments.rigstereo import (
+    MATCHERS,
+    Capture,
+    PreparedMethod,
+    RigSetup,
+    aim,
+    calibrate_method_rig,
+    chessboards,
+    describe_error,
+    experiment_rig,
+    render_capture,
+    square_size_m,
+    warp_maps,
+    with_objects,
+)
+from simulator.job import LFR_NAME, render_job
+from simulator.rig import RigCamera, RigConfig
+from simulator.whites import render_whites, white_settings
+
+__all__ = [
+    "DEFAULT_LENS",
+    "MEASURES",
+    "METHODS",
+    "RAY_PIXEL_STEP",
+    "SENSORS",
+    "TEST_BOARD_DEPTHS_M",
+    "PipelineSetup",
+    "run_pipeline",
+    "setup_for_pipeline",
+]
+
+#: The rows of the table, in order.
+METHODS = ("oracle", "data-only", "thin-lens-assumed")
+#: The table's measures (NaN in a failed method's row).
+MEASURES = (
+    "corner_rms_px",
+    "plane_rmse_mm",
+    "truth_error_mm",
+    "port_normal_err_deg",
+    "port_distance_err_mm",
+    "ray_rms_mm",
+    "ray_angle_mrad",
+    "stereo_rms_px",
+)
+#: The main lens of the real-lens captures unless ``ExperimentOptions.lens`` says otherwise.
+DEFAULT_LENS = "double-gauss"
+#: The sensor model (a detector preset) of each scale's camera.
+SENSORS = {"tiny": "tiny", "illum": "illum"}
+#: Depths of the two held-out slanted test boards (world z of their centres), metres, per scale:
+#: between the near and far calibration boards.
+TEST_BOARD_DEPTHS_M = {"tiny": (0.38, 0.5), "illum": (0.55, 0.8)}
+#: The test boards' centres off the rig's line of sight, as fractions of their depth.
+TEST_BOARD_OFFSETS = ((0.03, -0.02), (-0.03, 0.02))
+#: The test boards' slant (x, y, z Euler angles, degrees): :data:`simulator.boards.SLANT_XYZ_DEG`.
+TEST_BOARD_ROTATION_XYZ_DEG = board_scenes.SLANT_XYZ_DEG
+#: Every how many raw pixels (along each axis) the ray models are compared with the true rays.
+RAY_PIXEL_STEP = {"tiny": 2, "illum": 8}
+#: File suffixes a Lytro camera gives (captures and its white images); nothing else is delivered.
+LYTRO_SUFFIXES = (".lfr", ".raw", ".txt")
+
+
+@dataclass(frozen=True)
+class PipelineSetup:
+    """What the pipeline renders at one scale (beside the rig's :class:`RigSetup`).
+
+    Attributes
+    ----------
+    rig : RigSetup
+        The stereo rig, its boards' depths and size, its spp (``planes``'s).
+    sensor : str
+        The detector preset of the sensor model.
+    white_frames : int
+        Exposures averaged into each white image (Lytro's factory whites average many).
+    white_spp : int
+        Samples per pixel of a white render.
+    air_spp : int
+        Samples per pixel of an in-air board capture.
+    """
+
+    rig: RigSetup
+    sensor: str
+    white_frames: int
+    white_spp: int
+    air_spp: int
+
+
+def setup_for_pipeline(scale: str) -> PipelineSetup:
+    """The pipeline's set-up at ``scale`` (``tiny`` runs in CI; ``illum`` is the paper's camera)."""
+    rig = setup_for(scale)
+    if scale == "tiny":
+        return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=16, white_spp=32, air_spp=32)
+    return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=8, white_spp=16, air_spp=rig.spp)
+
+
+# ----------------------------------------------------------------------------------- the scenes
+def _with_sensor(rig: RigConfig, sensor: str) -> RigConfig:
+    """``rig`` with every camera's sensor model (preset ``sensor``)."""
+    cameras = tuple(
+        RigCamera(c.name, c.scene.with_overrides(sensor=sensor_model(sensor, c.scene.camera))) for c in rig.cameras
+    )
+    return dataclasses.replace(rig, cameras=cameras)
+
+
+def _with_seeds(rig: RigConfig, first_seed: int) -> RigConfig:
+    """``rig`` with camera ``i`` rendering (and drawing its noise) with seed ``first_seed + i``."""
+    cameras = tuple(
+        RigCamera(c.name, c.scene.with_overrides(render=dataclasses.replace(c.scene.render, seed=first_seed + i)))
+        for i, c in enumerate(rig.cameras)
+    )
+    return dataclasses.replace(rig, cameras=cameras)
+
+
+def _test_boards(rig: RigConfig, setup: RigSetup, scale: str) -> dict[str, Chessboard]:
+    """The held-out slanted test boards by capture name."""
+    out = {}
+    for depth, (dx, dy) in zip(TEST_BOARD_DEPTHS_M[scale], TEST_BOARD_OFFSETS, strict=True):
+        centre = aim(rig, depth) + depth * np.array([dx, dy, 0.0])
+        out[f"test-{depth:g}"] = Chessboard(
+            placement=Placement(position_m=tuple(centre), rotation_xyz_deg=TEST_BOARD_ROTATION_XYZ_DEG),
+            squares=board_scenes.SQUARES,
+            square_size_m=square_size_m(rig, setup, depth),
+        )
+    return out
+
+
+def _rig_jobs(rig: RigConfig, setup: RigSetup, scale: str) -> tuple[list[tuple[str, list]], dict[str, float]]:
+    """The rig's captures ``(name, objects)`` and the square size of each board capture, metres."""
+    near, far = setup.calibration_depths_m
+    jobs: list[tuple[str, list]] = []
+    squares = {}
+    for depth in (near, far):
+        for i, board in enumerate(chessboards(rig, setup, depth)):
+            jobs.append((f"board-{depth:g}-{i}", [board]))
+            squares[jobs[-1][0]] = board.square_size_m
+    for name, board in _test_boards(rig, setup, scale).items():
+        jobs.append((name, [board]))
+    jobs += [(f"plane-{depth:g}", [textured_plane(rig, depth)]) for depth in PLANE_DEPTHS_M[scale]]
+    return jobs, squares
+
+
+def _port_board_scene(camera_scene: SceneConfig, table: dict, spp: int, seed: int) -> SceneConfig:
+    """A port calibration board (a :func:`simulator.boards.port_boards` table, camera frame) before
+    one rig camera alone: its scene in its own frame (identity pose, the wall as its port, the
+    lights moved with it)."""
+    pose = camera_scene.pose
+    lights = tuple(
+        dataclasses.replace(light, position_m=tuple(pose.to_camera(np.array([light.position_m]))[0]))
+        if isinstance(light, PointLight)
+        else light
+        for light in camera_scene.lights
+    )
+    board = Chessboard(
+        placement=Placement(position_m=tuple(table["position_m"]), rotation_xyz_deg=tuple(table["rotation_xyz_deg"])),
+        squares=tuple(table["squares"]),
+        square_size_m=table["square_size_m"],
+    )
+    return camera_scene.with_overrides(
+        name=f"{camera_scene.name}-port-board",
+        pose=Pose(),
+        lights=lights,
+        objects=(board,),
+        render=RenderSettings(spp=spp, ideal_spp=1, seed=seed),
+    )
+
+
+def _focus_distance_m(camera: LightFieldCamera) -> float:
+    """The distance the camera focuses on (thin-lens model, from the main lens), metres; inf at infinity."""
+    excess = 1.0 / camera.focal_length_m - 1.0 / camera.lens_to_mla_m
+    return math.inf if excess <= 0.0 else 1.0 / excess
+
+
+def _air_board_scene(table: dict, camera_scene: SceneConfig, lens: str, spp: int, seed: int) -> SceneConfig:
+    """An in-air board before ``camera_scene``'s camera, through ``lens``, with its sensor model."""
+    config = board_scenes.in_air_board_scene(table, lens=lens, spp=spp, seed=seed, camera=camera_scene.camera.name)
+    return config.with_overrides(camera=camera_scene.camera, sensor=camera_scene.sensor)
+
+
+# ------------------------------------------------------------------------------------- the core
+class _Core:
+    """Runs the core's command line in process, records each command, fails with its message.
+
+    ``roots``: folders and the names they are shown by in the record (paths inside one are
+    written relative to it, after its name)."""
+
+    def __init__(self, roots: dict[Path, str], log: list[str]):
+        self.roots = roots
+        self.log = log
+
+    def _shown(self, arg: str) -> str:
+        path = Path(arg)
+        for root, name in self.roots.items():
+            if path.is_absolute() and path.is_relative_to(root):
+                return str(Path(name) / path.relative_to(root))
+        return arg
+
+    def __call__(self, *argv: str) -> str:
+        argv_list = [str(a) for a in argv]
+        self.log.append("lfrefract " + " ".join(shlex.quote(self._shown(a)) for a in argv_list))
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            status = core_cli.main(argv_list)
+        if status != 0:
+            message = " ".join(err.getvalue().split()) or f"exit status {status}"
+            raise RuntimeError(f"lfrefract {argv_list[0]} {argv_list[1] if len(argv_list) > 1 else ''}: {message}")
+        return out.getvalue()
+
+
+def _check_delivered(folder: Path) -> list[str]:
+    """The files of ``folder`` (relative, sorted); :class:`ParameterError` for anything a Lytro
+    camera does not give (truth must not cross over to the core)."""
+    files = sorted(p for p in folder.rglob("*") if p.is_file())
+    foreign = [p for p in files if p.suffix.lower() not in LYTRO_SUFFIXES]
+    if foreign:
+        raise ParameterError(f"the core's input folder holds files a camera does not give: {foreign[:5]}")
+    return [str(p.relative_to(folder)) for p in files]
+
+
+# --------------------------------------------------------------------------------------- the run
+def run_pipeline(
+    out_dir: Path,
+    *,
+    options: ExperimentOptions | None = None,
+    progress: bool = True,
+    renders_dir: Path | None = None,
+) -> ExperimentResult:
+    """Run the experiment (see the module docstring); figures and the core's outputs go to ``out_dir``.
+
+    ``options``: the scale, ``lens`` (the real captures' main lens, default :data:`DEFAULT_LENS`;
+    ``"thin"`` makes the data-only chain calibrate a camera that is what the core models),
+    ``port_distance_m`` and ``thickness_m`` (the rig's wall). ``renders_dir``: keep the renders there
+    and reuse those that match on a later run (default: a temporary directory, deleted).
+    """
+    options = options if options is not None else ExperimentOptions()
+    with tempfile.TemporaryDirectory(prefix="lfsim-pipeline-") as tmp:
+        work = Path(tmp) if renders_dir is None else Path(renders_dir)
+        return _run(Path(out_dir), options, work, progress=progress)
+
+
+def _render(options: ExperimentOptions, work: Path, *, progress: bool):
+    """Render the oracle's and the real captures; copy the Lytro files into ``work / "delivered"``."""
+    scale = options.scale
+    setup = setup_for_pipeline(scale)
+    lens = options.lens if options.lens is not None else DEFAULT_LENS
+    thin = experiment_rig(setup.rig, dataclasses.replace(options, lens=THIN_LENS))
+    real = _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
+    jobs, squares = _rig_jobs(thin, setup.rig, scale)
+    renders, delivered = work / "renders", work / "delivered"
+    oracle, captures = {}, {}
+    bar = tqdm(total=2 * len(jobs), desc="rendering the rig", unit="capture", disable=not progress)
+    for j, (name, objects) in enumerate(jobs):
+        oracle[name] = render_capture(with_objects(thin, objects), renders / "oracle" / name)
+        bar.update()
+        seeded = _with_seeds(with_objects(real, objects), 1 + len(real.cameras) * j)
+        captures[name] = render_capture(seeded, renders / "real" / name, write_lfr=True)
+        bar.update()
+    bar.close()
+    if delivered.exists():
+        shutil.rmtree(delivered)  # the work folder's own copy, remade from the renders
+    for camera in real.cameras:
+        for name, capture in captures.items():
+            target = delivered / "rig" / camera.name / f"{name}.lfr"
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(capture.folder / camera.name / LFR_NAME, target)
+    seed = 1 + len(real.cameras) * len(jobs)
+    for i, camera in enumerate(real.cameras):
+        scene = camera.scene
+        sensor = SensorSettings(detector=scene.sensor.detector, frames=setup.white_frames)
+        whites = renders / "whites" / camera.name
+        settings = white_settings(scene.camera, focus_distances_m=(_focus_distance_m(scene.camera),))
+        white_seed = seed + i * len(settings)
+        _once(
+            whites,
+            {
+                "camera": scene.camera.to_dict(),
+                "settings": [dataclasses.asdict(x) for x in settings],
+                "sensor": sensor.to_dict(),
+                "lens": lens,
+                "spp": setup.white_spp,
+                "seed": white_seed,
+            },
+            lambda scene=scene, whites=whites, sensor=sensor, settings=settings, white_seed=white_seed: render_whites(
+                whites,
+                camera=scene.camera,
+                settings=settings,
+                sensor=sensor,
+                lens=None if lens == THIN_LENS else lens,
+                spp=setup.white_spp,
+                seed=white_seed,
+                overwrite=True,
+                progress=False,
+            ),
+        )
+        for white in whites.iterdir():
+            if white.suffix in (".raw", ".txt"):
+                (delivered / "whites" / camera.name).mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(white, delivered / "whites" / camera.name / white.name)
+    seed += len(real.cameras) * 16
+    view = virtual_camera_for(real.cameras[0].scene.camera)
+    air_boards = board_scenes.in_air_boards(view)
+    air_squares = [table["square_size_m"] for table in air_boards]
+    for i, camera in enumerate(real.cameras):
+        for k, table in enumerate(tqdm(air_boards, desc=f"in-air boards ({camera.name})", disable=not progress)):
+            config = _air_board_scene(table, camera.scene, lens, setup.air_spp, seed + i * len(air_boards) + k)
+            _render_and_deliver(config, renders / "air" / camera.name / f"board-{k}", delivered / "air" / camera.name)
+    seed += len(real.cameras) * len(air_boards)
+    port_squares = {}
+    for i, camera in enumerate(real.cameras):
+        tables = board_scenes.port_boards(camera.scene.port, virtual_camera_for(camera.scene.camera))
+        port_squares[camera.name] = [table["square_size_m"] for table in tables]
+        for k, table in enumerate(tqdm(tables, desc=f"port boards ({camera.name})", disable=not progress)):
+            config = _port_board_scene(camera.scene, table, setup.air_spp, seed + i * len(tables) + k)
+            _render_and_deliver(config, renders / "port" / camera.name / f"board-{k}", delivered / "port" / camera.name)
+    return setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures
+
+
+def _render_and_deliver(config: SceneConfig, folder: Path, delivered: Path) -> None:
+    """Render ``config`` into ``folder`` (kept if it holds this scene's render) and copy its Lytro file
+    into ``delivered`` as ``<folder name>.lfr``."""
+    _once(
+        folder,
+        {k: v for k, v in config.to_dict().items() if k != "source"},
+        lambda: render_job(config, folder, progress=False, write_previews=False, write_lfr=True, overwrite=True),
+    )
+    delivered.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(folder / LFR_NAME, delivered / f"{folder.name}.lfr")
+
+
+def _signature(data) -> object:
+    """``data`` as plain JSON data (tuples become lists), to compare with what a file recorded."""
+    return json.loads(json.dumps(data))
+
+
+def _once(folder: Path, signature, render) -> None:
+    """Call ``render()`` to (re)make ``folder`` unless it was made for the same ``signature`` (kept
+    beside it, ``<folder>.signature.json``)."""
+    record = folder.parent / f"{folder.name}.signature.json"
+    signature = _signature(signature)
+    if folder.is_dir() and record.is_file() and read_json(record).get("signature") == signature:
+        return
+    render()
+    write_json(record, {"signature": signature})
+
+
+def _synth_all(core: _Core, captures: dict[str, Path], model_args: Sequence[str], out: Path, maps: Path) -> None:
+    """``lfrefract synth`` of each capture (name -> raw file) into ``out/<name>.exr``, k = the paper's 32."""
+    out.mkdir(parents=True, exist_ok=True)
+    for name, raw in captures.items():
+        target = out / f"{name}.exr"
+        core("synth", raw, *model_args, "--k", PAPER_K, "--map-cache", maps, "--quiet", "--out", target)
+
+
+def _images(synth_dir: Path, cameras: Sequence[str], reference: str) -> CentralImages:
+    """A method's synthesized images (``synth_dir/<camera>/<capture>.exr``) as central images; their
+    ``K`` from the synth sidecar of capture ``reference``. A shot's folder name names its capture."""
+    outputs = {}
+    for camera in cameras:
+        meta = read_json(synth_dir / camera / f"{reference}.json")
+        k = np.asarray(meta["K"], dtype=np.float64)
+        outputs[camera] = PinholeCamera(
+            focal_px=float(k[0, 0]),
+            cx_px=float(k[0, 2]),
+            cy_px=float(k[1, 2]),
+            width_px=int(meta["width_px"]),
+            height_px=int(meta["height_px"]),
+        )
+
+    def project(camera: str, shot) -> np.ndarray:
+        return read_exr(synth_dir / camera / f"{shot.folder.name}.exr", role="refraction_free")
+
+    return CentralImages(outputs=outputs, project=project)
+
+
+@dataclass
+class _Models:
+    """One method's models of each camera, filled as its chain runs."""
+
+    ports: dict[str, FlatPort] = dataclasses.field(default_factory=dict)
+    rays: dict[str, CapturedRays] = dataclasses.field(default_factory=dict)
+    error: str | None = None
+
+
+def _numbered(folder: Path) -> list[Path]:
+    """The ``board-<k>.lfr`` files of ``folder`` in the order of ``k``."""
+    return sorted(folder.glob("board-*.lfr"), key=lambda p: int(p.stem.split("-")[-1]))
+
+
+def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, runs: dict) -> dict[str, _Models]:
+    """The data-only and thin-lens-assumed chains, per camera, on the delivered files only."""
+    models = {"data-only": _Models(), "thin-lens-assumed": _Models()}
+    board_args = ["--squares", *map(str, board_scenes.SQUARES)]
+    for camera, run in runs.items():
+        whites = delivered / "whites" / camera
+        rig = delivered / "rig" / camera
+        out = cal_out / camera
+        out.mkdir(parents=True, exist_ok=True)
+        mla, camera_json = out / "mla.json", out / "camera.json"
+        try:
+            white = sorted(whites.glob("*.raw"))[0]
+            core("calibrate", "mla", white, "--camera", run["preset"], "--out", mla)
+        except Exception as exc:  # both chains need the MLA
+            for chain in models.values():
+                chain.error = chain.error or describe_error(exc)
+            continue
+        air = _numbered(delivered / "air" / camera)
+        chains = {"data-only": camera_json, "thin-lens-assumed": mla}
+        for method, model in chains.items():
+            chain = models[method]
+            if chain.error is not None:
+                continue
+            try:
+                if method == "data-only":
+                    sizes = [str(s) for s in run["air_squares"]]
+                    core(
+                        "calibrate",
+                        "camera",
+                        *air,
+                        "--camera",
+                        mla,
+                        "--white",
+                        whites,
+                        *board_args,
+                        "--square-size-m",
+                        *sizes,
+                        "--out",
+                        camera_json,
+                    )
+                port = out / ("port.json" if method == "data-only" else "port-thin-lens.json")
+                boards = _numbered(delivered / "port" / camera)
+                sizes = [str(s) for s in run["port_squares"]]
+                core(
+                    "calibrate",
+                    "port",
+                    *boards,
+                    "--camera",
+                    model,
+                    "--white",
+                    whites,
+                    *board_args,
+                    "--square-size-m",
+                    *sizes,
+                    *run["glass"],
+                    "--out",
+                    port,
+                )
+                captures = {p.stem: p for p in sorted(rig.glob("*.lfr"))}
+                args = ["--white", whites, "--camera", model, "--port", port]
+                _synth_all(core, captures, args, products / "synth" / method / camera, products / "maps")
+                chain.ports[camera] = port_from_file(port)
+                lf = camera_from_option(model)
+                rays = lf.captured_rays(run["uv"])
+                correction = ray_correction_from_option(model) if method == "data-only" else None
+                chain.rays[camera] = rays if correction is None else correction.corrected(rays)
+            except Exception as exc:  # a failing chain is a table row, not a failed run
+                chain.error = describe_error(exc)
+    return models
+
+
+def _oracle_stage(core: _Core, oracle: dict[str, Capture], thin: RigConfig, products: Path, uv: np.ndarray) -> _Models:
+    """Today's pipeline: ``synth`` of the thin-lens renders' noiseless raw images with their meta.json."""
+    models = _Models()
+    try:
+        for camera in thin.cameras:
+            captures = {name: capture.folder / camera.name / RAW_NAME for name, capture in oracle.items()}
+            _synth_all(core, captures, [], products / "synth" / "oracle" / camera.name, products / "maps")
+            models.ports[camera.name] = camera.scene.port
+            models.rays[camera.name] = camera.scene.camera.captured_rays(uv)
+    except Exception as exc:  # a failing chain is a table row, not a failed run
+        models.error = describe_error(exc)
+    return models
+
+
+def _true_rays(rig: RigConfig, uv: np.ndarray) -> dict[str, CapturedRays]:
+    """Each camera's true rays through its main lens (thin or real) at raw pixels ``uv`` (N, 2)."""
+    out = {}
+    for camera in rig.cameras:
+        scene = camera.scene
+        if scene.lens is None:
+            out[camera.name] = scene.camera.captured_rays(uv)
+        else:
+            out[camera.name] = RealLensCamera(camera=scene.camera, lens=scene.lens).chief_rays(uv)
+    return out
+
+
+def _port_errors(ports: dict[str, FlatPort], truth: RigConfig) -> tuple[float, float]:
+    """(normal angle, deg; distance, mm) of the calibrated ports against the true ones, the larger
+    of the cameras'."""
+    angles, distances = [], []
+    for camera in truth.cameras:
+        true, port = camera.scene.port, ports[camera.name]
+        angles.append(math.degrees(math.acos(float(np.clip(np.dot(true.normal, port.normal), -1.0, 1.0)))))
+        distances.append(abs(port.distance_m - true.distance_m) * 1e3)
+    return max(angles), max(distances)
+
+
+def _ray_measures(rays: dict[str, CapturedRays], true: dict[str, CapturedRays], truth: RigConfig) -> dict:
+    """The ray models against the true rays at each true port's air-side face, RMS over the cameras."""
+    positions, angles = [], []
+    for camera in truth.cameras:
+        model, ref, port = rays[camera.name], true[camera.name], camera.scene.port
+        errors = ray_errors(
+            model.origins_cam,
+            model.directions_cam,
+            ref.origins_cam,
+            ref.directions_cam,
+            plane_normal=port.normal,
+            plane_distance_m=port.distance_m,
+            valid=model.in_aperture & ref.in_aperture,
+        )
+        positions.append(errors.position_rms_m)
+        angles.append(errors.angle_rms_rad)
+    rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
+    return {"ray_rms_mm": rms(positions) * 1e3, "ray_angle_mrad": rms(angles) * 1e3}
+
+
+def _corner_measures(images: CentralImages, shots: dict[str, Capture], tests: dict[str, Chessboard], rig) -> dict:
+    """The test boards' corners in the method's images against their true projections by its ``K``."""
+    squared, found, total = [], 0, 0
+    for name, board in tests.items():
+        world = board_scenes.chessboard_corners_world(board)
+        for camera in rig.cameras:
+            total += 1
+            corners = board_scenes.find_corners(images.project(camera.name, shots[name]))
+            if corners is None:
+                continue
+            found += 1
+            expected = images.outputs[camera.name].project(camera.scene.pose.to_camera(world))
+            squared.append(np.sum(board_scenes.aligned_errors_px(corners, expected) ** 2, axis=1))
+    rms = float(np.sqrt(np.mean(np.concatenate(squared)))) if squared else math.nan
+    return {"corner_rms_px": rms, "test_boards_found": f"{found}/{total}"}
+
+
+def _run(out_dir: Path, options: ExperimentOptions, work: Path, *, progress: bool) -> ExperimentResult:
+    """Render (into ``work``), run the core on the delivered files, measure; see :func:`run_pipeline`."""
+    scale = options.scale
+    seconds = {}
+    start = time.perf_counter()
+    rendered = _render(options, work, progress=progress)
+    setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures = rendered
+    seconds["render_s"] = time.perf_counter() - start
+    delivered = work / "delivered"
+    files = _check_delivered(delivered)
+    step = RAY_PIXEL_STEP[scale]
+    sensor = real.cameras[0].scene.camera.sensor
+    vv, uu = np.mgrid[0 : sensor.height_px : step, 0 : sensor.width_px : step]
+    uv = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
+    wall = real.wall
+    glass = ["--thickness-m", str(wall.thickness_m), "--n-glass", str(wall.n_glass), "--n-water", str(wall.n_water)]
+    runs = {
+        c.name: {
+            "preset": c.scene.camera.name,
+            "air_squares": air_squares,
+            "port_squares": port_squares[c.name],
+            "glass": glass,
+            "uv": uv,
+        }
+        for c in real.cameras
+    }
+    log: list[str] = []
+    products = work / "core"
+    if products.exists():  # an earlier run's synthesized images and maps (remade: the core may have changed)
+        shutil.rmtree(products)
+    core = _Core({products: "core", work: "", out_dir: "out"}, log)
+    start = time.perf_counter()
+    models = {"oracle": _oracle_stage(core, oracle, thin, products, uv)}
+    seconds["oracle_core_s"] = time.perf_counter() - start
+    start = time.perf_counter()
+    models |= _core_stage(core, delivered, products, out_dir / "calibration", runs)
+    seconds["data_core_s"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    true_rays = {"oracle": _true_rays(thin, uv)}
+    true_rays["data-only"] = true_rays["thin-lens-assumed"] = _true_rays(real, uv)
+    warps = warp_maps(thin)
+    tests = _test_boards(thin, setup.rig, scale)
+    plane_depths = PLANE_DEPTHS_M[scale]
+    truth = {depth: plane_in_left(thin, textured_plane(thin, depth)) for depth in plane_depths}
+    names = [c.name for c in thin.cameras]
+    rows, by_depth, disparities = [], [], {}
+    for method in METHODS:
+        chain, shots = models[method], oracle if method == "oracle" else captures
+        row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan) | {"test_boards_found": ""}
+        prepared = PreparedMethod(name=method, error=chain.error)
+        if chain.error is None:
+            images = _images(products / "synth" / method, names, jobs[0][0])
+            boards = [(shots[name], size) for name, size in squares.items()]
+            prepared = calibrate_method_rig(method, images, boards, cameras=(names[0], names[1]))
+            row |= _corner_measures(images, shots, tests, thin)
+            row["port_normal_err_deg"], row["port_distance_err_mm"] = _port_errors(chain.ports, thin)
+            row |= _ray_measures(chain.rays, true_rays[method], thin)
+        if prepared.ok:
+            for depth in plane_depths:
+                shot = shots[f"plane-{depth:g}"]
+                by_depth += plane_rows(
+                    prepared, shot, depth, truth[depth], thin, warps, disparities, out_dir, clouds=None
+                )
+            zncc = [r for r in by_depth if r["method"] == method and r["matcher"] == MATCHERS[0]]
+            row["plane_rmse_mm"] = float(np.mean([r["plane_rmse_mm"] for r in zncc]))
+            row["truth_error_mm"] = float(np.mean([r["truth_error_mm"] for r in zncc]))
+            row["stereo_rms_px"] = prepared.stereo.rms_px
+            row |= {"status": "ok", "error": ""}
+        else:
+            row |= {"status": "failed", "error": prepared.error}
+            by_depth += [
+                {"matcher": m, "method": method, "depth_m": d, "status": "failed", "error": prepared.error}
+                for m in MATCHERS
+                for d in plane_depths
+            ]
+        rows.append(row)
+    seconds["measure_s"] = time.perf_counter() - start
+    rows = list(complete_rows(rows))
+    write_table(complete_rows(by_depth), out_dir, stem="planes")
+    write_text_atomically(out_dir / "commands.txt", "\n".join(log) + "\n")
+    figures = (
+        _summary_figure(out_dir, rows, scale=scale, lens=lens, sensor=setup.sensor, wall=real.wall),
+        *plane_figures(out_dir, list(by_depth), disparities, plane_depths, list(METHODS), prefix="pipeline"),
+    )
+    return ExperimentResult(
+        name="pipeline",
+        scale=scale,
+        rows=tuple(rows),
+        figures=figures,
+        summary=_summary(rows),
+        parameters={
+            "rig": dataclasses.asdict(setup.rig),
+            "lens": lens,
+            "sensor": setup.sensor,
+            "white_frames": setup.white_frames,
+            "white_spp": setup.white_spp,
+            "air_spp": setup.air_spp,
+            "wall": real.wall.to_dict(),
+            "plane_depths_m": list(plane_depths),
+            "test_board_depths_m": list(TEST_BOARD_DEPTHS_M[scale]),
+            "ray_pixel_step": step,
+            "delivered": files,
+            "commands": len(log),
+            **seconds,
+        },
+    )
+
+
+def _summary(rows: Sequence[dict]) -> str:
+    """The table as markdown, for the terminal and meta.json."""
+    keys = ("corner_rms_px", "plane_rmse_mm", "truth_error_mm", "port_normal_err_deg", "port_distance_err_mm")
+    keys += ("ray_rms_mm",)
+    lines = ["| method | " + " | ".join(keys) + " | status |", "|---|" + "---:|" * len(keys) + "---|"]
+    for row in rows:
+        cells = [f"{row[k]:.3f}" if isinstance(row[k], float) and math.isfinite(row[k]) else "-" for k in keys]
+        lines.append(f"| {row['method']} | " + " | ".join(cells) + f" | {row['status']} |")
+    failed = [f"- {r['method']}: {r['error']}" for r in rows if r["status"] != "ok"]
+    return "\n".join(lines + (["", "failed:", *failed] if failed else []))
+
+
+def _summary_figure(out_dir: Path, rows: Sequence[dict], *, scale: str, lens: str, sensor: str, wall) -> Path:
+    """Bars of the table's measures by method."""
+    import matplotlib as mpl
+
+    mpl.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = (
+        ("corner_rms_px", "test-board corners, px RMS"),
+        ("plane_rmse_mm", "plane fit RMSE (ZNCC), mm"),
+        ("truth_error_mm", "error against the true plane, mm"),
+        ("port_normal_err_deg", "port normal error, deg"),
+        ("port_distance_err_mm", "port distance error, mm"),
+        ("ray_rms_mm", "ray error at the port, mm RMS"),
+    )
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 3.4))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, (key, title) in zip(axes, panels, strict=True):
+        values = [float(r[key]) if isinstance(r[key], (int, float)) else math.nan for r in rows]
+        x = np.arange(len(rows))
+        ax.bar(x, values, color=[colours[i % len(colours)] for i in range(len(rows))])
+        ax.set_xticks(x, [r["method"] for r in rows], rotation=30, ha="right", fontsize=8)
+        ax.set_title(title, fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
+    tilt = math.degrees(math.acos(float(np.clip(wall.normal[2] / np.linalg.norm(wall.normal), -1.0, 1.0))))
+    fig.suptitle(
+        f"pipeline ({scale}): {lens} lens, {sensor} sensor, wall tilted {tilt:.0f} deg, "
+        f"{wall.thickness_m * 1e3:g} mm glass; oracle = thin lens, true camera and port",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    path = out_dir / "pipeline_summary.png"
+    fig.savefig(path, dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+@register("pipeline", options=("lens", "port_distance_m", "thickness_m"))
+def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+    """From Lytro files alone (real lens, sensor model): MLA, camera, port calibrated, stereo; against the oracle."""
+    return run_pipeline(out_dir, options=options, progress=progress)
