@@ -334,20 +334,26 @@ def run_pipeline(
     and reuse those that match on a later run (default: a temporary directory, deleted).
     """
     options = options if options is not None else ExperimentOptions()
-    with tempfile.TemporaryDirectory(prefix="lfsim-pipeline-") as tmp:
+    # The core's input folder and its products live in a fresh temporary folder of every run: nothing
+    # in renders_dir (the caller's) is ever deleted, and no earlier run's copy can reach the core.
+    with (
+        tempfile.TemporaryDirectory(prefix="lfsim-pipeline-") as tmp,
+        tempfile.TemporaryDirectory(prefix="lfsim-pipeline-core-") as scratch,
+    ):
         work = Path(tmp) if renders_dir is None else Path(renders_dir)
-        return _run(Path(out_dir), options, work, progress=progress)
+        return _run(Path(out_dir), options, work, Path(scratch), progress=progress)
 
 
-def _render(options: ExperimentOptions, work: Path, *, progress: bool):
-    """Render the oracle's and the real captures; copy the Lytro files into ``work / "delivered"``."""
+def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress: bool):
+    """Render the oracle's and the real captures into ``work / "renders"``; copy the Lytro files into
+    ``delivered`` (a new folder)."""
     scale = options.scale
     setup = setup_for_pipeline(scale)
     lens = options.lens if options.lens is not None else DEFAULT_LENS
     thin = experiment_rig(setup.rig, dataclasses.replace(options, lens=THIN_LENS))
     real = _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
     jobs, squares = _rig_jobs(thin, setup.rig, scale)
-    renders, delivered = work / "renders", work / "delivered"
+    renders = work / "renders"
     oracle, captures = {}, {}
     bar = tqdm(total=2 * len(jobs), desc="rendering the rig", unit="capture", disable=not progress)
     for j, (name, objects) in enumerate(jobs):
@@ -357,8 +363,6 @@ def _render(options: ExperimentOptions, work: Path, *, progress: bool):
         captures[name] = render_capture(seeded, renders / "real" / name, write_lfr=True)
         bar.update()
     bar.close()
-    if delivered.exists():
-        shutil.rmtree(delivered)  # the work folder's own copy, remade from the renders
     for camera in real.cameras:
         for name, capture in captures.items():
             target = delivered / "rig" / camera.name / f"{name}.lfr"
@@ -632,15 +636,15 @@ def _corner_measures(images: CentralImages, shots: dict[str, Capture], tests: di
     return {"corner_rms_px": rms, "test_boards_found": f"{found}/{total}"}
 
 
-def _run(out_dir: Path, options: ExperimentOptions, work: Path, *, progress: bool) -> ExperimentResult:
+def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *, progress: bool) -> ExperimentResult:
     """Render (into ``work``), run the core on the delivered files, measure; see :func:`run_pipeline`."""
     scale = options.scale
     seconds = {}
     start = time.perf_counter()
-    rendered = _render(options, work, progress=progress)
+    delivered, products = scratch / "delivered", scratch / "core"
+    rendered = _render(options, work, delivered, progress=progress)
     setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures = rendered
     seconds["render_s"] = time.perf_counter() - start
-    delivered = work / "delivered"
     files = _check_delivered(delivered)
     step = RAY_PIXEL_STEP[scale]
     sensor = real.cameras[0].scene.camera.sensor
@@ -659,10 +663,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, *, progress: boo
         for c in real.cameras
     }
     log: list[str] = []
-    products = work / "core"
-    if products.exists():  # an earlier run's synthesized images and maps (remade: the core may have changed)
-        shutil.rmtree(products)
-    core = _Core({products: "core", work: "", out_dir: "out"}, log)
+    core = _Core({delivered: "delivered", products: "core", work: "", out_dir: "out"}, log)
     start = time.perf_counter()
     models = {"oracle": _oracle_stage(core, oracle, thin, products, uv)}
     seconds["oracle_core_s"] = time.perf_counter() - start
