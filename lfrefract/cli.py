@@ -398,7 +398,14 @@ def naive(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
     )
     camera = _known(capture.camera, capture.raw_path)
-    image = naive_view(camera, capture.raw, output=capture.output, kind=args.kind, recorded=capture.recorded)
+    image = naive_view(
+        camera,
+        capture.raw,
+        output=capture.output,
+        kind=args.kind,
+        recorded=capture.recorded,
+        ray_correction=ray_correction_from_option(args.camera),
+    )
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
     return 0
@@ -415,7 +422,13 @@ def views(args: argparse.Namespace) -> int:
             view_stack_bytes(camera, output, grid=args.grid, channels=capture.channels, exported=True),
         )
     stack = subaperture_stack(
-        camera, capture.raw, grid=args.grid, spacing_px=args.spacing_px, output=output, recorded=capture.recorded
+        camera,
+        capture.raw,
+        grid=args.grid,
+        spacing_px=args.spacing_px,
+        output=output,
+        recorded=capture.recorded,
+        ray_correction=ray_correction_from_option(args.camera),
     )
     out = write_view_stack(
         Path(args.out),
@@ -566,7 +579,9 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
     )
-    conventional = ConventionalView(camera=camera, view=virtual_camera_for(camera))
+    conventional = ConventionalView(
+        camera=camera, view=virtual_camera_for(camera), ray_correction=ray_correction_from_option(args.camera)
+    )
     images = [
         conventional.apply(_board_raw(path, camera, args.white, args.colour, command="approx")) for path in args.boards
     ]

@@ -38,6 +38,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis.views import (
     apply_resampling,
     micro_image_samples,
@@ -131,10 +132,15 @@ class ConventionalView:
     camera : LightFieldCamera
     view : PinholeCamera
         Output geometry.
+    ray_correction : RayCorrection, optional
+        A calibrated camera's rays (``lfrefract calibrate camera``): each lens sits where its
+        corrected chief ray points, so the main lens's distortion is not in the image. Default: the
+        thin lens's rays.
     """
 
     camera: LightFieldCamera
     view: PinholeCamera
+    ray_correction: RayCorrection | None = None
     _idx: np.ndarray = field(init=False, repr=False)
     _matrix: sparse.csr_matrix = field(init=False, repr=False)
     _inside: np.ndarray = field(init=False, repr=False)
@@ -144,7 +150,7 @@ class ConventionalView:
             raise ParameterError(f"camera must be a LightFieldCamera, got {self.camera!r}")
         if not isinstance(self.view, PinholeCamera):
             raise ParameterError(f"view must be a PinholeCamera, got {self.view!r}")
-        idx, matrix, inside = resampling_matrix(self.camera, self.view)
+        idx, matrix, inside = resampling_matrix(self.camera, self.view, ray_correction=self.ray_correction)
         object.__setattr__(self, "_idx", idx)
         object.__setattr__(self, "_matrix", matrix)
         object.__setattr__(self, "_inside", inside)

@@ -659,6 +659,11 @@ VIEW_STACK_DISPARITY_RELATIVE = 0.03
 # between lens samples, one per two output pixels, pulls ECC towards the lens lattice.
 VIEW_STACK_SHIFT_RESIDUAL_PX = 0.15
 
+# Ratio; a calibrated camera's central view (its rays corrected) against the pinhole image of a
+# textured plane, over the thin lens's own view of its own rays: MEASURED. The correction moves
+# the lenses, so their interpolation samples the texture at other points.
+VIEW_CALIBRATED_FLOOR_RATIO = 1.5
+
 # ----------------------------------------------------------------------------- datasets
 # Ratio; mean raw pixel of the default scene (tiny, 2 spp) in water with absorption_per_m = 1 over
 # the same in clear water, both swept by a dataset (tests/simulator/test_dataset_run.py): 0.33

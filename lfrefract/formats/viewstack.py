@@ -18,6 +18,7 @@ from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.outputs import staged_directory
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis.views import ViewStack
 from lfrefract.validate import one_of, positive_float, positive_int
 
@@ -129,7 +130,7 @@ def write_view_stack(
       cameras, baseline, focal length in mm and pixels, sensor size, focus distance ``inf``);
     * ``valid_mask.png``: 255 where every view has a finite value in every channel, else 0;
     * ``stack.npz``: ``views`` (float32, NaN kept), ``offsets_px``, ``centres_m``, ``K``, the
-      camera as JSON, ``schema_version`` (:func:`read_view_stack`);
+      camera and its ray correction as JSON (empty when none), ``schema_version`` (:func:`read_view_stack`);
     * ``views.json``: the sidecar (layout, ordering, encoding, disparity relation, geometry).
 
     PNG views are 8-bit sRGB: ``round(255 * srgb(clip(value / white_level, 0, 1)))`` with the
@@ -219,6 +220,9 @@ def write_view_stack(
                 centres_m=stack.centres_m,
                 K=stack.K,
                 camera=np.asarray(json.dumps(stack.camera.to_dict()) if stack.camera is not None else ""),
+                ray_correction=np.asarray(
+                    json.dumps(stack.ray_correction.to_dict()) if stack.ray_correction is not None else ""
+                ),
                 schema_version=np.asarray(SCHEMA_VERSION),
             )
         write_json(
@@ -257,6 +261,7 @@ def write_view_stack(
                 "offsets_px": stack.offsets_px,
                 "centres_m": stack.centres_m,
                 "camera": stack.camera.to_dict() if stack.camera is not None else None,
+                "ray_correction": stack.ray_correction.to_dict() if stack.ray_correction is not None else None,
                 "metadata": metadata,
             },
         )
@@ -296,6 +301,9 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
             raise ParameterError(f"views must have 4 or 5 dimensions, got shape {views.shape}")
         camera_text = str(arrays["camera"])
         camera = LightFieldCamera.from_dict(json.loads(camera_text)) if camera_text else None
+        # Optional: stacks written before calibrated cameras were read have none (the thin lens's rays).
+        correction_text = str(arrays["ray_correction"]) if "ray_correction" in arrays else ""
+        correction = RayCorrection.from_dict(json.loads(correction_text)) if correction_text else None
         output = PinholeCamera.from_K(arrays["K"], int(views.shape[3]), int(views.shape[2]))
         return ViewStack(
             views=views,
@@ -303,6 +311,7 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
             centres_m=arrays["centres_m"],
             output=output,
             camera=camera,
+            ray_correction=correction,
         )
     except (ValueError, TypeError) as exc:  # ParameterError, JSONDecodeError, a K of strings
         raise FileFormatError(f"{str(file)!r} does not hold a valid view stack: {exc}") from None

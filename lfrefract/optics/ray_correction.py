@@ -31,7 +31,7 @@ import numpy as np
 from lfrefract.optics.camera import CapturedRays
 from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
 
-__all__ = ["PARAMETERS", "RayCorrection", "apply_correction"]
+__all__ = ["PARAMETERS", "RayCorrection", "apply_correction", "corrected_slopes"]
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
 PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
@@ -92,6 +92,10 @@ class RayCorrection:
         """
         return apply_correction(self.vector(), np.asarray(aperture_points_m, float), np.asarray(slopes, float))
 
+    def slopes(self, slopes: np.ndarray) -> np.ndarray:
+        """The camera's slopes ``t'`` (N, 2) of thin-lens slopes ``t`` (N, 2): ``s t (1 + k1 |t|^2 + k2 |t|^4)``."""
+        return corrected_slopes(self.vector(), np.asarray(slopes, dtype=float))
+
     def corrected(self, rays: CapturedRays) -> CapturedRays:
         """``rays`` (thin-lens captured rays) with the correction applied; masks and lenses kept."""
         d = rays.directions_cam
@@ -118,10 +122,16 @@ class RayCorrection:
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`RayCorrection.apply` for the parameter vector ``p`` (:data:`PARAMETERS`; the fit's form)."""
-    m, s, k1, k2, drift = p
-    r2 = np.sum(t * t, axis=1, keepdims=True)
-    slopes = s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
+    m, drift = p[0], p[4]
+    slopes = corrected_slopes(p, t)
     shift = drift * np.sum(slopes * slopes, axis=1, keepdims=True) * slopes  # back from z = d |t'|^2 to z = 0
     origins = np.column_stack([m * a - shift, np.zeros(len(a))])
     directions = np.column_stack([slopes, np.ones(len(a))])
     return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+def corrected_slopes(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """:meth:`RayCorrection.slopes` for the parameter vector ``p`` (:data:`PARAMETERS`)."""
+    s, k1, k2 = p[1], p[2], p[3]
+    r2 = np.sum(t * t, axis=1, keepdims=True)
+    return s * t * (1.0 + k1 * r2 + k2 * r2 * r2)

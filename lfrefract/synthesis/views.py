@@ -20,6 +20,16 @@ form a regular grid on the main-lens plane, ``baseline = s * pixel_pitch * f' / 
 every view has the same K and orientation, so it is the input that light-field depth-estimation
 methods expect (``lfrefract.formats.viewstack.write_view_stack`` writes it in the HCI benchmark layout).
 
+A calibrated camera (``ray_correction``, a :class:`lfrefract.optics.ray_correction.RayCorrection`
+from ``lfrefract calibrate camera``) moves every ray: the thin-lens slope ``t`` becomes
+``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` and the aperture point ``a`` becomes ``m a``. Every function
+here takes it: a lens then lands at ``K (t', 1)`` (the main lens's distortion removed) and a
+sub-aperture view's centre of projection is ``m h``, so the views are again pinholes of one K and
+the stack's baseline is ``m`` times the thin lens's. The pupil's drift ``d`` is left out: the rays of
+slope ``t'`` cross the axis at ``z = d |t'|^2`` rather than 0, which moves a point at depth ``Z`` by
+about ``f_px d |t'|^3 / Z`` pixels in the views (0.01 px for the tiny camera's corner at 0.3 m with
+d = 1 mm); the refraction-free synthesis uses every ray's exact origin.
+
 Unrecorded raw pixels (NaN, inf or negative values a capture was told to mask,
 :func:`lfrefract.formats.capture.read_capture`) are excluded with ``recorded``, an (H, W) bool mask of the
 raw image: every sample then averages the recorded pixels only, with its weights renormalised over
@@ -46,6 +56,7 @@ from lfrefract._memory import require_memory
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.validate import finite_vector, one_of, positive_float
 
 __all__ = [
@@ -160,6 +171,7 @@ def naive_view(
     output: PinholeCamera | None = None,
     kind: str = "central",
     recorded: np.ndarray | None = None,
+    ray_correction: RayCorrection | None = None,
 ) -> np.ndarray:
     """Resample a conventional view of ``raw`` onto a pinhole image, ignoring any port.
 
@@ -175,6 +187,8 @@ def naive_view(
     recorded : ndarray of bool, shape (H, W), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
         Default: all.
+    ray_correction : RayCorrection, optional
+        The camera's calibrated rays (see the module docstring); default: the thin lens's.
 
     Returns
     -------
@@ -188,6 +202,7 @@ def naive_view(
         (:func:`naive_view_bytes`) exceeds the memory available.
     """
     one_of("kind", kind, VIEW_KINDS)
+    ray_correction = checked_correction(ray_correction)
     output = output if output is not None else virtual_camera_for(camera)
     if not isinstance(output, PinholeCamera):
         raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
@@ -198,7 +213,9 @@ def naive_view(
         naive_view_bytes(camera, output, kind=kind, channels=image.shape[2]),
     )
     idx, values = _per_lens_values(camera, image, kind, recorded)
-    return _resample(camera, idx, values, output, (0.0, 0.0), grey=np.ndim(raw) == 2, masked=recorded is not None)
+    return _resample(
+        camera, idx, values, output, (0.0, 0.0), ray_correction, grey=np.ndim(raw) == 2, masked=recorded is not None
+    )
 
 
 def naive_view_bytes(camera: LightFieldCamera, output: PinholeCamera, *, kind: str, channels: int) -> int:
@@ -271,14 +288,18 @@ def _resample(
     values: np.ndarray,
     output: PinholeCamera | None,
     slope_shift: tuple[float, float],
+    ray_correction: RayCorrection | None,
     *,
     grey: bool,
     masked: bool = False,
 ) -> np.ndarray:
-    """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``;
-    ``masked``: lenses without a value (NaN) are skipped (:func:`_apply_resampling_masked`)."""
+    """Per-lens values (M, C) onto the pinhole image: lens ``c`` at ``K (c / f' + slope_shift, 1)``
+    (its slope corrected by ``ray_correction``); ``masked``: lenses without a value (NaN) are skipped
+    (:func:`_apply_resampling_masked`)."""
     output = output if output is not None else virtual_camera_for(camera)
-    _, matrix, inside = resampling_matrix(camera, output, slope_shift=slope_shift, lenses=idx)
+    _, matrix, inside = resampling_matrix(
+        camera, output, slope_shift=slope_shift, lenses=idx, ray_correction=ray_correction
+    )
     if masked:
         return _apply_resampling_masked(matrix, inside, values, output, grey=grey)
     return apply_resampling(matrix, inside, values, output, grey=grey)
@@ -317,10 +338,12 @@ def resampling_matrix(
     *,
     slope_shift: tuple[float, float] = (0.0, 0.0),
     lenses: np.ndarray | None = None,
+    ray_correction: RayCorrection | None = None,
 ) -> tuple[np.ndarray, sparse.csr_matrix, np.ndarray]:
     """Linear interpolation from per-lens samples to the pixels of a pinhole image.
 
-    Lens ``c`` sits at ``K (c / f' + slope_shift, 1)``; a pixel inside the lenses' Delaunay
+    Lens ``c`` sits at ``K (t, 1)``, ``t = c / f' + slope_shift`` its thin-lens slope, or
+    ``K (t', 1)`` with ``t' = ray_correction.slopes(t)`` for a calibrated camera; a pixel inside the lenses' Delaunay
     triangulation is the barycentric mix of its triangle's three lenses (what
     ``scipy.interpolate.LinearNDInterpolator`` does, with the weights computed once, in numpy:
     scipy's per-triangle transforms call LAPACK per triangle, which took 0.7-15 s with threaded
@@ -335,8 +358,11 @@ def resampling_matrix(
         Pixels inside the triangulation (the others have no value).
     """
     lenses = camera.lens_indices_on_sensor() if lenses is None else lenses
-    positions = output.focal_px * (camera.mla.centres_m(lenses) / camera.lens_to_mla_m + np.asarray(slope_shift))
-    positions = positions + np.array([output.cx_px, output.cy_px])
+    slopes = camera.mla.centres_m(lenses) / camera.lens_to_mla_m + np.asarray(slope_shift)
+    correction = checked_correction(ray_correction)
+    if correction is not None:
+        slopes = correction.slopes(slopes)
+    positions = output.focal_px * slopes + np.array([output.cx_px, output.cy_px])
     pixels, corners, weights = _linear_weights(positions, output.width_px, output.height_px)
     n_pixels = output.width_px * output.height_px
     entries = (weights.ravel(), (np.repeat(pixels, 3), corners.ravel()))
@@ -378,15 +404,28 @@ def _linear_weights(positions: np.ndarray, width: int, height: int) -> tuple[np.
     return pixel, simplices[tri[first]], weights[tri[first], cand[first]]
 
 
-def subaperture_centre_m(camera: LightFieldCamera, offset_px: tuple[float, float]) -> np.ndarray:
+def subaperture_centre_m(
+    camera: LightFieldCamera, offset_px: tuple[float, float], *, ray_correction: RayCorrection | None = None
+) -> np.ndarray:
     """Centre of projection (3,), camera frame, metres, of the sub-aperture view at ``offset_px``.
 
     ``offset_px = (du, dv)``: the sensor offset from every micro-image centre, pixels. The point
-    is on the main-lens plane: ``(du, dv, 0) * pixel_pitch * f' / f_mla``.
+    is on the main-lens plane: ``(du, dv, 0) * pixel_pitch * f' / f_mla``, times the pupil scale
+    ``m`` of a calibrated camera's ``ray_correction``.
     """
     du, dv = finite_vector("offset_px", offset_px, 2)
     scale = camera.sensor.pixel_pitch_m * camera.lens_to_mla_m / camera.mla.focal_length_m
+    correction = checked_correction(ray_correction)
+    if correction is not None:
+        scale *= correction.pupil_scale
     return np.array([du * scale, dv * scale, 0.0])
+
+
+def checked_correction(ray_correction: object) -> RayCorrection | None:
+    """``ray_correction`` if it is a :class:`RayCorrection` or None; else :class:`ParameterError`."""
+    if ray_correction is not None and not isinstance(ray_correction, RayCorrection):
+        raise ParameterError(f"ray_correction must be a RayCorrection or None, got {ray_correction!r}")
+    return ray_correction
 
 
 def subaperture_view(
@@ -396,6 +435,7 @@ def subaperture_view(
     *,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
+    ray_correction: RayCorrection | None = None,
 ) -> np.ndarray:
     """The sub-aperture view at ``offset_px`` from the micro-image centres, as a pinhole image.
 
@@ -414,6 +454,8 @@ def subaperture_view(
         Output geometry; default :func:`virtual_camera_for` ``(camera)``.
     recorded : ndarray of bool, shape (H, W), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
+    ray_correction : RayCorrection, optional
+        The camera's calibrated rays (see the module docstring); default: the thin lens's.
 
     Returns
     -------
@@ -421,6 +463,7 @@ def subaperture_view(
         NaN outside the lenses' hull, and where no recorded pixel contributes.
     """
     du, dv = finite_vector("offset_px", offset_px, 2)
+    ray_correction = checked_correction(ray_correction)
     limit = subaperture_limit_px(camera)
     if np.hypot(du, dv) > limit:
         raise ParameterError(
@@ -437,8 +480,9 @@ def subaperture_view(
     )
     idx = camera.lens_indices_on_sensor()
     values = micro_image_samples(camera, image, idx, (du, dv), recorded=recorded)
+    shift = _slope_shift(camera, du, dv)
     return _resample(
-        camera, idx, values, output, _slope_shift(camera, du, dv), grey=np.ndim(raw) == 2, masked=recorded is not None
+        camera, idx, values, output, shift, ray_correction, grey=np.ndim(raw) == 2, masked=recorded is not None
     )
 
 
@@ -525,6 +569,9 @@ class ViewStack:
         :func:`subaperture_centre_m` of ``offsets_px`` and the corner views must lie within
         :func:`subaperture_limit_px`. It gives the views' physical image distance (``f'``) for
         exports.
+    ray_correction : RayCorrection, optional
+        The calibrated rays the views were resampled with (see the module docstring); with
+        ``camera``, ``centres_m`` are then those of its pupil scale.
 
     Raises
     ------
@@ -537,8 +584,10 @@ class ViewStack:
     centres_m: np.ndarray
     output: PinholeCamera
     camera: LightFieldCamera | None = None
+    ray_correction: RayCorrection | None = None
 
     def __post_init__(self) -> None:
+        checked_correction(self.ray_correction)
         if not isinstance(self.output, PinholeCamera):
             raise ParameterError(f"output must be a PinholeCamera, got {self.output!r}")
         views = np.asarray(self.views)
@@ -568,7 +617,7 @@ class ViewStack:
                     f"offsets_px reach {corner:.4g} px from the micro-image centres at the corners, beyond "
                     f"camera {self.camera.name!r}'s limit of {subaperture_limit_px(self.camera):.4g} px"
                 )
-            step_m = subaperture_centre_m(self.camera, (1.0, 0.0))[0]
+            step_m = subaperture_centre_m(self.camera, (1.0, 0.0), ray_correction=self.ray_correction)[0]
             expected = np.concatenate([offsets * step_m, np.zeros((grid, grid, 1))], axis=2)
             if not np.allclose(centres, expected, rtol=1e-9, atol=0.0):
                 raise ParameterError(
@@ -643,6 +692,7 @@ def subaperture_stack(
     spacing_px: float | None = None,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
+    ray_correction: RayCorrection | None = None,
 ) -> ViewStack:
     """A regular ``grid x grid`` set of sub-aperture views of ``raw`` (a light-field view stack).
 
@@ -672,6 +722,9 @@ def subaperture_stack(
     recorded : ndarray of bool, shape (H_raw, W_raw), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
         Default: all.
+    ray_correction : RayCorrection, optional
+        The camera's calibrated rays (see the module docstring): every view is resampled on them and
+        the baseline is the pupil scale times the thin lens's. Default: the thin lens's.
 
     Returns
     -------
@@ -692,6 +745,7 @@ def subaperture_stack(
     if not isinstance(camera, LightFieldCamera):
         raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
     grid = _grid_size("grid", grid)
+    ray_correction = checked_correction(ray_correction)
     if output is None:
         output = virtual_camera_for(camera)
     elif not isinstance(output, PinholeCamera):
@@ -747,12 +801,16 @@ def subaperture_stack(
             shift = _slope_shift(camera, du, dv)
             if cached is None or shift != cached_shift:
                 cached = None  # release the previous matrix before building the next
-                cached = resampling_matrix(camera, output, slope_shift=shift, lenses=idx)[1:]
+                cached = resampling_matrix(
+                    camera, output, slope_shift=shift, lenses=idx, ray_correction=ray_correction
+                )[1:]
                 cached_shift = shift
             values = _bilinear(planes, centres_px + np.asarray((du, dv)), weight)
             if weight is None:
                 views[r, c] = apply_resampling(*cached, values, output, grey=grey)
             else:
                 views[r, c] = _apply_resampling_masked(*cached, values, output, grey=grey)
-            centres[r, c] = subaperture_centre_m(camera, (du, dv))
-    return ViewStack(views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera)
+            centres[r, c] = subaperture_centre_m(camera, (du, dv), ray_correction=ray_correction)
+    return ViewStack(
+        views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera, ray_correction=ray_correction
+    )

@@ -344,7 +344,60 @@ def run_pipeline(
         return _run(Path(out_dir), options, work, Path(scratch), progress=progress)
 
 
-def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress: bool):
+@dataclass(frozen=True)
+class _Rendered:
+    """What :func:`_render` made.
+
+    Attributes
+    ----------
+    setup : PipelineSetup
+        The scale's set-up.
+    lens : str
+        The real captures' main lens.
+    thin, real : RigConfig
+        The oracle's rig (thin lens, no sensor model) and the real one (``lens``, the sensor model).
+    jobs : list of (str, list)
+        The rig's captures, ``(name, objects)``.
+    squares : dict of str to float
+        The square size of each rig board capture, metres.
+    air_squares : list of float
+        The square size of each in-air board (the same boards before every camera), metres.
+    port_squares : dict of str to list of float
+        The square size of each port board by camera, metres.
+    oracle, captures : dict of str to Capture
+        The rig's captures by name: the thin-lens renders (raw.exr, meta.json) and the real ones.
+    """
+
+    setup: PipelineSetup
+    lens: str
+    thin: RigConfig
+    real: RigConfig
+    jobs: list[tuple[str, list]]
+    squares: dict[str, float]
+    air_squares: list[float]
+    port_squares: dict[str, list[float]]
+    oracle: dict[str, Capture]
+    captures: dict[str, Capture]
+
+
+#: Seeds set aside for each camera's white images (one per zoom / focus setting; the pipeline renders
+#: one setting, the block leaves room for more without moving every later seed).
+WHITE_SEEDS_PER_CAMERA = 16
+
+
+class _Seeds:
+    """Hands out consecutive blocks of render seeds, so no two renders share one."""
+
+    def __init__(self, first: int):
+        self._next = first
+
+    def block(self, size: int) -> int:
+        """The first seed of a fresh block of ``size``."""
+        first, self._next = self._next, self._next + size
+        return first
+
+
+def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress: bool) -> _Rendered:
     """Render the oracle's and the real captures into ``work / "renders"``; copy the Lytro files into
     ``delivered`` (a new folder)."""
     scale = options.scale
@@ -355,11 +408,13 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
     jobs, squares = _rig_jobs(thin, setup.rig, scale)
     renders = work / "renders"
     oracle, captures = {}, {}
+    seeds = _Seeds(1)
+    cameras = len(real.cameras)
     bar = tqdm(total=2 * len(jobs), desc="rendering the rig", unit="capture", disable=not progress)
-    for j, (name, objects) in enumerate(jobs):
+    for name, objects in jobs:
         oracle[name] = render_capture(with_objects(thin, objects), renders / "oracle" / name)
         bar.update()
-        seeded = _with_seeds(with_objects(real, objects), 1 + len(real.cameras) * j)
+        seeded = _with_seeds(with_objects(real, objects), seeds.block(cameras))
         captures[name] = render_capture(seeded, renders / "real" / name, write_lfr=True)
         bar.update()
     bar.close()
@@ -368,13 +423,15 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
             target = delivered / "rig" / camera.name / f"{name}.lfr"
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(capture.folder / camera.name / LFR_NAME, target)
-    seed = 1 + len(real.cameras) * len(jobs)
+    whites_first = seeds.block(cameras * WHITE_SEEDS_PER_CAMERA)
     for i, camera in enumerate(real.cameras):
         scene = camera.scene
         sensor = SensorSettings(detector=scene.sensor.detector, frames=setup.white_frames)
         whites = renders / "whites" / camera.name
         settings = white_settings(scene.camera, focus_distances_m=(_focus_distance_m(scene.camera),))
-        white_seed = seed + i * len(settings)
+        if len(settings) > WHITE_SEEDS_PER_CAMERA:
+            raise ParameterError(f"at most {WHITE_SEEDS_PER_CAMERA} white settings per camera, got {len(settings)}")
+        white_seed = whites_first + i * len(settings)  # setting k renders with white_seed + k
         _once(
             whites,
             {
@@ -401,23 +458,23 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
             if white.suffix in (".raw", ".txt"):
                 (delivered / "whites" / camera.name).mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(white, delivered / "whites" / camera.name / white.name)
-    seed += len(real.cameras) * 16
     view = virtual_camera_for(real.cameras[0].scene.camera)
     air_boards = board_scenes.in_air_boards(view)
     air_squares = [table["square_size_m"] for table in air_boards]
-    for i, camera in enumerate(real.cameras):
+    for camera in real.cameras:
+        first = seeds.block(len(air_boards))
         for k, table in enumerate(tqdm(air_boards, desc=f"in-air boards ({camera.name})", disable=not progress)):
-            config = _air_board_scene(table, camera.scene, lens, setup.air_spp, seed + i * len(air_boards) + k)
+            config = _air_board_scene(table, camera.scene, lens, setup.air_spp, first + k)
             _render_and_deliver(config, renders / "air" / camera.name / f"board-{k}", delivered / "air" / camera.name)
-    seed += len(real.cameras) * len(air_boards)
     port_squares = {}
-    for i, camera in enumerate(real.cameras):
+    for camera in real.cameras:
         tables = board_scenes.port_boards(camera.scene.port, virtual_camera_for(camera.scene.camera))
         port_squares[camera.name] = [table["square_size_m"] for table in tables]
+        first = seeds.block(len(tables))
         for k, table in enumerate(tqdm(tables, desc=f"port boards ({camera.name})", disable=not progress)):
-            config = _port_board_scene(camera.scene, table, setup.air_spp, seed + i * len(tables) + k)
+            config = _port_board_scene(camera.scene, table, setup.air_spp, first + k)
             _render_and_deliver(config, renders / "port" / camera.name / f"board-{k}", delivered / "port" / camera.name)
-    return setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures
+    return _Rendered(setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures)
 
 
 def _render_and_deliver(config: SceneConfig, folder: Path, delivered: Path) -> None:
@@ -643,7 +700,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     start = time.perf_counter()
     delivered, products = scratch / "delivered", scratch / "core"
     rendered = _render(options, work, delivered, progress=progress)
-    setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures = rendered
+    setup, lens, thin, real = rendered.setup, rendered.lens, rendered.thin, rendered.real
+    jobs, squares, oracle, captures = rendered.jobs, rendered.squares, rendered.oracle, rendered.captures
     seconds["render_s"] = time.perf_counter() - start
     files = _check_delivered(delivered)
     step = RAY_PIXEL_STEP[scale]
@@ -655,8 +713,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     runs = {
         c.name: {
             "preset": c.scene.camera.name,
-            "air_squares": air_squares,
-            "port_squares": port_squares[c.name],
+            "air_squares": rendered.air_squares,
+            "port_squares": rendered.port_squares[c.name],
             "glass": glass,
             "uv": uv,
         }

@@ -12,8 +12,8 @@ import shlex
 
 import pytest
 
-from simulator.experiments import run_experiment
-from simulator.experiments.pipeline import LYTRO_SUFFIXES, MEASURES, METHODS
+from simulator.experiments import ExperimentOptions
+from simulator.experiments.pipeline import LYTRO_SUFFIXES, MEASURES, METHODS, run_pipeline
 from tests.tolerances import (
     PIPELINE_CORNER_GAIN,
     PIPELINE_CORNER_RATIO,
@@ -21,17 +21,26 @@ from tests.tolerances import (
     PIPELINE_PORT_NORMAL_DEG,
 )
 
+#: A user's files in the renders folder, under the names of the run's own working folders (an early
+#: version deleted and remade ``delivered/`` and ``core/`` there).
+USER_FILES = ("delivered/notes.txt", "core/notes.txt", "notes.txt")
+
 
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
-    out = tmp_path_factory.mktemp("pipeline") / "out"
-    result = run_experiment("pipeline", out=out, scale="tiny", progress=False)
-    return out, result
+    root = tmp_path_factory.mktemp("pipeline")
+    out, renders = root / "out", root / "renders"
+    for name in USER_FILES:
+        (renders / name).parent.mkdir(parents=True, exist_ok=True)
+        (renders / name).write_text(f"the user's {name}")
+    out.mkdir()
+    result = run_pipeline(out, options=ExperimentOptions(scale="tiny"), progress=False, renders_dir=renders)
+    return out, result, renders
 
 
 @pytest.mark.render
 def test_only_a_cameras_files_reach_the_core(pipeline):
-    out, result = pipeline
+    out, result, _ = pipeline
     delivered = result.parameters["delivered"]
     assert delivered
     assert all(name.endswith(LYTRO_SUFFIXES) for name in delivered)
@@ -48,7 +57,7 @@ def test_only_a_cameras_files_reach_the_core(pipeline):
 
 @pytest.mark.render
 def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_chain(pipeline):
-    out, result = pipeline
+    out, result, _ = pipeline
     rows = {row["method"]: row for row in result.rows}
     assert tuple(rows) == METHODS
     assert all(row["status"] == "ok" for row in rows.values()), [r["error"] for r in rows.values()]
@@ -62,8 +71,17 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert data["ray_rms_mm"] < thin["ray_rms_mm"]
     assert oracle["ray_rms_mm"] < 1e-9
     assert oracle["port_normal_err_deg"] < 1e-5
-    for name in ("table.csv", "planes.csv", "pipeline_summary.png", "commands.txt"):
+    for name in ("planes.csv", "pipeline_summary.png", "commands.txt"):
         assert (out / name).is_file()
     for camera in ("left", "right"):
         for name in ("mla.json", "camera.json", "port.json", "port-thin-lens.json"):
             assert (out / "calibration" / camera / name).is_file()
+
+
+@pytest.mark.render
+def test_a_renders_folder_keeps_what_it_held_and_gets_the_renders(pipeline):
+    _, _, renders = pipeline
+    for name in USER_FILES:
+        assert (renders / name).read_text() == f"the user's {name}"
+    assert sorted(p.name for p in (renders / "delivered").iterdir()) == ["notes.txt"]
+    assert any((renders / "renders" / "real").iterdir())
