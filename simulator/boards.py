@@ -11,7 +11,8 @@ boards:
 * a :data:`SQUARES` chessboard (7 x 5 squares, :data:`PATTERN` inner corners), placed as a slanted
   test board on a line of sight (:func:`slanted_board`), as six views at one depth for the
   approximation baseline (:func:`calibration_boards`, :func:`calibration_views`) or as ten views
-  from 0.15 to 0.35 m for port calibration (:func:`port_boards`, :func:`port_from_renders`);
+  from 0.15 to 0.35 m for port calibration (:func:`port_boards`, :func:`port_from_renders`; twenty
+  with the outer ring, :data:`OUTER_RING_SCALE`);
 * the boards' ground truth (:func:`chessboard_corners_world`) and the corner error measures
   (:func:`find_corners`, :func:`corner_rms_px`).
 
@@ -54,6 +55,7 @@ __all__ = [
     "CAMERA",
     "DIRECTIONS",
     "LIGHTS",
+    "OUTER_RING_SCALE",
     "PATTERN",
     "PORT_DEPTHS_M",
     "PORT_PX_PER_SQUARE",
@@ -158,6 +160,14 @@ PORT_ROTATIONS_DEG = (
     (-20, 20, -5),
     (15, -30, 0),
 )
+#: The outer ring of port and in-air calibration boards (``outer_ring=True`` of :func:`port_boards`
+#: and :func:`in_air_boards`): ten more boards at :data:`PORT_TARGETS` this many times farther from the
+#: view's centre (their edges reach the view's), at the same depths, turned the other way about x and
+#: y. They reach the field's edge, where refraction departs most from a central camera and a real
+#: lens's distortion is largest. Measured on the pipeline experiment (double Gauss, tiny sensor, 20 deg
+#: wall; docs/experiments.md): the port normal 0.17 / 0.23 deg from the truth with the ten inner boards,
+#: 0.07 / 0.12 deg with both rings (left / right camera), once the camera was calibrated on both rings too.
+OUTER_RING_SCALE = 1.6
 #: Samples per pixel of the port calibration renders (:func:`port_from_renders`).
 PORT_SPP = 32
 
@@ -304,18 +314,33 @@ def calibration_boards(tilt_deg: tuple[float, float], depth_m: float, view: Pinh
     return boards_at_targets(empty_scene(tilt_deg).port, view, CALIBRATION_TARGETS, depths, CALIBRATION_ROTATIONS_DEG)
 
 
-def port_boards(tilt_deg: tuple[float, float] | FlatPort, view: PinholeCamera) -> list[dict]:
+def port_boards(
+    tilt_deg: tuple[float, float] | FlatPort, view: PinholeCamera, *, outer_ring: bool = False
+) -> list[dict]:
     """The ten port calibration boards behind the port of ``tilt_deg`` (degrees), or behind a port.
 
     Boards at :data:`PORT_TARGETS` and :data:`PORT_DEPTHS_M`, turned by :data:`PORT_ROTATIONS_DEG`,
     with :data:`PORT_PX_PER_SQUARE` pixels per square (:func:`boards_at_targets`); ``view`` as in
     :func:`calibration_boards`. ``tilt_deg`` may be the port itself (a rig camera's wall, in its
-    frame); the tables are then in that camera's frame.
+    frame); the tables are then in that camera's frame. ``outer_ring``: ten more after them, the
+    outer ring of :data:`OUTER_RING_SCALE`.
     """
     port = tilt_deg if isinstance(tilt_deg, FlatPort) else empty_scene(tilt_deg).port
-    return boards_at_targets(
-        port, view, PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, px_per_square=PORT_PX_PER_SQUARE
-    )
+    targets, depths, rotations = _ring_layout(outer_ring)
+    return boards_at_targets(port, view, targets, depths, rotations, px_per_square=PORT_PX_PER_SQUARE)
+
+
+def _ring_layout(outer_ring: bool) -> tuple[list[tuple[float, float]], list[float], list[tuple[float, float, float]]]:
+    """Targets, depths and rotations of the port and in-air boards: :data:`PORT_TARGETS` and, with
+    ``outer_ring``, the outer ring after them (:data:`OUTER_RING_SCALE`)."""
+    targets = list(PORT_TARGETS)
+    depths = list(PORT_DEPTHS_M)
+    rotations = [(float(x), float(y), float(z)) for x, y, z in PORT_ROTATIONS_DEG]
+    if outer_ring:
+        targets += [(OUTER_RING_SCALE * u, OUTER_RING_SCALE * v) for u, v in PORT_TARGETS]
+        depths += list(PORT_DEPTHS_M)
+        rotations += [(-x, -y, z) for x, y, z in rotations]
+    return targets, depths, rotations
 
 
 def boards_at_targets(
@@ -615,14 +640,15 @@ def in_air_board_scene(
     return config
 
 
-def in_air_boards(view: PinholeCamera) -> list[dict]:
+def in_air_boards(view: PinholeCamera, *, outer_ring: bool = False) -> list[dict]:
     """The camera calibration's ten boards in air: :data:`PORT_TARGETS` at :data:`PORT_DEPTHS_M`,
     turned by :data:`PORT_ROTATIONS_DEG`, :data:`PORT_PX_PER_SQUARE` pixels per square in ``view``
     (the refraction-free view of :data:`CAMERA`; so their squares differ, 9-20 mm), each centred on
-    its target's line of sight."""
+    its target's line of sight. ``outer_ring``: ten more after them, the outer ring of
+    :data:`OUTER_RING_SCALE` (the lens's distortion is calibrated where the port boards see)."""
     k_inverse = np.linalg.inv(view.K)
     tables = []
-    for (fx, fy), depth, rotation in zip(PORT_TARGETS, PORT_DEPTHS_M, PORT_ROTATIONS_DEG, strict=True):
+    for (fx, fy), depth, rotation in zip(*_ring_layout(outer_ring), strict=True):
         sight = k_inverse @ np.array([view.K[0, 2] + fx * view.width_px, view.K[1, 2] + fy * view.height_px, 1.0])
         square = PORT_PX_PER_SQUARE * depth / view.K[0, 0]
         tables.append(board_table(depth * sight / sight[2], rotation, square))

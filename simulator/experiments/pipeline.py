@@ -5,11 +5,14 @@ Gauss, ``ExperimentOptions.lens``) and the sensor model (Bayer mosaic, noise, 10
 renders what a real rig gives and nothing else:
 
 - each camera's white image (:func:`simulator.whites.render_whites`);
-- each camera's ten in-air chessboard captures (:func:`simulator.boards.in_air_boards`), for the
-  camera's ray model;
+- each camera's twenty in-air chessboard captures (:func:`simulator.boards.in_air_boards`, both
+  rings), for the camera's ray model;
+- each camera's twenty port boards, 0.15-0.35 m behind the wall (:func:`simulator.boards.port_boards`,
+  both rings), for its port; the calibration boards average :attr:`PipelineSetup.board_frames`
+  exposures, as one does with a board that stands still;
 - the stereo rig (:func:`simulator.experiments.planes.setup_for`: the default rig at ``tiny``, the
   Illum rig at ``illum``) behind its tilted glass wall: the six chessboards at a near and a far
-  depth (:func:`~simulator.experiments.rigstereo.chessboards`; the port's and the rig's calibration),
+  depth (:func:`~simulator.experiments.rigstereo.chessboards`; the rig's calibration),
   two slanted test boards between them (held out: the corner error is measured on them) and the
   ``planes`` experiment's slanted textured plane at its three depths.
 
@@ -176,23 +179,30 @@ class PipelineSetup:
         Exposures averaged into each white image (Lytro's factory whites average many).
     white_spp : int
         Samples per pixel of a white render.
-    air_spp : int
-        Samples per pixel of an in-air board capture.
+    board_spp : int
+        Samples per pixel of a calibration board capture (in air and behind the port). A real capture
+        has no Monte Carlo noise: enough samples leave the sensor's noise the one that counts.
+    board_frames : int
+        Exposures averaged into each calibration board capture, as one averages frames of a board
+        that stands still (the sensor's noise falls as the square root).
     """
 
     rig: RigSetup
     sensor: str
     white_frames: int
     white_spp: int
-    air_spp: int
+    board_spp: int
+    board_frames: int
 
 
 def setup_for_pipeline(scale: str) -> PipelineSetup:
     """The pipeline's set-up at ``scale`` (``tiny`` runs in CI; ``illum`` is the paper's camera)."""
     rig = setup_for(scale)
     if scale == "tiny":
-        return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=16, white_spp=32, air_spp=32)
-    return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=8, white_spp=16, air_spp=rig.spp)
+        return PipelineSetup(
+            rig=rig, sensor=SENSORS[scale], white_frames=16, white_spp=32, board_spp=128, board_frames=8
+        )
+    return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=8, white_spp=16, board_spp=32, board_frames=8)
 
 
 # ----------------------------------------------------------------------------------- the scenes
@@ -241,10 +251,15 @@ def _rig_jobs(rig: RigConfig, setup: RigSetup, scale: str) -> tuple[list[tuple[s
     return jobs, squares
 
 
-def _port_board_scene(camera_scene: SceneConfig, table: dict, spp: int, seed: int) -> SceneConfig:
+def _board_sensor(camera_scene: SceneConfig, frames: int) -> SensorSettings:
+    """``camera_scene``'s sensor model with ``frames`` exposures averaged (a calibration board's)."""
+    return SensorSettings(detector=camera_scene.sensor.detector, frames=frames)
+
+
+def _port_board_scene(camera_scene: SceneConfig, table: dict, spp: int, seed: int, frames: int) -> SceneConfig:
     """A port calibration board (a :func:`simulator.boards.port_boards` table, camera frame) before
     one rig camera alone: its scene in its own frame (identity pose, the wall as its port, the
-    lights moved with it)."""
+    lights moved with it), its sensor averaging ``frames`` exposures."""
     pose = camera_scene.pose
     lights = tuple(
         dataclasses.replace(light, position_m=tuple(pose.to_camera(np.array([light.position_m]))[0]))
@@ -263,6 +278,7 @@ def _port_board_scene(camera_scene: SceneConfig, table: dict, spp: int, seed: in
         lights=lights,
         objects=(board,),
         render=RenderSettings(spp=spp, ideal_spp=1, seed=seed),
+        sensor=_board_sensor(camera_scene, frames),
     )
 
 
@@ -272,10 +288,13 @@ def _focus_distance_m(camera: LightFieldCamera) -> float:
     return math.inf if excess <= 0.0 else 1.0 / excess
 
 
-def _air_board_scene(table: dict, camera_scene: SceneConfig, lens: str, spp: int, seed: int) -> SceneConfig:
-    """An in-air board before ``camera_scene``'s camera, through ``lens``, with its sensor model."""
+def _air_board_scene(
+    table: dict, camera_scene: SceneConfig, lens: str, spp: int, seed: int, frames: int
+) -> SceneConfig:
+    """An in-air board before ``camera_scene``'s camera, through ``lens``, with its sensor model
+    averaging ``frames`` exposures."""
     config = board_scenes.in_air_board_scene(table, lens=lens, spp=spp, seed=seed, camera=camera_scene.camera.name)
-    return config.with_overrides(camera=camera_scene.camera, sensor=camera_scene.sensor)
+    return config.with_overrides(camera=camera_scene.camera, sensor=_board_sensor(camera_scene, frames))
 
 
 # ------------------------------------------------------------------------------------- the core
@@ -459,20 +478,20 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
                 (delivered / "whites" / camera.name).mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(white, delivered / "whites" / camera.name / white.name)
     view = virtual_camera_for(real.cameras[0].scene.camera)
-    air_boards = board_scenes.in_air_boards(view)
+    air_boards = board_scenes.in_air_boards(view, outer_ring=True)
     air_squares = [table["square_size_m"] for table in air_boards]
     for camera in real.cameras:
         first = seeds.block(len(air_boards))
         for k, table in enumerate(tqdm(air_boards, desc=f"in-air boards ({camera.name})", disable=not progress)):
-            config = _air_board_scene(table, camera.scene, lens, setup.air_spp, first + k)
+            config = _air_board_scene(table, camera.scene, lens, setup.board_spp, first + k, setup.board_frames)
             _render_and_deliver(config, renders / "air" / camera.name / f"board-{k}", delivered / "air" / camera.name)
     port_squares = {}
     for camera in real.cameras:
-        tables = board_scenes.port_boards(camera.scene.port, virtual_camera_for(camera.scene.camera))
+        tables = board_scenes.port_boards(camera.scene.port, virtual_camera_for(camera.scene.camera), outer_ring=True)
         port_squares[camera.name] = [table["square_size_m"] for table in tables]
         first = seeds.block(len(tables))
         for k, table in enumerate(tqdm(tables, desc=f"port boards ({camera.name})", disable=not progress)):
-            config = _port_board_scene(camera.scene, table, setup.air_spp, first + k)
+            config = _port_board_scene(camera.scene, table, setup.board_spp, first + k, setup.board_frames)
             _render_and_deliver(config, renders / "port" / camera.name / f"board-{k}", delivered / "port" / camera.name)
     return _Rendered(setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures)
 
@@ -788,7 +807,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
             "sensor": setup.sensor,
             "white_frames": setup.white_frames,
             "white_spp": setup.white_spp,
-            "air_spp": setup.air_spp,
+            "board_spp": setup.board_spp,
+            "board_frames": setup.board_frames,
             "wall": real.wall.to_dict(),
             "plane_depths_m": list(plane_depths),
             "test_board_depths_m": list(TEST_BOARD_DEPTHS_M[scale]),

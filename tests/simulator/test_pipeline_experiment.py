@@ -1,6 +1,6 @@
 """The pipeline experiment at tiny scale: from Lytro files alone, against the oracle (issue: real captures in).
 
-One run (about 3 minutes on two cores) renders through the double Gauss and the sensor model, hands the
+One run (about 8 minutes on two cores) renders through the double Gauss and the sensor model, hands the
 core only the Lytro files and checks: nothing but a camera's files reached the core, every command of the
 data-only chains read only those files, and the calibrated chain's figures stay near the oracle's.
 """
