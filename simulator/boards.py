@@ -330,16 +330,14 @@ def port_boards(
     return boards_at_targets(port, view, targets, depths, rotations, px_per_square=PORT_PX_PER_SQUARE)
 
 
-def _ring_layout(outer_ring: bool) -> tuple[list[tuple[float, float]], list[float], list[tuple[float, float, float]]]:
-    """Targets, depths and rotations of the port and in-air boards: :data:`PORT_TARGETS` and, with
-    ``outer_ring``, the outer ring after them (:data:`OUTER_RING_SCALE`)."""
-    targets = list(PORT_TARGETS)
-    depths = list(PORT_DEPTHS_M)
-    rotations = [(float(x), float(y), float(z)) for x, y, z in PORT_ROTATIONS_DEG]
+def _ring_layout(outer_ring: bool) -> tuple[list, list, list]:
+    """Targets, depths and rotations (degrees) of the port and in-air boards: :data:`PORT_TARGETS`
+    and, with ``outer_ring``, the outer ring after them (:data:`OUTER_RING_SCALE`)."""
+    targets, depths, rotations = list(PORT_TARGETS), list(PORT_DEPTHS_M), list(PORT_ROTATIONS_DEG)
     if outer_ring:
         targets += [(OUTER_RING_SCALE * u, OUTER_RING_SCALE * v) for u, v in PORT_TARGETS]
-        depths += list(PORT_DEPTHS_M)
-        rotations += [(-x, -y, z) for x, y, z in rotations]
+        depths += PORT_DEPTHS_M
+        rotations += [(-x, -y, z) for x, y, z in PORT_ROTATIONS_DEG]
     return targets, depths, rotations
 
 

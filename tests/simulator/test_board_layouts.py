@@ -14,21 +14,11 @@ import pytest
 from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.calibration.port import project_through_port
 from simulator import boards
-from simulator.config import Chessboard, Placement
 from tests.tolerances import BOARD_CORNER_MARGIN_SQUARES
 
 VIEW = virtual_camera_for(camera_preset(boards.CAMERA))
 #: The pipeline's wall as the left camera of the default rig sees it (20 deg), and a steeper one.
 TILTS_DEG = ((20.0, -3.0), (25.0, 10.0))
-
-
-def _board(table: dict) -> Chessboard:
-    placement = table["position_m"], table["rotation_xyz_deg"]
-    return Chessboard(
-        placement=Placement(position_m=tuple(placement[0]), rotation_xyz_deg=tuple(placement[1])),
-        squares=tuple(table["squares"]),
-        square_size_m=table["square_size_m"],
-    )
 
 
 def _inside(uv: np.ndarray) -> bool:
@@ -46,15 +36,17 @@ def test_the_outer_ring_adds_ten_port_boards_after_the_inner_ten_all_in_view(til
     assert len(both) == 20
     assert both[:10] == inner
     port = boards.empty_scene(tilt_deg).port
+    seen = []  # each board's inner corners in the view, through the port
     for table in both:
-        corners = boards.chessboard_corners_world(_board(table))
-        assert _inside(project_through_port(VIEW, port, corners)), table
+        board = boards.board_scene(tilt_deg, table).objects[0]  # the table as the scene parser reads it
+        seen.append(project_through_port(VIEW, port, boards.chessboard_corners_world(board)))
+        assert _inside(seen[-1]), table
     # Each outer board is seen farther from the view's centre than its inner twin (but the one on the axis).
     centre = np.array([VIEW.cx_px, VIEW.cy_px])
-    seen = [project_through_port(VIEW, port, boards.chessboard_corners_world(_board(t))).mean(axis=0) for t in both]
     off_axis = [i for i, target in enumerate(boards.PORT_TARGETS) if target != (0.0, 0.0)]
     for i in off_axis:
-        assert np.linalg.norm(seen[10 + i] - centre) > np.linalg.norm(seen[i] - centre) + 5.0, i
+        outer, inner_twin = seen[10 + i].mean(axis=0), seen[i].mean(axis=0)
+        assert np.linalg.norm(outer - centre) > np.linalg.norm(inner_twin - centre) + 5.0, i
 
 
 def test_the_outer_ring_adds_ten_in_air_boards_in_view():
@@ -63,5 +55,5 @@ def test_the_outer_ring_adds_ten_in_air_boards_in_view():
     assert both[:10] == inner
     assert len(both) == 20
     for table in both:
-        corners = boards.chessboard_corners_world(_board(table))
-        assert _inside(VIEW.project(corners)), table
+        board = boards.in_air_board_scene(table).objects[0]
+        assert _inside(VIEW.project(boards.chessboard_corners_world(board))), table
