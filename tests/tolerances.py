@@ -891,3 +891,18 @@ PIPELINE_PORT_NORMAL_DEG = 0.25
 # corners are 6.3-7.7 px (0.45-0.55 of a 14 px square) inside; OpenCV finds every such board in the
 # pipeline's renders. At 2x the inner ring's offsets instead of 1.6x the boards leave the view.
 BOARD_CORNER_MARGIN_SQUARES = 0.4
+
+# ----------------------------------------------------------------------------- HCI benchmark scores
+# Dimensionless (relative); tests/lfrefract/test_hci_metrics.py compares MSE x 100 and BadPix
+# percentages with figures worked out by hand. Its disparities and errors are powers of two or
+# short sums of them, so every difference, square and sum is exact; what is left is the division
+# by the pixel count and the factor 100, two correctly rounded operations (1.1e-16 relative each).
+# 1e-12 leaves room for another summation order, while one pixel more or less in a count of 20
+# moves a score by 5 %.
+HCI_SCORE_RELATIVE = 1e-12
+
+# ----------------------------------------------------------------------------- dataset images
+# Relative to a value's magnitude; a 16-bit PNG float image decodes to float32, which rounds
+# ``offset + code * scale`` by half an ulp (2**-24 relative), on top of the half code step the
+# encoding itself allows (checked separately).
+PNG16_DECODE_FLOAT32_RELATIVE = 2.0**-24

@@ -153,6 +153,17 @@ def _plan(spec: SweepSpec, digests: DigestCache, progress: bool) -> tuple[list[d
     return planned, inputs
 
 
+def _rejections(planned: list[dict]) -> dict:
+    """The draws refused while planning (``[constraints]``, ``sweep.redraw_impossible``): in all,
+    the samples drawn more than once, and by reason."""
+    by_reason: dict[str, int] = {}
+    for record in planned:
+        for reason, count in record.get("rejected", {}).items():
+            by_reason[reason] = by_reason.get(reason, 0) + count
+    redrawn = sum(1 for record in planned if record.get("rejected"))
+    return {"draws_refused": sum(by_reason.values()), "samples_redrawn": redrawn, "by_reason": by_reason}
+
+
 def _check_target(out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[str, dict]) -> None:
     """Raise unless ``out`` is absent, empty, or a dataset of this spec with these samples and
     input files (reads only)."""
@@ -206,6 +217,9 @@ def _prepare(
                 "spec_source": spec.source,
                 "outputs": list(spec.outputs),
                 "swept_keys": list(spec.swept_keys),
+                "set": {key: value for key, value in spec.to_dict().get("set", {}).items()},
+                "image_format": spec.image_format,
+                "rejections": _rejections(planned),
                 "created": _now(),
                 "lfrefract": lfrefract.__version__,
                 "inputs": inputs,
@@ -399,6 +413,7 @@ def run_dataset(
                     outputs=spec.outputs,
                     synthesis=spec.synthesis,
                     views=spec.views,
+                    image_format=spec.image_format,
                     inputs={path: entry["sha256"] for path, entry in s.inputs.items()},
                     threads=threads_per_worker,
                     variant=variant,

@@ -18,18 +18,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lfrefract import PinholeCamera
 from lfrefract.errors import FileFormatError
-from lfrefract.formats.capture import RAW_NAME
-from lfrefract.formats.exr import read_exr, write_exr
+from lfrefract.formats.capture import RAW_NAME, SIDECAR_NAME
+from lfrefract.formats.exr import read_exr
 from lfrefract.formats.flatport import write_flat_port
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import staged_directory
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.config import SceneConfig
+from simulator.dataset.images import exr_entry, write_image
 from simulator.dataset.spec import ViewOptions
 
-__all__ = ["SampleTask", "render_sample"]
+__all__ = ["FILLED_APPROXIMATED", "FILLED_EMPTY", "FILLED_EXACT", "SampleTask", "filled_classes", "render_sample"]
 
 #: Files of a sample folder besides those of ``lfsim render``.
 SAMPLE_FILE = "sample.json"
@@ -37,6 +40,13 @@ PORT_FILE = "port.txt"
 REFRACTION_FREE_FILE = "refraction_free.exr"
 COVERAGE_FILE = "refraction_free.coverage.exr"
 VIEWS_DIR = "views"
+
+#: The images of ``lfsim render`` by their name in ``sample.json``'s ``images`` (and the loader's):
+#: file stem and role.
+RENDER_IMAGES = {"raw": ("raw", "raw"), "ideal": ("ideal", "ideal"), "depth_m": ("depth", "depth")}
+
+#: Classes of a ``filled`` image: how a synthesized pixel got its value.
+FILLED_EMPTY, FILLED_APPROXIMATED, FILLED_EXACT = 0, 1, 2
 
 _threads_set: int | None = None
 _digests = None  # this worker process's DigestCache (a mesh that many samples use is hashed once)
@@ -62,6 +72,8 @@ class SampleTask:
         Options of the refraction-free image.
     views : ViewOptions
         Options of the view stack (checked when the spec was parsed).
+    image_format : {"exr", "npz", "png16"}
+        File format of the sample's images (:mod:`simulator.dataset.images`).
     inputs : dict
         The files the scene reads (mesh files): absolute path -> SHA-256 (hex) when the sample
         was planned. The render fails if one differs once the scene has been read.
@@ -81,6 +93,7 @@ class SampleTask:
     outputs: tuple[str, ...] = ()
     synthesis: SynthesisOptions | None = None
     views: ViewOptions = field(default_factory=lambda: ViewOptions())
+    image_format: str = "exr"
     inputs: dict = field(default_factory=dict)
     threads: int | None = None
     variant: str | None = None
@@ -148,15 +161,15 @@ def render_sample(task: SampleTask) -> dict:
         extras: dict[str, Any] = {}
         if config.port is not None:
             write_flat_port(stage / PORT_FILE, config.port)
-        raw = None
+        needs_raw = "refraction_free" in task.outputs or "views" in task.outputs
+        raw = read_exr(stage / RAW_NAME, role="raw") if needs_raw else None
+        images = _render_images(stage, result.metadata, task.image_format)
         if "refraction_free" in task.outputs:
             t0 = time.perf_counter()
-            raw = read_exr(stage / RAW_NAME, role="raw")
-            extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task)
+            extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task, images)
             seconds["refraction_free"] = time.perf_counter() - t0
         if "views" in task.outputs:
             t0 = time.perf_counter()
-            raw = read_exr(stage / RAW_NAME, role="raw") if raw is None else raw
             extras["views"] = _views(stage, config, raw, result.metadata, task)
             seconds["views"] = time.perf_counter() - t0
         write_json(
@@ -169,6 +182,8 @@ def render_sample(task: SampleTask) -> dict:
                 "hash": task.hash,
                 "params": task.params,
                 "outputs": list(task.outputs),
+                "image_format": task.image_format,
+                "images": images,
                 **extras,
             },
         )
@@ -203,15 +218,51 @@ def _check_inputs(task: SampleTask) -> None:
             )
 
 
-def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
-    """Synthesize the refraction-free image (the ideal image's geometry) and its coverage."""
+def _render_images(stage: Path, meta: dict, image_format: str) -> dict:
+    """The entries of ``lfsim render``'s images; in another format than EXR they are converted
+    (the EXR files removed, ``meta.json``'s ``files`` naming the new ones)."""
+    images = {}
+    for name, (stem, role) in RENDER_IMAGES.items():
+        path = stage / f"{stem}.exr"
+        if image_format == "exr":
+            images[name] = exr_entry(path, role=role)
+            continue
+        images[name] = write_image(stage, stem, read_exr(path, role=role), image_format=image_format, role=role)
+        path.unlink()
+    if image_format != "exr":
+        files = dict(meta["files"]) | {stem: images[name]["file"] for name, (stem, _) in RENDER_IMAGES.items()}
+        write_json(stage / SIDECAR_NAME, meta | {"files": files})
+    return images
+
+
+def filled_classes(exact, filled) -> np.ndarray:
+    """The ``filled`` image of a synthesis: :data:`FILLED_EXACT` where every necessary ray was
+    recorded, :data:`FILLED_APPROXIMATED` where nearby rays stand in, :data:`FILLED_EMPTY` where no
+    captured ray was found (the image holds NaN there), uint8 of the masks' shape."""
+    exact, filled = np.asarray(exact, dtype=bool), np.asarray(filled, dtype=bool)
+    classes = np.full(exact.shape, FILLED_EMPTY, dtype=np.uint8)
+    classes[filled] = FILLED_APPROXIMATED
+    classes[exact & filled] = FILLED_EXACT
+    return classes
+
+
+def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask, images: dict) -> dict:
+    """Synthesize the refraction-free image (the ideal image's geometry), its coverage and its
+    ``filled`` classes; NaN where no captured ray was found (the project's "no value")."""
     options = task.synthesis if task.synthesis is not None else SynthesisOptions()
     output = PinholeCamera.from_dict(meta["ideal"])
     warp = build_warp_map(config.camera, config.port, output=output, options=options, workers=task.threads)
-    write_exr(stage / REFRACTION_FREE_FILE, warp.apply(raw), role="refraction_free")
-    write_exr(stage / COVERAGE_FILE, warp.coverage.astype("float32"), role="coverage")
+    image = warp.apply(raw)
+    image[~warp.filled] = np.nan
+    fmt = task.image_format
+    images["refraction_free"] = write_image(stage, "refraction_free", image, image_format=fmt, role="refraction_free")
+    coverage = warp.coverage.astype(np.float32)
+    images["coverage"] = write_image(stage, "refraction_free.coverage", coverage, image_format=fmt, role="coverage")
+    classes = filled_classes(warp.exact, warp.filled)
+    images["filled"] = write_image(stage, "refraction_free.filled", classes, image_format=fmt, role="filled")
     return {
-        "files": {"image": REFRACTION_FREE_FILE, "coverage": COVERAGE_FILE},
+        "files": {name: images[name]["file"] for name in ("refraction_free", "coverage", "filled")},
+        "filled_classes": {"empty": FILLED_EMPTY, "approximated": FILLED_APPROXIMATED, "exact": FILLED_EXACT},
         "K": warp.output.K.tolist(),
         "options": options.to_dict(),
         "map_key": warp.key,

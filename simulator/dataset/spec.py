@@ -8,8 +8,13 @@ A sweep spec has three tables::
     scene = "default"                 # base scene: an embedded scene name, or a .toml path
                                       #   relative to this file
     repeats = 1                       # samples per grid point (each with its own seed and draws)
-    outputs = ["refraction_free"]     # optional extras: "refraction_free", "views", "previews"
-    spp = 4                           # optional: samples per pixel of every sample
+    outputs = ["refraction_free"]     # optional extras: "refraction_free", "views", "previews",
+                                      #   "labels" (normal_cam, instance_id), "raw_truth"
+    spp = 4                           # optional: samples per pixel of every sample's raw image
+    ideal_spp = 64                    # optional: samples per pixel of every sample's ideal image
+    image_format = "exr"              # optional: "exr" (default), "npz" or "png16"
+    max_draws = 100                   # optional: draws of the [random] keys per sample at most
+    redraw_impossible = false         # optional: also draw again a sample the geometry check refuses
     unset = ["port.n_water"]          # optional: dotted keys removed from the base scene first
     [sweep.synthesis]                 # optional: lfrefract.synthesis.warp_map.SynthesisOptions fields
     k = 32                            #   (only with "refraction_free")
@@ -28,6 +33,13 @@ A sweep spec has three tables::
     "port.thickness_m" = { normal = [0.006, 0.0005] }
     "light.0.intensity_w_sr" = { choice = [0.4, 0.5] }
 
+    [set]                             # dotted scene keys -> one value each, the same for every
+    "port.thickness_m" = 0.004        #   sample: constants, recorded as set, not swept
+
+    [constraints]                     # named conditions on the sample's scene; a sample that
+    board_before_backdrop = { key = "object.1.position_m.2", less_than = "object.0.position_m.2", margin = 0.05 }
+                                      #   breaks one draws its [random] keys again
+
 A dotted key addresses the scene TOML (:mod:`simulator.config`): ``port.tilt_x_deg``,
 ``camera.preset``, ``camera.pose.position_m``, ``object.2.rotation_xyz_deg`` (the third
 ``[[object]]``), ``water.temperature_c``, or a whole table or array (``object`` replaces every
@@ -44,6 +56,20 @@ which is also its render seed, and draws the value of random key ``K`` from
 ``numpy.random.default_rng(SeedSequence([seed, i, crc32(K)]))``, so a key's draws do not depend
 on the other keys. Every sample is built with :func:`simulator.config.parse_scene` and checked
 with :func:`simulator.geometry.check_geometry` before anything is rendered.
+
+Keys of ``[set]`` are applied to every sample after ``sweep.unset`` and before the swept values;
+a key cannot be both set and swept. ``sweep.spp`` and ``sweep.ideal_spp`` set ``render.spp`` and
+``render.ideal_spp`` the same way (the raw image's and the ideal image's samples per pixel: ground
+truth is usually rendered with more).
+
+A constraint ``{ key = K, less_than = L, margin = m }`` (or ``greater_than``) holds when the value
+at ``K`` is below ``L - m`` (above ``L + m``); ``K`` and ``L`` are dotted keys into the sample's
+scene, whose last parts may index a vector (``object.1.position_m.2`` is the second object's z),
+or ``L`` is a number. A sample that breaks a constraint (or, with ``sweep.redraw_impossible``, that
+the geometry check refuses) draws its ``[random]`` keys again, draw ``a`` from
+``SeedSequence([seed, i, crc32(K), a])``, up to ``sweep.max_draws`` draws in all; then the sweep is
+refused, naming the sample and the condition. The draws refused are counted per sample
+(:attr:`SweepSample.rejected`) and for the whole sweep in ``dataset.json``.
 
 Files a sample's scene reads besides its TOML (mesh files: every path in the scene) are its
 *inputs*: their SHA-256 is part of the sample's hash, so an edited mesh makes another sample.
@@ -77,13 +103,17 @@ from lfrefract.synthesis.warp_map import SynthesisOptions
 from lfrefract.validate import finite_float, finite_vector, one_of, positive_float, positive_int, reject_unknown_keys
 from simulator import seeds
 from simulator.config import SceneConfig, embedded_scenes, parse_scene, scene_files, scenes_dir
+from simulator.dataset.images import IMAGE_FORMATS
 from simulator.dataset.manifest import DigestCache
 from simulator.geometry import check_geometry
 
 __all__ = [
+    "DEFAULT_MAX_DRAWS",
     "DISTRIBUTIONS",
     "MAX_SAMPLES",
     "OUTPUTS",
+    "RELATIONS",
+    "Constraint",
     "Distribution",
     "SweepSample",
     "SweepSpec",
@@ -100,9 +130,18 @@ __all__ = [
     "toml_digest",
 ]
 
-#: Optional outputs of a sample besides the render files: the refraction-free image (and its
-#: coverage), the sub-aperture view stack, and the PNG previews of ``lfsim render``.
-OUTPUTS = ("refraction_free", "views", "previews")
+#: Optional outputs of a sample besides the render files: the refraction-free image (with its
+#: coverage and its ``filled`` class image), the sub-aperture view stack (with its ground-truth
+#: disparity), the PNG previews of ``lfsim render``, the ideal image's surface labels (normals in
+#: the camera frame, instance ids) and the raw pixels' truth (depth along each pixel's true ray,
+#: its lenslet).
+OUTPUTS = ("refraction_free", "views", "previews", "labels", "raw_truth")
+
+#: Draws of a sample's ``[random]`` keys at most, by default (``sweep.max_draws``).
+DEFAULT_MAX_DRAWS = 100
+
+#: Relations of a ``[constraints]`` entry.
+RELATIONS = ("less_than", "greater_than")
 
 #: Distributions of a ``[random]`` key, with the form of their arguments.
 DISTRIBUTIONS = {
@@ -150,10 +189,13 @@ def sample_seed(sweep_seed: int, index: int) -> int:
     return int(state[0]) % seeds.SEED_LIMIT
 
 
-def key_rng(sweep_seed: int, index: int, key: str) -> np.random.Generator:
-    """Generator of random key ``key`` for sample ``index``:
-    ``default_rng(SeedSequence([sweep_seed, index, crc32(key)]))``."""
-    return np.random.default_rng(np.random.SeedSequence([sweep_seed, index, zlib.crc32(key.encode())]))
+def key_rng(sweep_seed: int, index: int, key: str, draw: int = 0) -> np.random.Generator:
+    """Generator of random key ``key`` for draw ``draw`` of sample ``index``:
+    ``default_rng(SeedSequence([sweep_seed, index, crc32(key)]))`` for the first draw,
+    ``SeedSequence([sweep_seed, index, crc32(key), draw])`` for a later one (a sample that broke a
+    constraint)."""
+    entropy = [sweep_seed, index, zlib.crc32(key.encode())] + ([draw] if draw else [])
+    return np.random.default_rng(np.random.SeedSequence(entropy))
 
 
 def _plain(value: Any) -> Any:
@@ -241,6 +283,104 @@ class Distribution:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Constraint:
+    """One ``[constraints]`` entry: the value at ``key`` below (``less_than``) or above
+    (``greater_than``) ``other`` by more than ``margin``.
+
+    Parameters
+    ----------
+    name : str
+        The entry's name (named in errors and in the rejection counts).
+    key : str
+        Dotted key into the sample's scene; its last parts may index a vector
+        (``object.1.position_m.2``).
+    relation : {"less_than", "greater_than"}
+    other : str or float
+        A dotted key like ``key``, or a number.
+    margin : float
+        In the keys' unit, at least 0.
+    """
+
+    name: str
+    key: str
+    relation: str
+    other: str | float
+    margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        where = f"[constraints] {self.name!r}"
+        _check_path(f"{where} key", self.key)
+        one_of(f"{where} relation", self.relation, RELATIONS)
+        if isinstance(self.other, str):
+            _check_path(f"{where} {self.relation}", self.other)
+        else:
+            object.__setattr__(self, "other", finite_float(f"{where} {self.relation}", self.other))
+        margin = finite_float(f"{where} margin", self.margin)
+        if margin < 0.0:
+            raise ParameterError(f"{where} margin must be >= 0, got {self.margin!r}")
+        object.__setattr__(self, "margin", margin)
+
+    @classmethod
+    def from_table(cls, name: str, table: Any) -> Constraint:
+        """From ``{ key = ..., less_than | greater_than = ..., margin = ... }``."""
+        where = f"[constraints] {name!r}"
+        if not isinstance(table, dict):
+            raise ParameterError(
+                f"{where} must be a table such as {{ key = 'object.1.position_m.2', less_than = "
+                f"'object.0.position_m.2', margin = 0.05 }}, got {table!r}"
+            )
+        reject_unknown_keys(where, table, {"key", "margin", *RELATIONS})
+        relations = [r for r in RELATIONS if r in table]
+        if "key" not in table or len(relations) != 1:
+            raise ParameterError(f"{where} needs 'key' and exactly one of {list(RELATIONS)}, got {table!r}")
+        return cls(
+            name=name,
+            key=table["key"],
+            relation=relations[0],
+            other=table[relations[0]],
+            margin=table.get("margin", 0.0),
+        )
+
+    def holds(self, data: Mapping[str, Any]) -> bool:
+        """Whether the scene ``data`` (TOML form) meets the condition.
+
+        Raises
+        ------
+        ParameterError
+            If a key does not address a number of the scene.
+        """
+        where = f"[constraints] {self.name!r}"
+        value = _number_at(data, self.key, where)
+        other = self.other if isinstance(self.other, float) else _number_at(data, self.other, where)
+        if self.relation == "less_than":
+            return value < other - self.margin
+        return value > other + self.margin
+
+
+def _check_path(where: str, key: Any) -> str:
+    """``key`` if it is a dotted path of names and indices, else :class:`ParameterError`."""
+    if not isinstance(key, str) or not all(_KEY_PART.match(part) for part in key.split(".")):
+        raise ParameterError(f"{where} {key!r} is not a dotted scene key (e.g. 'object.1.position_m.2')")
+    return key
+
+
+def _number_at(data: Mapping[str, Any], key: str, where: str) -> float:
+    """The number at dotted ``key`` of the scene ``data``: tables by name, arrays by index."""
+    node: Any = data
+    for depth, part in enumerate(key.split(".")):
+        here = ".".join(key.split(".")[: depth + 1])
+        if isinstance(node, (list, tuple)) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, Mapping) and part in node:
+            node = node[part]
+        else:
+            raise ParameterError(f"{where}: the sample's scene has no {here!r} (key {key!r})")
+    if isinstance(node, bool) or not isinstance(node, (int, float)):
+        raise ParameterError(f"{where}: {key!r} is {node!r}, not a number; index a vector by its entry")
+    return float(node)
+
+
+@dataclass(frozen=True, kw_only=True)
 class SweepSample:
     """One sample of a sweep: its id, seed, swept values and validated scene.
 
@@ -267,6 +407,9 @@ class SweepSample:
         (of the bytes) as read when the sample was built: its base scene file (whose entry also
         has ``toml_sha256``, the SHA-256 of its TOML in :func:`canonical_json` form: what the
         sample's hash covers of it) and the files its scene names (meshes).
+    rejected : Mapping
+        The draws of its ``[random]`` keys refused before this one, by reason (a constraint's
+        name, or ``"geometry"``), read-only; empty for a sample drawn once.
     """
 
     id: str
@@ -277,11 +420,12 @@ class SweepSample:
     config: SceneConfig
     scene_data: Mapping[str, Any]
     inputs: Mapping[str, Mapping[str, Any]] = field(default_factory=lambda: MappingProxyType({}))
+    rejected: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
 
     def record(self) -> dict:
-        """Plain data for ``dataset.json``: id, index, seed, params, hash, and the paths of its
-        input files (``inputs``, sorted)."""
-        return {
+        """Plain data for ``dataset.json``: id, index, seed, params, hash, the paths of its input
+        files (``inputs``, sorted) and, for a sample drawn more than once, ``rejected``."""
+        record = {
             "id": self.id,
             "index": self.index,
             "seed": self.seed,
@@ -289,6 +433,9 @@ class SweepSample:
             "hash": self.hash,
             "inputs": sorted(self.inputs),
         }
+        if self.rejected:
+            record["rejected"] = dict(self.rejected)
+        return record
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -307,7 +454,11 @@ class SweepSpec:
     outputs : tuple of str
         Extras among :data:`OUTPUTS`.
     spp : int or None
-        Samples per pixel replacing every scene's, or None to keep them.
+        Samples per pixel of the raw image replacing every scene's, or None to keep them.
+    ideal_spp : int or None
+        Samples per pixel of the ideal image replacing every scene's, or None to keep them.
+    image_format : {"exr", "npz", "png16"}
+        File format of the sample's images (:data:`IMAGE_FORMATS`).
     unset : tuple of str
         Dotted keys removed from every base scene before the swept values are set.
     synthesis : SynthesisOptions or None
@@ -318,6 +469,14 @@ class SweepSpec:
         Grid keys in file order with their values.
     random : tuple of Distribution
         Random keys in file order.
+    constants : tuple of (str, object)
+        ``[set]``: keys in file order with their value, the same for every sample.
+    constraints : tuple of Constraint
+        ``[constraints]`` in file order.
+    max_draws : int
+        Draws of a sample's random keys at most.
+    redraw_impossible : bool
+        Whether a sample the geometry check refuses draws again (else the sweep is refused).
     base_dir : Path
         Directory of the spec file (relative scene paths are resolved against it).
     source : str
@@ -332,11 +491,17 @@ class SweepSpec:
     repeats: int = 1
     outputs: tuple[str, ...] = ()
     spp: int | None = None
+    ideal_spp: int | None = None
+    image_format: str = "exr"
     unset: tuple[str, ...] = ()
     synthesis: SynthesisOptions | None = None
     views: ViewOptions = field(default_factory=lambda: ViewOptions())
     grid: tuple[tuple[str, tuple], ...] = ()
     random: tuple[Distribution, ...] = ()
+    constants: tuple[tuple[str, Any], ...] = ()
+    constraints: tuple[Constraint, ...] = ()
+    max_draws: int = DEFAULT_MAX_DRAWS
+    redraw_impossible: bool = False
     base_dir: Path = Path(".")
     source: str = "<memory>"
     data: Mapping[str, Any] = field(default_factory=dict)
@@ -359,6 +524,11 @@ class SweepSpec:
     def swept_keys(self) -> tuple[str, ...]:
         """Grid keys, then random keys, in file order."""
         return tuple(k for k, _ in self.grid) + tuple(d.key for d in self.random)
+
+    @property
+    def set_keys(self) -> tuple[str, ...]:
+        """``[set]`` keys in file order."""
+        return tuple(k for k, _ in self.constants)
 
 
 def _thaw(value: Any) -> Any:
@@ -502,6 +672,17 @@ def _random(random_table: dict, grid_table: dict, base: Path) -> list[Distributi
     return random
 
 
+def _constants(set_table: dict, swept: dict) -> tuple[tuple[str, Any], ...]:
+    """``[set]``: dotted keys in file order with their values (none of them swept)."""
+    for key in set_table:
+        _check_key("[set]", key)
+        if key == SCENE_KEY:
+            raise ParameterError("[set] 'scene': the base scene of every sample is sweep.scene")
+        if key in swept:
+            raise ParameterError(f"key {key!r} is both in [set] and swept ([grid] or [random]): give one of them")
+    return tuple((key, _freeze(value)) for key, value in set_table.items())
+
+
 def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory>") -> SweepSpec:
     """Build a :class:`SweepSpec` from a parsed TOML document (structure only).
 
@@ -524,20 +705,24 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     ------
     ParameterError
         For unknown tables or keys, a NaN or infinite number, empty or inverted ranges, an unknown distribution or
-        output, a reserved or malformed dotted key, a key both in ``[grid]`` and ``[random]``,
+        output, a reserved or malformed dotted key, a key both in ``[grid]`` and ``[random]`` (or
+        set and swept), a malformed constraint,
         a missing base scene, or more than :data:`MAX_SAMPLES` samples; the message names the
         key and value.
     """
     base = Path(base_dir).resolve()
     if not isinstance(data, dict):
         raise ParameterError(f"a sweep spec must be a TOML document (a table), got {data!r}")
-    reject_unknown_keys("sweep spec", data, {"sweep", "grid", "random"})
+    reject_unknown_keys("sweep spec", data, {"sweep", "grid", "random", "set", "constraints"})
     _reject_non_finite(data, "")
     if "sweep" not in data or not isinstance(data["sweep"], dict):
         raise ParameterError("sweep spec: missing [sweep] table (name, seed, scene)")
     sweep = dict(data["sweep"])
     reject_unknown_keys(
-        "[sweep]", sweep, {"name", "seed", "scene", "repeats", "outputs", "spp", "synthesis", "views", "unset"}
+        "[sweep]",
+        sweep,
+        {"name", "seed", "scene", "repeats", "outputs", "spp", "ideal_spp", "image_format", "synthesis", "views"}
+        | {"unset", "max_draws", "redraw_impossible"},
     )
     for key in ("name", "seed", "scene"):
         if key not in sweep:
@@ -550,16 +735,30 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     _scene_file("sweep.scene", scene, base)
     repeats = positive_int("sweep.repeats", sweep.get("repeats", 1))
     spp = None if "spp" not in sweep else positive_int("sweep.spp", sweep["spp"])
+    ideal_spp = None if "ideal_spp" not in sweep else positive_int("sweep.ideal_spp", sweep["ideal_spp"])
+    image_format = one_of("sweep.image_format", sweep.get("image_format", "exr"), IMAGE_FORMATS)
+    max_draws = positive_int("sweep.max_draws", sweep.get("max_draws", DEFAULT_MAX_DRAWS))
+    redraw_impossible = sweep.get("redraw_impossible", False)
+    if not isinstance(redraw_impossible, bool):
+        raise ParameterError(f"sweep.redraw_impossible must be true or false, got {redraw_impossible!r}")
     unset = _unset_keys(sweep.get("unset", []))
     outputs, synthesis, views = _outputs(sweep)
     grid_table = data.get("grid", {})
     random_table = data.get("random", {})
-    if not isinstance(grid_table, dict) or not isinstance(random_table, dict):
-        raise ParameterError("[grid] and [random] must be tables of dotted keys")
+    set_table = data.get("set", {})
+    constraints_table = data.get("constraints", {})
+    for name, table in (("[grid]", grid_table), ("[random]", random_table), ("[set]", set_table)):
+        if not isinstance(table, dict):
+            raise ParameterError(f"{name} must be a table of dotted keys, got {table!r}")
+    if not isinstance(constraints_table, dict):
+        raise ParameterError(f"[constraints] must be a table of named conditions, got {constraints_table!r}")
     grid = _grid(grid_table, base)
     random = _random(random_table, grid_table, base)
-    if spp is not None and "render.spp" in grid_table | random_table:
-        raise ParameterError("render.spp is swept and sweep.spp is set: give one of them")
+    constants = _constants(set_table, grid_table | random_table)
+    constraints = tuple(Constraint.from_table(name, table) for name, table in constraints_table.items())
+    for option, key in (("spp", "render.spp"), ("ideal_spp", "render.ideal_spp")):
+        if option in sweep and key in grid_table | random_table | set_table:
+            raise ParameterError(f"{key} is swept or set and sweep.{option} is given: give one of them")
     spec = SweepSpec(
         name=name,
         seed=seed,
@@ -567,11 +766,17 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
         repeats=repeats,
         outputs=tuple(outputs),
         spp=spp,
+        ideal_spp=ideal_spp,
+        image_format=image_format,
         unset=tuple(unset),
         synthesis=synthesis,
         views=views,
         grid=tuple(grid),
         random=tuple(random),
+        constants=constants,
+        constraints=constraints,
+        max_draws=max_draws,
+        redraw_impossible=redraw_impossible,
         base_dir=base,
         source=source,
         data=_freeze(data),
@@ -912,10 +1117,24 @@ def iter_samples(
             last = index
             seed = sample_seed(spec.seed, index)
             point = _grid_point(spec, index // spec.repeats)
-            params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
-            for dist in spec.random:
-                params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key))
-            yield _build_sample(spec, index, seed, params, base_scene, digests)
+            rejected: dict[str, int] = {}
+            for draw in range(spec.max_draws):
+                params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
+                for dist in spec.random:
+                    params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key, draw))
+                try:
+                    sample = _build_sample(spec, index, seed, params, base_scene, digests, rejected)
+                    break
+                except _RefusedDrawError as refusal:
+                    rejected[refusal.reason] = rejected.get(refusal.reason, 0) + 1
+                    if not spec.random:
+                        raise ParameterError(f"{refusal}; the sample has no [random] keys to draw again") from None
+            else:
+                raise ParameterError(
+                    f"sample {sample_id(index)}: none of {spec.max_draws} draws of its [random] keys was accepted "
+                    f"(refused, by reason: {rejected}); widen the ranges, loosen [constraints] or raise sweep.max_draws"
+                )
+            yield sample
             bar.update()
             elapsed = time.perf_counter() - start
             if progress and not estimated and elapsed >= _ESTIMATE_AFTER_S and total:
@@ -946,8 +1165,17 @@ def _grid_point(spec: SweepSpec, p: int) -> tuple:
     return tuple(reversed(values))
 
 
+class _RefusedDrawError(Exception):
+    """A draw of a sample that breaks a constraint (or, with ``redraw_impossible``, the geometry
+    check): drawn again. ``reason``: the constraint's name, or ``"geometry"``."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
 def _build_sample(
-    spec: SweepSpec, index: int, seed: int, params: dict, base_scene, digests: DigestCache
+    spec: SweepSpec, index: int, seed: int, params: dict, base_scene, digests: DigestCache, rejected: dict[str, int]
 ) -> SweepSample:
     sid = sample_id(index)
     where = f"sample {sid} ({_describe(params)})"
@@ -956,16 +1184,27 @@ def _build_sample(
     data = copy.deepcopy(base)
     try:
         _unset(data, spec.unset)
-        if spec.spp is not None:
-            _assign(data, "render.spp", spec.spp)
+        for option, key in ((spec.spp, "render.spp"), (spec.ideal_spp, "render.ideal_spp")):
+            if option is not None:
+                _assign(data, key, option)
+        for key, value in spec.constants:
+            _assign(data, key, _thaw(value))
         for key, value in params.items():
             if key != SCENE_KEY:
                 _assign(data, key, copy.deepcopy(value))
         _assign(data, "render.seed", seed)
         data["name"] = f"{spec.name}/{sid}"
+        for constraint in spec.constraints:
+            if not constraint.holds(data):
+                raise _RefusedDrawError(f"{where}: breaks [constraints] {constraint.name!r}", constraint.name)
         config = parse_scene(data, base_dir=path.parent, source=f"{spec.source}#{sid}")
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
+    try:
         check_geometry(config)
     except ParameterError as exc:
+        if spec.redraw_impossible:
+            raise _RefusedDrawError(f"{where}: {exc}", "geometry") from None
         raise ParameterError(f"{where}: {exc}") from None
     if config.port is None and "refraction_free" in spec.outputs:
         raise ParameterError(f"{where}: the scene has no [port], so it has no refraction-free image to write")
@@ -996,4 +1235,5 @@ def _build_sample(
         config=config,
         scene_data=_freeze(data),
         inputs=MappingProxyType({k: MappingProxyType(v) for k, v in inputs.items()}),
+        rejected=MappingProxyType(dict(rejected)),
     )

@@ -89,7 +89,7 @@ def test_run_writes_every_sample_and_its_record(tilt_run):
         assert set(record["seconds"]) >= {"render", "raw", "ideal", "refraction_free", "total"}
         assert sorted(record["files"]) == [
             ".lfrefract-output.json", "depth.exr", "ideal.exr", "lenses.npz", "meta.json", "port.txt", "raw.exr",
-            "refraction_free.coverage.exr", "refraction_free.exr", "sample.json",
+            "refraction_free.coverage.exr", "refraction_free.exr", "refraction_free.filled.exr", "sample.json",
         ]  # fmt: skip
         for name, entry in record["files"].items():
             assert file_digest(folder / name) == (entry["bytes"], entry["sha256"])
@@ -120,9 +120,18 @@ def test_refraction_free_image_is_the_synthesis_of_the_raw_image(tilt_run):
         output=PinholeCamera.from_dict(meta["ideal"]),
         options=SynthesisOptions(),
     )
-    assert np.array_equal(sample.refraction_free, warp.apply(sample.raw), equal_nan=True)
+    expected = np.where(warp.filled[..., None], warp.apply(sample.raw), np.nan)  # NaN: no value
+    assert np.array_equal(sample.refraction_free, expected, equal_nan=True)
     assert np.array_equal(sample.coverage, warp.coverage.astype(np.float32))
     assert sample.refraction_free.shape == sample.ideal.shape
+    # The filled classes: 2 exact, 1 approximated, 0 empty (where the image is NaN).
+    filled = sample.filled
+    assert filled.dtype == np.uint8
+    assert np.array_equal(filled == 2, warp.exact & warp.filled)
+    assert np.array_equal(filled == 1, warp.filled & ~warp.exact)
+    assert np.array_equal(filled == 0, np.all(np.isnan(sample.refraction_free), axis=2))
+    empty = [np.count_nonzero(s.filled == 0) for s in Dataset(tilt_run.out_dir)]
+    assert 0 < max(empty) < filled.size  # the steepest tilts leave pixels without any captured ray
 
 
 def test_loader_gives_arrays_and_parameters_in_index_order(tilt_run):
