@@ -1,5 +1,6 @@
 """Comparison metrics: images in a region (PSNR, SSIM after Wang et al. 2004, the aligning shift),
-planes, depth and disparity maps, and ray models against true rays."""
+planes, depth and disparity maps (with the HCI 4D light field benchmark's scores), and ray models
+against true rays."""
 
 from __future__ import annotations
 
@@ -11,16 +12,22 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract.errors import ParameterError
-from lfrefract.validate import as_points, positive_float, positive_int
+from lfrefract.validate import as_points, positive_float, positive_int, shown
 
 __all__ = [
+    "HCI_BADPIX_THRESHOLDS_PX",
+    "HCI_BOUNDARY_PX",
     "DepthErrors",
     "DisparityErrors",
+    "HciScores",
     "PlaneFit",
     "RayErrors",
     "depth_errors",
     "disparity_errors",
     "fit_plane_ransac",
+    "hci_badpix",
+    "hci_mse_x100",
+    "hci_scores",
     "psnr",
     "ray_errors",
     "shift_px",
@@ -476,4 +483,223 @@ def ray_errors(
         angle_rms_rad=float(np.sqrt(np.mean(angle**2))),
         angle_max_rad=float(angle.max()),
         count=int(keep.sum()),
+    )
+
+
+# =============================================================================== HCI benchmark
+# The general disparity metrics of the HCI 4D light field benchmark (Honauer et al., ACCV 2016), as
+# its evaluation toolkit (github.com/lightfield-analysis/evaluation-toolkit) computes them.
+
+#: Pixels left out along each side of a disparity map: the toolkit's default ``boundary_offset`` of
+#: a scene (toolkit/scenes/base_scene.py, ``BaseScene``), for the 512 x 512 low-resolution maps its
+#: general metrics are computed on (at another resolution it scales with the map: 150 px at 10x).
+HCI_BOUNDARY_PX = 15
+
+#: The BadPix thresholds of the benchmark's general metrics, pixels of disparity: ``BadPix(0.01)``,
+#: ``BadPix(0.03)`` and ``BadPix(0.07)`` (toolkit/utils/misc.py, ``get_general_metrics``).
+HCI_BADPIX_THRESHOLDS_PX = (0.01, 0.03, 0.07)
+
+
+def _hci_map(name: str, value: Any) -> np.ndarray:
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be an (H, W) array of real numbers: {exc}") from None
+    if arr.dtype == np.bool_ or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ParameterError(f"{name} must hold real numbers (floating point or integer), got dtype {arr.dtype}")
+    if arr.ndim != 2:
+        raise ParameterError(f"{name} must have shape (H, W), got {arr.shape}")
+    return arr
+
+
+def _hci_selection(disparity_px: Any, truth_px: Any, mask: Any, boundary_px: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The estimate and the truth at the evaluated pixels (1-D, their own dtypes), checked."""
+    est = _hci_map("disparity_px", disparity_px)
+    ref = _hci_map("truth_px", truth_px)
+    if est.shape != ref.shape:
+        raise ParameterError(f"disparity_px and truth_px must have the same shape, got {est.shape} and {ref.shape}")
+    height, width = ref.shape
+    if isinstance(boundary_px, bool) or not isinstance(boundary_px, (int, np.integer)) or boundary_px < 0:
+        raise ParameterError(f"boundary_px must be a non-negative integer, got {shown(boundary_px)}")
+    border = int(boundary_px)
+    if 2 * border >= min(height, width):
+        raise ParameterError(f"boundary_px = {border} leaves no pixel of a {height} x {width} map")
+    selected = np.zeros(ref.shape, dtype=bool)
+    selected[border : height - border, border : width - border] = True
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.dtype != np.bool_ or m.shape != ref.shape:
+            raise ParameterError(f"mask must be a boolean array of shape {ref.shape}, got {m.dtype} {m.shape}")
+        selected &= m
+    selected &= np.isfinite(ref)
+    if not selected.any():
+        raise ParameterError(
+            f"no pixel to evaluate: mask, the border of boundary_px = {border} and the finite values of "
+            "truth_px leave none"
+        )
+    return est[selected], ref[selected]
+
+
+def _hci_mse_x100(est: np.ndarray, ref: np.ndarray) -> float:
+    e = est.astype(np.float64)
+    have = np.isfinite(e)
+    if not have.any():
+        return float("nan")
+    with np.errstate(over="ignore"):
+        return float(np.mean((e[have] - ref[have].astype(np.float64)) ** 2) * 100.0)
+
+
+def _hci_badpix(est: np.ndarray, ref: np.ndarray, threshold: float) -> float:
+    # The toolkit subtracts and compares in the maps' own precision: float32 for PFM maps, where
+    # the threshold becomes float32 as well (so an error of exactly float32(0.07) is not bad).
+    dtype = np.result_type(est.dtype, ref.dtype, np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        error = np.abs(est.astype(dtype) - ref.astype(dtype))
+        good = error <= dtype.type(threshold)  # NaN (a missing estimate) is not good
+    return 100.0 * float(np.count_nonzero(~good)) / float(error.size)
+
+
+def hci_mse_x100(
+    disparity_px: np.ndarray,
+    truth_px: np.ndarray,
+    *,
+    mask: np.ndarray | None = None,
+    boundary_px: int = HCI_BOUNDARY_PX,
+) -> float:
+    """The HCI benchmark's MSE x 100: mean squared disparity error over the evaluated pixels, times 100.
+
+    As the toolkit's ``MSE`` metric (toolkit/metrics/general_metrics.py): the mean of
+    ``(truth - estimate)^2`` over the evaluation mask, multiplied by 100, leaving out pixels whose
+    estimate is not finite. Computed in double precision (the toolkit computes in the maps'
+    float32; the two agree to about seven significant digits, the toolkit reports two decimals).
+
+    Parameters
+    ----------
+    disparity_px : ndarray, shape (H, W)
+        Estimated disparity, pixels (the benchmark's convention: between adjacent views); NaN or
+        +-inf where there is no estimate (left out here, counted as bad by :func:`hci_badpix`).
+    truth_px : ndarray, shape (H, W)
+        True disparity, pixels; pixels where it is not finite carry no truth and are left out.
+    mask : ndarray of bool, shape (H, W), optional
+        The evaluation mask (default all pixels), e.g. one of the benchmark's region masks.
+    boundary_px : int
+        Pixels left out along each side, >= 0 (default :data:`HCI_BOUNDARY_PX`, the toolkit's
+        choice for its 512 x 512 maps; 0 evaluates the whole map).
+
+    Returns
+    -------
+    float
+        The score, squared pixels times 100; NaN if no evaluated pixel has a finite estimate.
+
+    Raises
+    ------
+    ParameterError
+        If a map is not an (H, W) array of real numbers, the shapes differ, ``mask`` is not a
+        boolean (H, W) array, ``boundary_px`` is not a non-negative integer, or no pixel is left
+        to evaluate (the message names the parameter).
+    """
+    est, ref = _hci_selection(disparity_px, truth_px, mask, boundary_px)
+    return _hci_mse_x100(est, ref)
+
+
+def hci_badpix(
+    disparity_px: np.ndarray,
+    truth_px: np.ndarray,
+    *,
+    threshold_px: float,
+    mask: np.ndarray | None = None,
+    boundary_px: int = HCI_BOUNDARY_PX,
+) -> float:
+    """The HCI benchmark's BadPix(t): the percentage of evaluated pixels off by more than ``threshold_px``.
+
+    As the toolkit's ``BadPix`` metric (toolkit/metrics/general_metrics.py): a pixel is bad when
+    ``|estimate - truth| > t``, strictly (an error of exactly ``t`` is good), and the score is
+    ``100 * bad / evaluated``, a **percentage** from 0 to 100 (not a fraction, unlike
+    :func:`disparity_errors`). The difference and the comparison are made in the maps' own
+    precision, as in the toolkit: float32 when both maps are float32 (as read from PFM files; the
+    threshold is then rounded to float32 as well), float64 otherwise.
+
+    A pixel whose estimate is NaN or +-inf is bad (it is missing). The toolkit counts +-inf as bad
+    too; a NaN it counts as good, by accident of NaN comparisons (its submissions have none).
+
+    Parameters
+    ----------
+    disparity_px : ndarray, shape (H, W)
+        Estimated disparity, pixels; NaN or +-inf where there is no estimate.
+    truth_px : ndarray, shape (H, W)
+        True disparity, pixels; pixels where it is not finite carry no truth and are left out (the
+        benchmark's truth is finite everywhere).
+    threshold_px : float
+        The threshold ``t``, pixels, > 0; the benchmark's are :data:`HCI_BADPIX_THRESHOLDS_PX`.
+    mask : ndarray of bool, shape (H, W), optional
+        The evaluation mask (default all pixels).
+    boundary_px : int
+        Pixels left out along each side, >= 0 (default :data:`HCI_BOUNDARY_PX`).
+
+    Returns
+    -------
+    float
+        Percentage of the evaluated pixels that are bad, 0 to 100.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`hci_mse_x100`, or if ``threshold_px`` is not a finite positive number.
+    """
+    threshold = positive_float("threshold_px", threshold_px)
+    est, ref = _hci_selection(disparity_px, truth_px, mask, boundary_px)
+    return _hci_badpix(est, ref, threshold)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HciScores:
+    """The HCI 4D light field benchmark's general disparity scores of one map (:func:`hci_scores`).
+
+    Parameters
+    ----------
+    mse_x100 : float
+        Mean squared error over the evaluated pixels with a finite estimate, squared pixels times
+        100 (:func:`hci_mse_x100`); NaN if none has one.
+    badpix_0_01, badpix_0_03, badpix_0_07 : float
+        Percentage (0 to 100) of the evaluated pixels whose error exceeds 0.01, 0.03 and 0.07 px or
+        whose estimate is missing (:func:`hci_badpix`).
+    count : int
+        Number of evaluated pixels (inside the mask and the border, with a finite truth).
+    missing : int
+        How many of them have a NaN or infinite estimate.
+    """
+
+    mse_x100: float
+    badpix_0_01: float
+    badpix_0_03: float
+    badpix_0_07: float
+    count: int
+    missing: int
+
+
+def hci_scores(
+    disparity_px: np.ndarray,
+    truth_px: np.ndarray,
+    *,
+    mask: np.ndarray | None = None,
+    boundary_px: int = HCI_BOUNDARY_PX,
+) -> HciScores:
+    """The HCI benchmark's MSE x 100 and BadPix(0.01), (0.03), (0.07) of a disparity map.
+
+    Parameters are those of :func:`hci_mse_x100`; the scores are those of :func:`hci_mse_x100` and
+    :func:`hci_badpix` at :data:`HCI_BADPIX_THRESHOLDS_PX`, on the same pixels.
+
+    Returns
+    -------
+    HciScores
+    """
+    est, ref = _hci_selection(disparity_px, truth_px, mask, boundary_px)
+    fine, medium, coarse = (_hci_badpix(est, ref, t) for t in HCI_BADPIX_THRESHOLDS_PX)
+    return HciScores(
+        mse_x100=_hci_mse_x100(est, ref),
+        badpix_0_01=fine,
+        badpix_0_03=medium,
+        badpix_0_07=coarse,
+        count=int(est.size),
+        missing=int(np.count_nonzero(~np.isfinite(est))),
     )

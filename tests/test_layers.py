@@ -46,6 +46,7 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     ),
     "lfrefract.optics": (*_BASE, "lfrefract.optics"),
     "lfrefract.formats.flatport": (*_BASE, *_LOW_FORMATS, "lfrefract.optics"),
+    "lfrefract.formats.pfm": (*_BASE, "lfrefract.formats.outputs"),
     "lfrefract.formats.paramfile": (*_BASE, *_LOW_FORMATS, "lfrefract.optics", "lfrefract.formats.flatport"),
     "lfrefract.synthesis": (
         *_BASE,

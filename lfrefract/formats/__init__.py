@@ -6,6 +6,7 @@
 - :mod:`~lfrefract.formats.paramfile`: camera and port files (TOML, JSON, or the flat-port text).
 - :mod:`~lfrefract.formats.ply`: point clouds.
 - :mod:`~lfrefract.formats.viewstack`: sub-aperture view stacks (HCI benchmark layout).
+- :mod:`~lfrefract.formats.pfm`: Portable Float Map images (the HCI benchmark's disparity maps).
 - :mod:`~lfrefract.formats.capture`: a capture (raw image, camera, port, ground truth) as a folder,
   or a Lytro file.
 - :mod:`~lfrefract.formats.mosaic`: a sensor's Bayer mosaic of integer counts, demosaicing, ``mosaic.npz``.
