@@ -131,3 +131,9 @@ def test_redraw_impossible_draws_again_what_the_geometry_check_refuses():
     samples = expand(parse_spec(data))
     assert all(s.config.objects[1].placement.position_m[2] > 0.03 for s in samples)
     assert sum(s.rejected.get("geometry", 0) for s in samples) > 0
+
+
+def test_sensor_settings_are_ordinary_keys():
+    data = spec(set={"sensor.preset": "tiny"}, grid={"sensor.iso": [100.0, 800.0]})
+    samples = expand(parse_spec(data))
+    assert [s.config.sensor.detector.iso for s in samples] == [100.0, 800.0]
