@@ -906,3 +906,66 @@ HCI_SCORE_RELATIVE = 1e-12
 # ``offset + code * scale`` by half an ulp (2**-24 relative), on top of the half code step the
 # encoding itself allows (checked separately).
 PNG16_DECODE_FLOAT32_RELATIVE = 2.0**-24
+
+# ----------------------------------------------------------------------------- ground-truth labels
+# simulator.groundtruth.surface_labels and raw_pixel_truth (tests/simulator/test_groundtruth_labels.py),
+# against numpy ray/plane intersections. Mitsuba intersects in float32.
+# Dimensionless, per component of a unit normal: Mitsuba builds a rectangle's or disk's normal from
+# its float32 to_world matrix and normalises it in float32 (a few eps32 = 1.2e-7 per component);
+# the rotation into the camera frame is float64. A normal left in the world frame, or rotated by R
+# instead of R^T, is off by more than 0.1 under the tests' pose. 5.6e-8 measured.
+LABEL_NORMAL_FLOAT32 = 1e-5
+
+# Relative; camera-frame z of the first hit along a raw pixel's ray. Mitsuba takes the ray in
+# float32 (origin on the port's water face or the lens's front, plus the pose's 0.27 m shift:
+# 3e-8 m; direction to eps32 = 6e-8) and returns a float32 distance t: a few eps32 of the
+# 0.3-0.6 m distance, amplified by the planes' slant (incidence up to 56 deg, 1 / cos = 1.8): ~1e-6
+# relative (2.8e-7 measured), as the ideal image's depth (DEPTH_FLOAT32_RELATIVE). A ray left
+# unrefracted by the port misses by more than 1e-3 relative (the test checks that it would).
+RAW_DEPTH_FLOAT32_RELATIVE = 1e-5
+
+# Relative to the distance along the ray; pixels whose ray passes this close to an object's rim are
+# left out of the exact comparison of instance ids and of hit / no hit: Mitsuba's float32 ray moves
+# the hit point by a few eps32 (6e-8) of its distance, so it may decide either way there. 1e-5
+# leaves out well under 3 % of the pixels (the test checks it).
+LABEL_EDGE_MARGIN_RELATIVE = 1e-5
+
+# ----------------------------------------------------------------------------- forward projection
+# Forward projection through a flat port (lfrefract/optics/forward.py; tests/lfrefract/test_forward_projection.py).
+# Metres; the backward trace (FlatPort.trace_from_air) of the air ray the solver returns must pass this close
+# to the point (ports tilted up to 40 deg, 5-60 mm away, 0 or 2-8 mm of glass; points 0.05-3 m away). The
+# solver stops at a lateral residual of 1e-12 m (DEFAULT_TOLERANCE_M); the trace adds float64 round-off of a
+# few 1e-16 m per metre travelled, amplified by 1 / cos^2 of the incidence: 1.0e-12 m worst measured over
+# 48 000 points. A wrong index or Snell term misses by millimetres.
+FORWARD_MISS_M = 1e-9
+# Radians; a point placed on a traced water-side ray (0.05-3 m beyond the port) gives the air ray back to
+# about the solver's residual over the path's length, 1e-12 m / 0.05 m = 2e-11 rad (5.7e-12 measured over
+# 6 000 rays). A ray one Snell term off differs by > 1e-3 rad.
+FORWARD_DIRECTION_RAD = 1e-10
+# Radians; Agrawal et al.'s quartic for a single interface, solved as the eigenvalues of 4 x 4 companion
+# matrices, against the iteration: the eigenvalues carry eps times the polynomial's conditioning (1.7e-11
+# measured over 20 000 points); the wrong root of the quartic is off by degrees.
+FORWARD_QUARTIC_RAD = 1e-9
+# Iterations; Newton's method from the left on the concave residual converges quadratically from the
+# first step: 9 measured for 48 000 random points. More than 15 would mean the bisection safeguard is doing
+# the work (60 halvings to converge).
+FORWARD_SOLVER_ITERATIONS_MAX = 15
+
+# ----------------------------------------------------------------------------- view-stack disparity truth
+# simulator/view_truth.py; tests/simulator/test_view_truth.py.
+# Relative; the traced disparity against its analytic value (in air f b / Z; behind a port the float64
+# oracle's displacement of the analytic plane's point) or against the same map in another view: the surface
+# point lies at Mitsuba's float32 hit distance (relative error a few 1e-8 to 1e-7, as DEPTH_FLOAT32_RELATIVE),
+# which moves the disparity by as much relative, and the maps are stored in float32 (6e-8). 2.5e-7 measured
+# (tiny camera, planes at 0.3-0.5 m, no port and ports tilted 0 and (25, 10) deg). A baseline or focal length
+# off by one part in 1e4, or the neighbour on the wrong side, fails by far.
+VIEW_TRUTH_RELATIVE = 2e-6
+# Relative; behind a port parallel to the lens, the disparity of the pixels half a pixel off the axis (the
+# tiny view's cx is 45.5) against the paraxial apparent-depth value f b / (d + t n_a / n_g + w n_a / n_w): the
+# field angle 0.5 / 120 rad changes the refraction's lateral magnification by ~T^2 (1 - n_a^2 / n^2) 3 / 2 ~ 1e-5
+# relative (2.1e-5 measured). The in-air value (a wrong sign of refraction) is 30 % away, the edge 10 %.
+VIEW_TRUTH_PARAXIAL_RELATIVE = 1e-4
+# Metres; pixels whose float64 oracle ray meets the plane this close to its rectangle's edge may fall on
+# either side in Mitsuba's float32 geometry (rounding of a 0.3 m hit point: ~3e-8 m); the NaN-mask comparison
+# leaves them out (at most 2 of 6348 pixels, asserted). Pixels are ~2 mm apart on the plane.
+VIEW_TRUTH_EDGE_M = 1e-6

@@ -198,6 +198,19 @@ class Sample:
         object ``i`` (``sample.info["instances"]``); None unless ``labels`` was asked for."""
         return self.image("instance_id")
 
+    @property
+    def raw_depth_m(self) -> np.ndarray | None:
+        """Camera-frame z of the first surface along each raw pixel's true ray (through the port),
+        metres, float32 (H, W); +inf: the ray reaches no surface, NaN: the pixel records no ray;
+        None unless ``raw_truth`` was asked for."""
+        return self.image("raw_depth_m")
+
+    @property
+    def lens_index(self) -> np.ndarray | None:
+        """Row of :attr:`lenses` of each raw pixel's microlens, int32 (H, W), -1 for none; None
+        unless ``raw_truth`` was asked for."""
+        return self.image("lens_index")
+
     def _required(self, name: str) -> np.ndarray:
         value = self.image(name)
         if value is None:

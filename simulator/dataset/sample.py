@@ -5,8 +5,10 @@ place only when every file is written, so it exists complete or not at all. It h
 of ``lfsim render`` (:func:`simulator.job.render_job`: ``raw.exr``, ``ideal.exr``, ``depth.exr``,
 ``lenses.npz``, ``meta.json``), ``sample.json`` (id, seed, swept values, hash), ``port.txt``
 (the flat-port layout of Refractive COLMAP / calibmar) when the scene has a port, and the
-optional outputs: ``refraction_free.exr`` with ``refraction_free.coverage.exr``, ``views/``
-(the sub-aperture view stack) and ``previews/``.
+optional outputs: the refraction-free image with its coverage and ``filled`` classes, ``views/``
+(the sub-aperture view stack), ``previews/``, the ideal image's surface labels (normals, instance
+ids) and the raw pixels' truth (depth along each pixel's true ray, lenslet). Images are written in
+the dataset's format (:mod:`simulator.dataset.images`) and listed in ``sample.json``'s ``images``.
 """
 
 from __future__ import annotations
@@ -172,6 +174,10 @@ def render_sample(task: SampleTask) -> dict:
             t0 = time.perf_counter()
             extras["views"] = _views(stage, config, raw, result.metadata, task)
             seconds["views"] = time.perf_counter() - t0
+        if "labels" in task.outputs or "raw_truth" in task.outputs:
+            t0 = time.perf_counter()
+            extras |= _truth_labels(stage, config, result.metadata, task, images)
+            seconds["labels"] = time.perf_counter() - t0
         write_json(
             stage / SAMPLE_FILE,
             {
@@ -269,6 +275,33 @@ def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: Sa
         "exact_fraction": float(warp.exact.mean()),
         "filled_fraction": float(warp.filled.mean()),
     }
+
+
+def _truth_labels(stage: Path, config: SceneConfig, meta: dict, task: SampleTask, images: dict) -> dict:
+    """The ideal image's surface labels (``"labels"``: ``normal_cam``, ``instance_id``) and the raw
+    pixels' truth (``"raw_truth"``: ``raw_depth_m``, ``lens_index``), traced in the port-free scene
+    (:mod:`simulator.groundtruth`); returns the extras for ``sample.json``."""
+    from simulator import backend, groundtruth
+    from simulator.scene import build_scene
+
+    mi = backend.load_mitsuba(task.variant)
+    scene = build_scene(mi, config, port_geometry=False)
+    fmt = task.image_format
+    extras: dict[str, Any] = {}
+    if "labels" in task.outputs:
+        labels = groundtruth.surface_labels(mi, scene, config, PinholeCamera.from_dict(meta["ideal"]))
+        images["normal_cam"] = write_image(stage, "normal_cam", labels.normal_cam, image_format=fmt, role="normal_cam")
+        images["instance_id"] = write_image(
+            stage, "instance_id", labels.instance_id, image_format=fmt, role="instance_id", no_value=0
+        )
+        extras["instances"] = groundtruth.instance_table(config)
+    if "raw_truth" in task.outputs:
+        truth = groundtruth.raw_pixel_truth(mi, scene, config)
+        images["raw_depth_m"] = write_image(stage, "raw_depth", truth.depth_m, image_format=fmt, role="raw_depth")
+        images["lens_index"] = write_image(
+            stage, "lens_index", truth.lens_row, image_format=fmt, role="lens_index", no_value=-1
+        )
+    return extras
 
 
 def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lfrefract.formats.jsonio import read_json
-from simulator.dataset import ArrayDataset, Dataset, parse_spec, run_dataset
+from simulator.dataset import ArrayDataset, Dataset, expand, parse_spec, run_dataset
 
 SPEC = {
     "sweep": {
@@ -92,3 +92,46 @@ def test_array_dataset_pickles_and_serves_spawned_workers(png_run):
             assert np.array_equal(got[name], want[name], equal_nan=True)
     with pytest.raises(KeyError, match="normal_cam"):
         Dataset(png_run).select("normal_cam")[0]
+
+
+#: The sweep above with every ground-truth label, as .npz.
+LABEL_SPEC = {
+    "sweep": {k: v for k, v in SPEC["sweep"].items() if k != "synthesis"}
+    | {"image_format": "npz", "outputs": ["labels", "raw_truth"]},
+    "grid": SPEC["grid"],
+    "set": SPEC["set"],
+}
+
+
+@pytest.fixture(scope="module")
+def label_run(tmp_path_factory):
+    """Two samples of :data:`LABEL_SPEC`."""
+    out = tmp_path_factory.mktemp("labels") / "data"
+    assert run_dataset(parse_spec(LABEL_SPEC), out, workers=1, progress=False).ok
+    return out
+
+
+def test_labels_are_the_ground_truth_of_the_sample_scene(label_run):
+    """The files hold what simulator.groundtruth traces for the sample's own scene (its tests check
+    those functions against analytic geometry)."""
+    from lfrefract import PinholeCamera
+    from simulator import backend, groundtruth
+    from simulator.scene import build_scene
+
+    sample = Dataset(label_run)[1]
+    assert sample.image_names == ("raw", "ideal", "depth_m", "normal_cam", "instance_id", "raw_depth_m", "lens_index")
+    config = expand(parse_spec(LABEL_SPEC))[1].config
+    mi = backend.load_mitsuba()
+    scene = build_scene(mi, config, port_geometry=False)
+    labels = groundtruth.surface_labels(mi, scene, config, PinholeCamera.from_dict(sample.meta["ideal"]))
+    assert np.array_equal(sample.normal_cam, labels.normal_cam, equal_nan=True)
+    assert np.array_equal(sample.instance_id, labels.instance_id)
+    assert np.array_equal(sample.depth_m, labels.depth_m)  # the render's depth is the labels' depth
+    assert sample.instance_id.dtype == np.uint16
+    assert set(np.unique(sample.instance_id)) == {1, 2, 3, 4}  # the backdrop fills the rest of the view
+    assert sample.info["instances"] == groundtruth.instance_table(config)
+    truth = groundtruth.raw_pixel_truth(mi, scene, config)
+    assert np.array_equal(sample.raw_depth_m, truth.depth_m, equal_nan=True)
+    assert np.array_equal(sample.lens_index, truth.lens_row)
+    assert sample.info["images"]["lens_index"]["no_value"] == -1
+    assert sample.lens_index.max() < len(sample.lenses["lens_index"])
