@@ -56,7 +56,14 @@ CONTRACT: dict[str, tuple[str, ...]] = {
         "lfrefract.formats.mosaic",
         "lfrefract.optics",
     ),
-    "lfrefract.formats.viewstack": (*_BASE, *_LOW_FORMATS, *_VERSION, "lfrefract.optics", "lfrefract.synthesis"),
+    "lfrefract.formats.viewstack": (
+        *_BASE,
+        *_LOW_FORMATS,
+        *_VERSION,
+        "lfrefract.optics",
+        "lfrefract.synthesis",
+        "lfrefract.formats.pfm",
+    ),
     "lfrefract.stereo": (*_BASE, "lfrefract.optics"),
     "lfrefract.calibration": (
         *_BASE,

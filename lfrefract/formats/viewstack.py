@@ -16,6 +16,7 @@ from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import write_exr
 from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.outputs import staged_directory
+from lfrefract.formats.pfm import write_pfm
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import RayCorrection
@@ -33,8 +34,17 @@ _STACK_KIND = "lfrefract.view_stack"
 _STACK_ARRAYS = "stack.npz"
 _STACK_MASK = "valid_mask.png"
 _STACK_PARAMETERS = "parameters.cfg"
+_TRUTH_CENTRAL = "gt_disp_lowres.pfm"
+_TRUTH_ARRAYS = "gt_disparity.npz"
 
-__all__ = ["PNG_WHITE_PERCENTILE", "VIEW_STACK_FORMATS", "read_view_stack", "view_file_names", "write_view_stack"]
+__all__ = [
+    "PNG_WHITE_PERCENTILE",
+    "VIEW_STACK_FORMATS",
+    "read_view_disparity",
+    "read_view_stack",
+    "view_file_names",
+    "write_view_stack",
+]
 
 
 def view_file_names(grid: int, image_format: str) -> list[str]:
@@ -117,6 +127,7 @@ def write_view_stack(
     white_level: float | None = None,
     metadata: dict | None = None,
     inputs: Iterable[str | os.PathLike] = (),
+    disparity_px: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
     """Write a sub-aperture view stack in the HCI 4D light field benchmark layout, atomically.
 
@@ -131,7 +142,11 @@ def write_view_stack(
     * ``valid_mask.png``: 255 where every view has a finite value in every channel, else 0;
     * ``stack.npz``: ``views`` (float32, NaN kept), ``offsets_px``, ``centres_m``, ``K``, the
       camera and its ray correction as JSON (empty when none), ``schema_version`` (:func:`read_view_stack`);
-    * ``views.json``: the sidecar (layout, ordering, encoding, disparity relation, geometry).
+    * ``views.json``: the sidecar (layout, ordering, encoding, disparity relation, geometry);
+    * with ``disparity_px``, the ground truth: ``gt_disp_lowres.pfm`` (the central view's) and
+      ``gt_disp_lowres_Cam000.pfm`` ... (every view's) horizontal disparity as the benchmark's
+      PFM files (:mod:`lfrefract.formats.pfm`), and ``gt_disparity.npz`` with both stacks,
+      ``disparity_x_px`` and ``disparity_y_px`` (:func:`read_view_disparity`).
 
     PNG views are 8-bit sRGB: ``round(255 * srgb(clip(value / white_level, 0, 1)))`` with the
     IEC 61966-2-1 transfer curve, one ``white_level`` for all views (so they stay photometrically
@@ -155,6 +170,11 @@ def write_view_stack(
         Plain data stored under ``"metadata"`` in ``views.json`` (e.g. the source raw image).
     inputs : iterable of path-like
         Files the caller read the stack from: ``out_dir`` may not hold one.
+    disparity_px : (ndarray, ndarray), optional
+        The stack's true disparity, pixels, float, each of shape (grid, grid, height, width):
+        horizontal (``u - u'`` with ``u'`` where view ``[r, c + 1]`` shows the same surface point)
+        and vertical (``v - v'`` towards view ``[r + 1, c]``), NaN where a view pixel sees nothing;
+        behind a tilted port the two differ (``simulator.view_truth``).
 
     Returns
     -------
@@ -181,6 +201,7 @@ def write_view_stack(
             views = views[..., 0]
     if metadata is not None and not isinstance(metadata, dict):
         raise ParameterError(f"metadata must be a dict or None, got {type(metadata).__name__}")
+    disparity = _checked_disparity(disparity_px, stack)
     finite = stack.central_view[np.isfinite(stack.central_view)]
     if white_level is None:
         white = float(np.percentile(finite, PNG_WHITE_PERCENTILE)) if finite.size else 0.0
@@ -211,6 +232,15 @@ def write_view_stack(
             else:
                 write_exr(stage / name, view, role="subaperture_view")
         _write_png(stage / _STACK_MASK, valid.astype(np.uint8) * 255)
+        truth_files = {}
+        if disparity is not None:
+            dx, dy = disparity
+            truth_files = {"central": _TRUTH_CENTRAL, "views": _truth_names(grid), "arrays": _TRUTH_ARRAYS}
+            write_pfm(stage / _TRUTH_CENTRAL, dx[h, h])
+            for index, name in enumerate(truth_files["views"]):
+                write_pfm(stage / name, dx[index // grid, index % grid])
+            with (stage / _TRUTH_ARRAYS).open("wb") as fh:
+                np.savez_compressed(fh, disparity_x_px=dx, disparity_y_px=dy)
         (stage / _STACK_PARAMETERS).write_text(_hci_parameters(stack))
         with (stage / _STACK_ARRAYS).open("wb") as fh:
             np.savez(
@@ -257,6 +287,7 @@ def write_view_stack(
                         "shows at (u, v); zero at infinity"
                     ),
                     "focal_px_times_baseline_m": stack.output.focal_px * stack.baseline_m,
+                    "ground_truth": truth_files or None,
                 },
                 "offsets_px": stack.offsets_px,
                 "centres_m": stack.centres_m,
@@ -266,6 +297,55 @@ def write_view_stack(
             },
         )
     return out
+
+
+def _truth_names(grid: int) -> list[str]:
+    """``gt_disp_lowres_Cam000.pfm`` ...: the per-view truth files, numbered as the views."""
+    return [
+        f"gt_disp_lowres_{name.rsplit('.', 1)[0].removeprefix('input_')}.pfm" for name in view_file_names(grid, "exr")
+    ]
+
+
+def _checked_disparity(disparity_px: object, stack: ViewStack) -> tuple[np.ndarray, np.ndarray] | None:
+    """``disparity_px`` as two float32 arrays of the stack's (grid, grid, height, width), or raise."""
+    if disparity_px is None:
+        return None
+    shape = (stack.grid, stack.grid, stack.output.height_px, stack.output.width_px)
+    if not isinstance(disparity_px, (tuple, list)) or len(disparity_px) != 2:
+        raise ParameterError(f"disparity_px must be a pair of arrays (horizontal, vertical), got {type(disparity_px)}")
+    out = []
+    for name, value in zip(("horizontal", "vertical"), disparity_px, strict=True):
+        arr = np.asarray(value)
+        if arr.shape != shape or not np.issubdtype(arr.dtype, np.floating):
+            raise ParameterError(
+                f"disparity_px's {name} array must be float of shape {shape}, got {arr.dtype} {arr.shape}"
+            )
+        out.append(arr.astype(np.float32))
+    return out[0], out[1]
+
+
+def read_view_disparity(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray] | None:
+    """The true disparity of a view stack directory (``gt_disparity.npz``), or None without one.
+
+    Returns
+    -------
+    (ndarray, ndarray) or None
+        Horizontal and vertical disparity, pixels, float32, (grid, grid, height, width) each (see
+        :func:`write_view_stack`).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is there but does not hold both arrays.
+    """
+    file = Path(path) / _TRUTH_ARRAYS
+    if not file.is_file():
+        return None
+    try:
+        with np.load(file, allow_pickle=False) as npz:
+            return npz["disparity_x_px"], npz["disparity_y_px"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise FileFormatError(f"{str(file)!r} is not a view stack's disparity file: {exc}") from None
 
 
 def read_view_stack(path: str | os.PathLike) -> ViewStack:

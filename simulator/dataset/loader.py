@@ -211,6 +211,15 @@ class Sample:
         unless ``raw_truth`` was asked for."""
         return self.image("lens_index")
 
+    @property
+    def view_disparity(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Ground-truth disparity of :attr:`view_stack`, pixels between neighbouring views (the HCI
+        benchmark's convention): horizontal and vertical, float32 (grid, grid, h, w) each, NaN where
+        a view pixel sees nothing; None without a view stack or for a real main lens."""
+        from lfrefract.formats.viewstack import read_view_disparity
+
+        return None if self.views_dir is None else read_view_disparity(self.views_dir)
+
     def _required(self, name: str) -> np.ndarray:
         value = self.image(name)
         if value is None:

@@ -305,13 +305,32 @@ def _truth_labels(stage: Path, config: SceneConfig, meta: dict, task: SampleTask
 
 
 def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
-    """The sub-aperture view stack of the raw image (the ideal image's geometry), under ``views/``."""
+    """The sub-aperture view stack of the raw image (the ideal image's geometry), under ``views/``,
+    with its ground-truth disparity (:func:`simulator.view_truth.view_stack_disparity`) for a
+    thin-lens camera; a real lens's views are not pinholes, and get none (said in the extras)."""
     from lfrefract.formats.viewstack import write_view_stack
     from lfrefract.synthesis.views import subaperture_stack
+    from simulator import backend
+    from simulator.scene import build_scene
+    from simulator.view_truth import view_stack_disparity
 
     views = task.views
     output = PinholeCamera.from_dict(meta["ideal"])
     stack = subaperture_stack(config.camera, raw, output=output, **views.stack_options())
+    disparity, why_none = None, None
+    if config.lens is None:
+        mi = backend.load_mitsuba(task.variant)
+        scene = build_scene(mi, config, port_geometry=False)
+        truth = view_stack_disparity(mi, scene, config, output, grid=stack.grid, spacing_px=stack.spacing_px)
+        disparity = (truth.disparity_x_px, truth.disparity_y_px)
+    else:
+        why_none = "a real main lens's sub-aperture views are not pinholes: no ground-truth disparity"
     metadata = {"sample": task.id, "source": RAW_NAME}
-    write_view_stack(stage / VIEWS_DIR, stack, metadata=metadata, **views.write_options())
-    return {"dir": VIEWS_DIR, "grid": stack.grid, "spacing_px": stack.spacing_px, "baseline_m": stack.baseline_m}
+    write_view_stack(stage / VIEWS_DIR, stack, metadata=metadata, disparity_px=disparity, **views.write_options())
+    return {
+        "dir": VIEWS_DIR,
+        "grid": stack.grid,
+        "spacing_px": stack.spacing_px,
+        "baseline_m": stack.baseline_m,
+        "disparity": "gt_disparity.npz and gt_disp_lowres*.pfm" if disparity is not None else why_none,
+    }

@@ -747,15 +747,15 @@ def parse_spec(data: dict, *, base_dir: Path | str = ".", source: str = "<memory
     random_table = data.get("random", {})
     set_table = data.get("set", {})
     constraints_table = data.get("constraints", {})
-    for name, table in (("[grid]", grid_table), ("[random]", random_table), ("[set]", set_table)):
+    for label, table in (("[grid]", grid_table), ("[random]", random_table), ("[set]", set_table)):
         if not isinstance(table, dict):
-            raise ParameterError(f"{name} must be a table of dotted keys, got {table!r}")
+            raise ParameterError(f"{label} must be a table of dotted keys, got {table!r}")
     if not isinstance(constraints_table, dict):
         raise ParameterError(f"[constraints] must be a table of named conditions, got {constraints_table!r}")
     grid = _grid(grid_table, base)
     random = _random(random_table, grid_table, base)
     constants = _constants(set_table, grid_table | random_table)
-    constraints = tuple(Constraint.from_table(name, table) for name, table in constraints_table.items())
+    constraints = tuple(Constraint.from_table(key, table) for key, table in constraints_table.items())
     for option, key in (("spp", "render.spp"), ("ideal_spp", "render.ideal_spp")):
         if option in sweep and key in grid_table | random_table | set_table:
             raise ParameterError(f"{key} is swept or set and sweep.{option} is given: give one of them")

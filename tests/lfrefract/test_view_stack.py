@@ -571,3 +571,28 @@ def test_a_stack_beyond_the_memory_is_refused_before_any_view_is_allocated(monke
     ):
         subaperture_stack(TINY, raw, grid=1001)
     assert time.perf_counter() - start < OVERSIZE_REFUSAL_SECONDS
+
+
+def test_ground_truth_disparity_is_written_in_the_benchmark_layout(tmp_path, rgb_stack):
+    from lfrefract.formats.pfm import read_pfm
+    from lfrefract.formats.viewstack import read_view_disparity
+
+    g, h, w = rgb_stack.grid, rgb_stack.output.height_px, rgb_stack.output.width_px
+    dx = np.random.default_rng(4).uniform(0.1, 2.0, (g, g, h, w)).astype(np.float32)
+    dy = dx + 0.25
+    dx[0, 0, 0, 0] = np.nan  # a view pixel that sees nothing
+    out = write_view_stack(tmp_path / "lf", rgb_stack, disparity_px=(dx, dy))
+    got_x, got_y = read_view_disparity(out)
+    assert np.array_equal(got_x, dx, equal_nan=True)
+    assert np.array_equal(got_y, dy)
+    centre = rgb_stack.centre_index
+    assert np.array_equal(read_pfm(out / "gt_disp_lowres.pfm"), dx[centre, centre])
+    for index in range(g * g):
+        view = read_pfm(out / f"gt_disp_lowres_Cam{index:03d}.pfm")
+        assert np.array_equal(view, dx[index // g, index % g], equal_nan=True)
+    sidecar = json.loads((out / "views.json").read_text())
+    assert sidecar["disparity"]["ground_truth"]["central"] == "gt_disp_lowres.pfm"
+    assert read_view_disparity(write_view_stack(tmp_path / "plain", rgb_stack)) is None
+    with pytest.raises(ParameterError, match="vertical array must be float of shape"):
+        write_view_stack(tmp_path / "bad", rgb_stack, disparity_px=(dx, dy[:, :, :-1]))
+    assert not (tmp_path / "bad").exists()

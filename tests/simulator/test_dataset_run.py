@@ -362,7 +362,26 @@ def test_views_output_is_the_view_stack_of_the_raw_image(tmp_path, scheduler):
     assert check_dataset(root).ok
     (sample,) = Dataset(root)
     assert sample.refraction_free is None
-    assert sorted(p.name for p in sample.views_dir.iterdir()) == sorted([*view_file_names(3, "png"), *VIEW_STACK_FILES])
+    truth_files = ["gt_disp_lowres.pfm", "gt_disparity.npz", *(f"gt_disp_lowres_Cam{i:03d}.pfm" for i in range(9))]
+    expected_files = [*view_file_names(3, "png"), *VIEW_STACK_FILES, *truth_files]
+    assert sorted(p.name for p in sample.views_dir.iterdir()) == sorted(expected_files)
+    # The ground-truth disparity is simulator.view_truth's for the sample's scene (tested there).
+    from lfrefract.formats.pfm import read_pfm
+    from simulator import backend
+    from simulator.scene import build_scene
+    from simulator.view_truth import view_stack_disparity
+
+    config = expand(parse_spec(data))[0].config
+    mi = backend.load_mitsuba()
+    truth = view_stack_disparity(
+        mi, build_scene(mi, config, port_geometry=False), config, PinholeCamera.from_dict(sample.meta["ideal"]), grid=3
+    )
+    dx, dy = sample.view_disparity
+    assert np.array_equal(dx, truth.disparity_x_px, equal_nan=True)
+    assert np.array_equal(dy, truth.disparity_y_px, equal_nan=True)
+    assert np.array_equal(read_pfm(sample.views_dir / "gt_disp_lowres.pfm"), dx[1, 1], equal_nan=True)
+    assert np.array_equal(read_pfm(sample.views_dir / "gt_disp_lowres_Cam005.pfm"), dx[1, 2], equal_nan=True)
+    assert np.nanmedian(dx) > 0.0  # nearer than the focus at infinity: positive, as the benchmark's
     stack = sample.view_stack
     meta = sample.meta
     expected = subaperture_stack(

@@ -130,7 +130,7 @@ BAD_SPECS = [
         spec_data(grid={"port.tilt_x_deg": [1.0]}, random={"port.tilt_x_deg": {"uniform": [0, 1]}}),
         r"key 'port.tilt_x_deg' is both in \[grid\] and in \[random\]",
     ),
-    ("spp twice", spec_data(grid={"render.spp": [4, 8]}), r"render.spp is swept and sweep.spp is set"),
+    ("spp twice", spec_data(grid={"render.spp": [4, 8]}), r"render.spp is swept or set and sweep.spp is given"),
     (
         "unset of a missing key",
         spec_data(sweep={"unset": ["port.n_glass", "object.7"]}),

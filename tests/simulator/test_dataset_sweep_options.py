@@ -37,6 +37,7 @@ def test_set_keys_reach_every_sample_and_are_not_swept():
         assert sample.config.port.thickness_m == 0.003
         assert sample.config.camera.name == "tiny"
         assert set(sample.params) == {"port.tilt_x_deg"}
+        assert sample.config.name == f"t/{sample.id}"
     # The constant is part of every sample's scene, so of its hash.
     other = expand(parse_spec(spec(grid={"port.tilt_x_deg": [0.0, 10.0]}, set={"port.thickness_m": 0.004})))
     assert samples[0].hash != other[0].hash
