@@ -24,7 +24,8 @@ the version; ``python -m lfrefract`` is the same command line.
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
 refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (K, size, pose, options, coverage
-statistics), the coverage map ``OUT.coverage.exr`` and a figure ``OUT.png``. ``naive`` writes the
+statistics), the coverage map ``OUT.coverage.exr``, the classes ``OUT.filled.exr`` (2 exact, 1
+approximated, 0 empty: NaN in ``OUT.exr``) and a figure ``OUT.png``. ``naive`` writes the
 conventional view with no refraction handling, for comparison. ``views`` writes a regular grid of
 sub-aperture views (no refraction handling either) in the HCI 4D light field benchmark layout that
 light-field depth-estimation methods read (``lfrefract.formats.viewstack.write_view_stack``).
@@ -106,6 +107,9 @@ from lfrefract.optics.camera import GRID_TYPES
 from lfrefract.synthesis.views import VIEW_KINDS, naive_view, subaperture_stack, view_stack_bytes
 from lfrefract.synthesis.warp_map import (
     BLOCK_PIXELS,
+    FILLED_APPROXIMATED,
+    FILLED_EMPTY,
+    FILLED_EXACT,
     PAPER_K,
     SEARCH_METHODS,
     SynthesisOptions,
@@ -213,6 +217,7 @@ def synth_outputs(out: Path) -> dict[Path, ExpectedKind]:
     return {
         out: ExpectedKind(exr_role="refraction_free"),
         out.with_suffix(".coverage.exr"): ExpectedKind(exr_role="coverage"),
+        out.with_suffix(".filled.exr"): ExpectedKind(exr_role="filled"),
         sidecar: ExpectedKind(json_kind=SYNTH_KIND),
         out.with_suffix(".png"): ExpectedKind(listed_in=sidecar, listed_kind=SYNTH_KIND),
     }
@@ -266,6 +271,9 @@ def synth(args: argparse.Namespace) -> int:
         warp = maps["G"]  # the colours share the coverage (it is the necessary rays'); G for the figures
         nonzeros = float(np.mean([len(m.indices) / max(1, len(m.gain)) for m in maps.values()]))
         keys: str | dict = {colour: w.key for colour, (w, _) in built.items()}
+        classes = warp.filled_classes
+        for colour_map in maps.values():  # a pixel some colour has no ray for has no value
+            classes[~colour_map.filled] = FILLED_EMPTY
     else:
         start = time.perf_counter()
         warp, how = _synth_map(args, camera, port, output, options, capture.channels)
@@ -276,15 +284,18 @@ def synth(args: argparse.Namespace) -> int:
         apply_seconds = time.perf_counter() - start
         nonzeros = float(len(warp.indices) / max(1, len(warp.gain)))
         keys = warp.key
+        classes = warp.filled_classes
+    image[classes == FILLED_EMPTY] = np.nan  # the project's "no value" (docs/conventions.md)
     stats = {
-        "exact_fraction": float(warp.exact.mean()),
-        "filled_fraction": float(warp.filled.mean()),
+        "exact_fraction": float(np.mean(classes == FILLED_EXACT)),
+        "filled_fraction": float(np.mean(classes != FILLED_EMPTY)),
         "mean_coverage": float(warp.coverage.mean()),
         "nonzeros_per_pixel": nonzeros,
     }
     figure = out.with_suffix(".png")
     write_exr(out, image, role="refraction_free")
     write_exr(out.with_suffix(".coverage.exr"), warp.coverage.astype(np.float32), role="coverage")
+    write_exr(out.with_suffix(".filled.exr"), classes, role="filled")
     write_json(
         out.with_suffix(".json"),
         {
@@ -302,7 +313,13 @@ def synth(args: argparse.Namespace) -> int:
             "map_key": keys,
             "coverage": stats,
             "seconds": {"map": map_seconds, "apply": apply_seconds},
-            "files": {"image": out.name, "coverage": out.with_suffix(".coverage.exr").name, "figure": figure.name},
+            "files": {
+                "image": out.name,
+                "coverage": out.with_suffix(".coverage.exr").name,
+                "filled": out.with_suffix(".filled.exr").name,
+                "figure": figure.name,
+            },
+            "filled_classes": {"empty": FILLED_EMPTY, "approximated": FILLED_APPROXIMATED, "exact": FILLED_EXACT},
         },
     )
     _figure(figure, image, warp)
@@ -377,7 +394,8 @@ def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
     import matplotlib.pyplot as plt
 
     shown = image if image.ndim == 2 else image[..., :3]
-    white = float(np.percentile(shown[warp.filled], 99.5)) if warp.filled.any() else 1.0
+    finite = shown[np.isfinite(shown)]
+    white = float(np.percentile(finite, 99.5)) if finite.size else 1.0
     fig, ax = plt.subplots(figsize=(6, 6 * warp.output.height_px / warp.output.width_px + 0.5), dpi=120)
     ax.imshow(np.clip(shown / (white or 1.0), 0, 1) ** (1 / 2.2), cmap="gray", interpolation="nearest")
     ax.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)

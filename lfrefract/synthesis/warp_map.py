@@ -65,6 +65,9 @@ from lfrefract.synthesis._raytree import LazyRayTree
 from lfrefract.validate import non_negative_float, one_of, positive_int
 
 __all__ = [
+    "FILLED_APPROXIMATED",
+    "FILLED_EMPTY",
+    "FILLED_EXACT",
     "PAPER_K",
     "SEARCH_METHODS",
     "SynthesisOptions",
@@ -78,6 +81,10 @@ __all__ = [
     "uses_kdtree",
     "warp_map_key",
 ]
+
+#: Classes of :attr:`WarpMap.filled_classes`: no captured ray (no value), nearby rays standing in
+#: for some necessary ray, every necessary ray recorded.
+FILLED_EMPTY, FILLED_APPROXIMATED, FILLED_EXACT = 0, 1, 2
 
 #: Version of the warp-map algorithm and file layout; part of every map's key.
 WARP_MAP_VERSION = 3
@@ -342,6 +349,17 @@ class WarpMap:
         """Output pixels whose every necessary ray the camera records usably, shape (height, width)."""
         return self.coverage >= 1.0
 
+    @property
+    def filled_classes(self) -> np.ndarray:
+        """How each output pixel gets its value, uint8 (height, width): :data:`FILLED_EXACT` (every
+        necessary ray recorded), :data:`FILLED_APPROXIMATED` (nearby rays stand in) or
+        :data:`FILLED_EMPTY` (no captured ray: no value)."""
+        filled = self.filled
+        classes = np.full(filled.shape, FILLED_EMPTY, dtype=np.uint8)
+        classes[filled] = FILLED_APPROXIMATED
+        classes[filled & self.exact] = FILLED_EXACT
+        return classes
+
     def apply(self, raw: np.ndarray) -> np.ndarray:
         """Synthesize the refraction-free image of one raw frame.
 
@@ -353,7 +371,9 @@ class WarpMap:
         Returns
         -------
         ndarray, float32, shape (height, width) or (height, width, C)
-            Zero where :attr:`filled` is False.
+            Zero where :attr:`filled` is False, which image-processing code (OpenCV's matchers and
+            corner finders) takes as it is; files mark those pixels NaN, the project's "no value"
+            (``lfrefract synth``, datasets), with :attr:`filled_classes`.
         """
         arr = np.asarray(raw)
         if arr.shape[:2] != tuple(self.raw_shape):

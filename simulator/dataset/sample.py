@@ -29,12 +29,18 @@ from lfrefract.formats.exr import read_exr
 from lfrefract.formats.flatport import write_flat_port
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import staged_directory
-from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
+from lfrefract.synthesis.warp_map import (
+    FILLED_APPROXIMATED,
+    FILLED_EMPTY,
+    FILLED_EXACT,
+    SynthesisOptions,
+    build_warp_map,
+)
 from simulator.config import SceneConfig
 from simulator.dataset.images import exr_entry, write_image
 from simulator.dataset.spec import ViewOptions
 
-__all__ = ["FILLED_APPROXIMATED", "FILLED_EMPTY", "FILLED_EXACT", "SampleTask", "filled_classes", "render_sample"]
+__all__ = ["SampleTask", "render_sample"]
 
 #: Files of a sample folder besides those of ``lfsim render``.
 SAMPLE_FILE = "sample.json"
@@ -47,8 +53,6 @@ VIEWS_DIR = "views"
 #: file stem and role.
 RENDER_IMAGES = {"raw": ("raw", "raw"), "ideal": ("ideal", "ideal"), "depth_m": ("depth", "depth")}
 
-#: Classes of a ``filled`` image: how a synthesized pixel got its value.
-FILLED_EMPTY, FILLED_APPROXIMATED, FILLED_EXACT = 0, 1, 2
 
 _threads_set: int | None = None
 _digests = None  # this worker process's DigestCache (a mesh that many samples use is hashed once)
@@ -241,17 +245,6 @@ def _render_images(stage: Path, meta: dict, image_format: str) -> dict:
     return images
 
 
-def filled_classes(exact, filled) -> np.ndarray:
-    """The ``filled`` image of a synthesis: :data:`FILLED_EXACT` where every necessary ray was
-    recorded, :data:`FILLED_APPROXIMATED` where nearby rays stand in, :data:`FILLED_EMPTY` where no
-    captured ray was found (the image holds NaN there), uint8 of the masks' shape."""
-    exact, filled = np.asarray(exact, dtype=bool), np.asarray(filled, dtype=bool)
-    classes = np.full(exact.shape, FILLED_EMPTY, dtype=np.uint8)
-    classes[filled] = FILLED_APPROXIMATED
-    classes[exact & filled] = FILLED_EXACT
-    return classes
-
-
 def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask, images: dict) -> dict:
     """Synthesize the refraction-free image (the ideal image's geometry), its coverage and its
     ``filled`` classes; NaN where no captured ray was found (the project's "no value")."""
@@ -264,7 +257,7 @@ def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: Sa
     images["refraction_free"] = write_image(stage, "refraction_free", image, image_format=fmt, role="refraction_free")
     coverage = warp.coverage.astype(np.float32)
     images["coverage"] = write_image(stage, "refraction_free.coverage", coverage, image_format=fmt, role="coverage")
-    classes = filled_classes(warp.exact, warp.filled)
+    classes = warp.filled_classes
     images["filled"] = write_image(stage, "refraction_free.filled", classes, image_format=fmt, role="filled")
     return {
         "files": {name: images[name]["file"] for name in ("refraction_free", "coverage", "filled")},

@@ -548,7 +548,10 @@ def _images(synth_dir: Path, cameras: Sequence[str], reference: str) -> CentralI
         )
 
     def project(camera: str, shot) -> np.ndarray:
-        return read_exr(synth_dir / camera / f"{shot.folder.name}.exr", role="refraction_free")
+        # synth writes NaN where a pixel has no value; OpenCV's corner finders and matchers take 0,
+        # what the in-memory synthesis gives there (WarpMap.apply).
+        image = read_exr(synth_dir / camera / f"{shot.folder.name}.exr", role="refraction_free")
+        return np.nan_to_num(image, nan=0.0)
 
     return CentralImages(outputs=outputs, project=project)
 

@@ -318,9 +318,12 @@ def test_masked_synthesis_gives_unrecorded_pixels_no_weight_and_says_how_many(tm
     printed = capsys.readouterr().out
     assert f"masked {n_nan} NaN pixel values (in {n_nan} pixels) as unrecorded" in printed, printed
     reference, image = read_exr(tmp_path / "a" / "s.exr"), read_exr(tmp_path / "b" / "s.exr")
-    assert np.isfinite(image).all()
-    filled = image[..., 0] > 0
-    reference_filled = reference[..., 0] > 0
+    # NaN exactly where the pixel has no value (class 0 of s.filled.exr), never elsewhere.
+    empty = read_exr(tmp_path / "b" / "s.filled.exr", role="filled") == 0
+    assert np.array_equal(np.isnan(image).any(axis=2), empty)
+    assert np.array_equal(np.isnan(image).all(axis=2), empty)
+    filled = np.isfinite(image[..., 0]) & (image[..., 0] > 0)
+    reference_filled = np.isfinite(reference[..., 0]) & (reference[..., 0] > 0)
     # A pixel loses all its rays (k per sub-pixel ray, 8 by default) to 3 % holes rarely.
     assert filled.sum() >= 0.999 * reference_filled.sum()
     assert not (filled & ~reference_filled).any()
@@ -345,7 +348,8 @@ def test_an_all_nan_raw_image_is_refused_or_masked_to_nothing(tmp_path, capsys):
     sidecar = json.loads((tmp_path / "out" / "s.json").read_text())
     assert sidecar["coverage"]["filled_fraction"] == 0.0
     assert sidecar["coverage"]["exact_fraction"] == 0.0
-    assert (read_exr(tmp_path / "out" / "s.exr") == 0).all()
+    assert np.isnan(read_exr(tmp_path / "out" / "s.exr")).all()  # no value anywhere
+    assert (read_exr(tmp_path / "out" / "s.filled.exr", role="filled") == 0).all()
 
 
 def test_masked_views_and_naive_views_skip_unrecorded_pixels(tmp_path, capsys):
@@ -445,7 +449,9 @@ def test_a_masked_synthesis_caches_the_full_map(tmp_path, capsys):
     clean = make_capture(tmp_path / "clean")
     assert main([*commands(clean, tmp_path / "b")["synth"], "--map-cache", str(cache)]) == 0
     assert "loaded" in capsys.readouterr().out
-    assert np.isfinite(read_exr(tmp_path / "b" / "s.exr")).all()
+    image, classes = read_exr(tmp_path / "b" / "s.exr"), read_exr(tmp_path / "b" / "s.filled.exr", role="filled")
+    assert np.array_equal(np.isfinite(image).all(axis=2), classes > 0)
+    assert json.loads((tmp_path / "b" / "s.json").read_text())["coverage"]["filled_fraction"] == np.mean(classes > 0)
 
 
 # =============================================================================== the parser (issue 13)

@@ -117,10 +117,11 @@ def test_synth_companions_are_replaced_only_as_listed_by_its_sidecar(tmp_path, c
     argv = commands(capture, out)["synth"]
     assert main(argv) == 0
     sidecar = read_json(out / "s.json")
-    assert sidecar["files"] == {"image": "s.exr", "coverage": "s.coverage.exr", "figure": "s.png"}
+    expected = {"image": "s.exr", "coverage": "s.coverage.exr", "filled": "s.filled.exr", "figure": "s.png"}
+    assert sidecar["files"] == expected
     (out / "s.json").unlink()  # the figure is no longer listed anywhere: it may be the user's
-    (out / "s.exr").unlink()
-    (out / "s.coverage.exr").unlink()
+    for name in ("s.exr", "s.coverage.exr", "s.filled.exr"):
+        (out / name).unlink()
     figure = (out / "s.png").read_bytes()
     assert "is not a file listed in" in refused(capsys, [*argv, "--overwrite"])
     assert (out / "s.png").read_bytes() == figure

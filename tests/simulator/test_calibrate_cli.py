@@ -36,7 +36,9 @@ def test_calibrate_mla_then_synthesize_with_it_and_a_port_file(tmp_path, capsys)
     args = ["synth", str(scene / "raw.exr"), "--out", str(out), "--quiet"]
     assert core_cli.main([*args, "--port", str(tmp_path / "port.json"), "--mla", str(tmp_path / "mla.json")]) == 0
     assert read_json(out.with_suffix(".json"))["camera"]["mla"] == mla["camera"]["mla"]
-    assert np.isfinite(read_exr(out, role="refraction_free")).all()
+    image, classes = read_exr(out, role="refraction_free"), read_exr(out.with_suffix(".filled.exr"), role="filled")
+    assert np.array_equal(np.isfinite(image).all(axis=2), classes > 0)  # NaN: no value, and only there
+    assert read_json(out.with_suffix(".json"))["coverage"]["filled_fraction"] == np.mean(classes > 0)
 
 
 def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
