@@ -3,28 +3,17 @@ constraints with redraws counted, the image format (parsing and expansion; no re
 
 from __future__ import annotations
 
-import copy
-
 import pytest
 
 from lfrefract import ParameterError
 from simulator.dataset import expand, parse_spec
 from simulator.dataset.run import _rejections
 from simulator.dataset.spec import key_rng
+from tests.simulator.test_dataset_spec import spec_data as spec
 
-BASE = {"sweep": {"name": "t", "seed": 5, "scene": "default", "spp": 2}}
 #: The default scene's backdrop is object 0 (z = 0.8 m); the chessboard is object 1.
 BOARD_Z, BACKDROP_Z = "object.1.position_m.2", "object.0.position_m.2"
-
-
-def spec(**tables) -> dict:
-    data = copy.deepcopy(BASE)
-    for name, table in tables.items():
-        if name == "sweep":
-            data["sweep"].update(table)
-        else:
-            data[name] = table
-    return data
+SEED = spec()["sweep"]["seed"]
 
 
 def test_set_keys_reach_every_sample_and_are_not_swept():
@@ -85,7 +74,7 @@ def test_constraint_redraws_until_it_holds_and_counts_the_refusals():
     backdrop = samples[0].config.objects[0].placement.position_m[2]
     assert all(v < backdrop - 0.05 for v in z)
     # The first draws: those at 0.75 m or more were refused and drawn again.
-    first = [key_rng(5, s.index, BOARD_Z).uniform(0.3, 0.9) for s in samples]
+    first = [key_rng(SEED, s.index, BOARD_Z).uniform(0.3, 0.9) for s in samples]
     for sample, value in zip(samples, first, strict=True):
         refused = sample.rejected.get("board_before_backdrop", 0)
         assert (refused > 0) == (value >= backdrop - 0.05)
