@@ -6,7 +6,7 @@ The views (:func:`lfrefract.synthesis.views.subaperture_stack`): view ``[r, c]``
 point ``C_rc = ((c - h) b, (r - h) b, 0)`` of the main-lens plane (camera frame, metres;
 ``b = s * pixel_pitch * f' / f_mla`` the baseline, :func:`~lfrefract.synthesis.views.subaperture_centre_m`),
 and the view places each ray at the pixel ``K (slope, 1)`` of its true slope (with ``f' != f`` the
-sub-aperture rays are tilted by ``_slope_shift``, and the resampling places the lenses shifted by it,
+sub-aperture rays are tilted by ``subaperture_slope_shift``, and the resampling places the lenses shifted by it,
 so the tilt is already in the pixel positions). So in the air view ``[r, c]``'s pixel ``p`` is the ray
 from ``C_rc`` along ``K^-1 p``: a pinhole with the stack's common ``K`` (the ideal image's
 :class:`~lfrefract.optics.pinhole.PinholeCamera` in a dataset) and the camera frame's orientation.
@@ -86,10 +86,10 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.forward import project_through_port
 from lfrefract.synthesis.views import (
     RESAMPLING_BYTES_PER_PIXEL,
-    _slope_shift,
     resampling_matrix,
     subaperture_centre_m,
     subaperture_limit_px,
+    subaperture_slope_shift,
 )
 from lfrefract.validate import positive_float
 from simulator.config import SceneConfig
@@ -258,7 +258,7 @@ def _geometry(camera: LightFieldCamera, grid: int, spacing: float) -> tuple[np.n
 def _recorded(camera: LightFieldCamera, output: PinholeCamera, offset: np.ndarray) -> np.ndarray:
     """Pixels (H * W,) bool of the view at sensor ``offset`` that the view has a value for (inside the
     lenses' hull, exactly as its resampling decides)."""
-    shift = _slope_shift(camera, float(offset[0]), float(offset[1]))
+    shift = subaperture_slope_shift(camera, float(offset[0]), float(offset[1]))
     return resampling_matrix(camera, output, slope_shift=shift, lenses=camera.lens_indices_on_sensor())[2]
 
 
@@ -424,7 +424,7 @@ def view_stack_disparity(
     cached: tuple[tuple[float, float], np.ndarray] | None = None
     for r in range(grid):
         for c in range(grid):
-            shift = _slope_shift(camera, float(offsets[r, c, 0]), float(offsets[r, c, 1]))
+            shift = subaperture_slope_shift(camera, float(offsets[r, c, 0]), float(offsets[r, c, 1]))
             if cached is None or cached[0] != shift:  # once in all when f' = f
                 cached = None
                 cached = (shift, _recorded(camera, output, offsets[r, c]))

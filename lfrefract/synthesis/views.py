@@ -71,6 +71,7 @@ __all__ = [
     "resampling_matrix",
     "subaperture_centre_m",
     "subaperture_limit_px",
+    "subaperture_slope_shift",
     "subaperture_stack",
     "subaperture_view",
     "view_stack_bytes",
@@ -480,7 +481,7 @@ def subaperture_view(
     )
     idx = camera.lens_indices_on_sensor()
     values = micro_image_samples(camera, image, idx, (du, dv), recorded=recorded)
-    shift = _slope_shift(camera, du, dv)
+    shift = subaperture_slope_shift(camera, du, dv)
     return _resample(
         camera, idx, values, output, shift, ray_correction, grey=np.ndim(raw) == 2, masked=recorded is not None
     )
@@ -499,7 +500,7 @@ def subaperture_limit_px(camera: LightFieldCamera) -> float:
     return camera.micro_image_radius_px - 1.0
 
 
-def _slope_shift(camera: LightFieldCamera, du: float, dv: float) -> tuple[float, float]:
+def subaperture_slope_shift(camera: LightFieldCamera, du: float, dv: float) -> tuple[float, float]:
     """Principal-point shift (slope units) of the sub-aperture view at ``(du, dv)``: zero when
     ``f' = f``, else ``delta * pixel_pitch / f_mla * (1 - f' / f)`` (see the module docstring)."""
     spread = 1.0 - camera.lens_to_mla_m / camera.focal_length_m
@@ -798,7 +799,7 @@ def subaperture_stack(
     for r in range(grid):
         for c in range(grid):
             du, dv = float(offsets[r, c, 0]), float(offsets[r, c, 1])
-            shift = _slope_shift(camera, du, dv)
+            shift = subaperture_slope_shift(camera, du, dv)
             if cached is None or shift != cached_shift:
                 cached = None  # release the previous matrix before building the next
                 cached = resampling_matrix(

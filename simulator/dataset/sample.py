@@ -174,13 +174,14 @@ def render_sample(task: SampleTask) -> dict:
             t0 = time.perf_counter()
             extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task, images)
             seconds["refraction_free"] = time.perf_counter() - t0
+        traced = _PortFreeScene(config, task.variant)  # built once, if a label needs it
         if "views" in task.outputs:
             t0 = time.perf_counter()
-            extras["views"] = _views(stage, config, raw, result.metadata, task)
+            extras["views"] = _views(stage, config, raw, result.metadata, task, traced)
             seconds["views"] = time.perf_counter() - t0
         if "labels" in task.outputs or "raw_truth" in task.outputs:
             t0 = time.perf_counter()
-            extras |= _truth_labels(stage, config, result.metadata, task, images)
+            extras |= _truth_labels(stage, config, result.metadata, task, images, traced)
             seconds["labels"] = time.perf_counter() - t0
         write_json(
             stage / SAMPLE_FILE,
@@ -270,15 +271,33 @@ def _refraction_free(stage: Path, config: SceneConfig, raw, meta: dict, task: Sa
     }
 
 
-def _truth_labels(stage: Path, config: SceneConfig, meta: dict, task: SampleTask, images: dict) -> dict:
+class _PortFreeScene:
+    """The sample's Mitsuba scene without the port, in which the labels are traced; built on first use."""
+
+    def __init__(self, config: SceneConfig, variant: str | None) -> None:
+        self._config, self._variant = config, variant
+        self._built: tuple[Any, Any] | None = None
+
+    def get(self) -> tuple[Any, Any]:
+        """``(mi, scene)``."""
+        if self._built is None:
+            from simulator import backend
+            from simulator.scene import build_scene
+
+            mi = backend.load_mitsuba(self._variant)
+            self._built = (mi, build_scene(mi, self._config, port_geometry=False))
+        return self._built
+
+
+def _truth_labels(
+    stage: Path, config: SceneConfig, meta: dict, task: SampleTask, images: dict, traced: _PortFreeScene
+) -> dict:
     """The ideal image's surface labels (``"labels"``: ``normal_cam``, ``instance_id``) and the raw
     pixels' truth (``"raw_truth"``: ``raw_depth_m``, ``lens_index``), traced in the port-free scene
     (:mod:`simulator.groundtruth`); returns the extras for ``sample.json``."""
-    from simulator import backend, groundtruth
-    from simulator.scene import build_scene
+    from simulator import groundtruth
 
-    mi = backend.load_mitsuba(task.variant)
-    scene = build_scene(mi, config, port_geometry=False)
+    mi, scene = traced.get()
     fmt = task.image_format
     extras: dict[str, Any] = {}
     if "labels" in task.outputs:
@@ -297,14 +316,12 @@ def _truth_labels(stage: Path, config: SceneConfig, meta: dict, task: SampleTask
     return extras
 
 
-def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) -> dict:
+def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask, traced: _PortFreeScene) -> dict:
     """The sub-aperture view stack of the raw image (the ideal image's geometry), under ``views/``,
     with its ground-truth disparity (:func:`simulator.view_truth.view_stack_disparity`) for a
     thin-lens camera; a real lens's views are not pinholes, and get none (said in the extras)."""
     from lfrefract.formats.viewstack import write_view_stack
     from lfrefract.synthesis.views import subaperture_stack
-    from simulator import backend
-    from simulator.scene import build_scene
     from simulator.view_truth import view_stack_disparity
 
     views = task.views
@@ -312,8 +329,7 @@ def _views(stage: Path, config: SceneConfig, raw, meta: dict, task: SampleTask) 
     stack = subaperture_stack(config.camera, raw, output=output, **views.stack_options())
     disparity, why_none = None, None
     if config.lens is None:
-        mi = backend.load_mitsuba(task.variant)
-        scene = build_scene(mi, config, port_geometry=False)
+        mi, scene = traced.get()
         truth = view_stack_disparity(mi, scene, config, output, grid=stack.grid, spacing_px=stack.spacing_px)
         disparity = (truth.disparity_x_px, truth.disparity_y_px)
     else:

@@ -14,7 +14,7 @@ from lfrefract.formats.viewstack import _hci_parameters
 from lfrefract.optics.forward import project_through_port
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.real_lens import RealLensCamera
-from lfrefract.synthesis.views import _slope_shift, subaperture_centre_m, subaperture_stack
+from lfrefract.synthesis.views import subaperture_centre_m, subaperture_slope_shift, subaperture_stack
 from simulator import groundtruth
 from simulator.scene import build_scene
 from simulator.view_truth import ViewDisparity, stack_spacing_px, view_disparity, view_stack_disparity
@@ -69,7 +69,7 @@ def test_a_view_pixel_is_the_ray_from_the_view_centre_along_k_inverse_p_even_off
             np.broadcast_to(subaperture_centre_m(camera, offset), rays.origins_cam.shape),
             atol=FLOAT64_GEOMETRY_M,
         )
-        shift = np.asarray(_slope_shift(camera, *offset))
+        shift = np.asarray(subaperture_slope_shift(camera, *offset))
         assert np.all(np.abs(shift) > 1e-4)
         slopes = camera.mla.centres_m(idx) / camera.lens_to_mla_m + shift  # views.resampling_matrix's
         np.testing.assert_allclose(rays.directions_cam[:, :2] / rays.directions_cam[:, 2:], slopes, atol=FLOAT64_UNIT)
