@@ -8,9 +8,14 @@
         y = sample.depth_m                  # (h, w) float32, +inf where no surface
         tilt = sample.params["port.tilt_x_deg"]
 
+    batches = data.select("raw", "ideal", "depth_m")   # map-style: items are dicts of arrays
+
 Only the manifest's done samples are listed (their latest record); failed and not-yet-run samples
 are left out (:attr:`Dataset.missing` names them). Arrays are read from the sample folder each
-time they are accessed, so holding a :class:`Sample` costs nothing until then.
+time they are accessed, in the dataset's format (:mod:`simulator.dataset.images`, by the entries of
+``sample.json``), so holding a :class:`Sample` costs nothing until then. Every object here holds
+only paths and the listing and pickles, so a PyTorch ``DataLoader``'s worker processes receive it
+under any start method.
 """
 
 from __future__ import annotations
