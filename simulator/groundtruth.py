@@ -72,7 +72,8 @@ class GroundTruth:
 
 
 def lens_table(camera: LightFieldCamera, lens: LensPrescription | None = None) -> dict[str, np.ndarray]:
-    """Microlens ground truth for every lens whose micro-image centre is on the sensor.
+    """Microlens ground truth for every lens whose micro-image centre is on the sensor (with a real
+    ``lens``, its own micro-image centres decide, not the thin lens's).
 
     Returns
     -------
@@ -83,8 +84,8 @@ def lens_table(camera: LightFieldCamera, lens: LensPrescription | None = None) -
         thin lens's centre, or with a real ``lens`` the paraxial exit pupil,
         :meth:`lfrefract.optics.real_lens.RealLensCamera.micro_image_centres_px`).
     """
-    idx = camera.lens_indices_on_sensor()
     optics = camera if lens is None else RealLensCamera(camera=camera, lens=lens)
+    idx = camera.lens_indices_on_sensor(micro_image_scale=optics.micro_image_scale)
     return {
         "lens_index": idx,
         "lens_centre_m": camera.mla.centres_m(idx),

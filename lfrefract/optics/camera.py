@@ -400,19 +400,27 @@ class LightFieldCamera:
         pts = self.sensor.pixels_to_image_plane(as_points("uv", uv, 2))
         return self.mla.nearest_indices(pts / self.micro_image_scale)
 
-    def lens_indices_on_sensor(self) -> np.ndarray:
+    def lens_indices_on_sensor(self, *, micro_image_scale: float | None = None) -> np.ndarray:
         """Every lens whose micro-image centre lies on the sensor, lattice indices (M, 2).
 
-        Rows are sorted by (j, i), i.e. row by row.
+        Rows are sorted by (j, i), i.e. row by row. ``micro_image_scale``: the micro-image centres'
+        distance from the axis over the lens centres' (default :attr:`micro_image_scale`, the thin
+        lens's; a real main lens has its own, about its exit pupil:
+        :attr:`lfrefract.optics.real_lens.RealLensCamera.micro_image_scale`).
         """
+        scale = (
+            self.micro_image_scale
+            if micro_image_scale is None
+            else positive_float("micro_image_scale", micro_image_scale)
+        )
         half_w, half_h = (s / 2.0 for s in self.sensor.size_m)
         corners = np.array([[-half_w, -half_h], [half_w, -half_h], [-half_w, half_h], [half_w, half_h]])
-        frac = np.linalg.solve(self.mla.basis_m, (corners / self.micro_image_scale - np.asarray(self.mla.offset_m)).T).T
+        frac = np.linalg.solve(self.mla.basis_m, (corners / scale - np.asarray(self.mla.offset_m)).T).T
         lo = np.floor(frac.min(axis=0)) - 1
         hi = np.ceil(frac.max(axis=0)) + 1
         ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="xy")
         idx = np.stack([ii.ravel(), jj.ravel()], axis=1)
-        centres = self.mla.centres_m(idx) * self.micro_image_scale
+        centres = self.mla.centres_m(idx) * scale
         # A centre counts as on the sensor when it lies within the outermost pixel centres.
         pitch = self.sensor.pixel_pitch_m
         inside = (np.abs(centres[:, 0]) <= half_w - pitch / 2) & (np.abs(centres[:, 1]) <= half_h - pitch / 2)

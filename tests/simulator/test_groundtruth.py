@@ -121,3 +121,23 @@ def test_user_mesh_is_placed_and_scaled(mi, tmp_path, suffix):
     expected = BIG.project(np.array([[-0.05, 0.0, 0.4], [0.15, 0.0, 0.4]]))[:, 0]
     assert abs(cols.min() - expected[0]) <= 1
     assert abs(cols.max() - expected[1]) <= 1
+
+
+def test_lens_table_of_a_real_lens_holds_every_lens_whose_own_micro_image_is_on_the_sensor():
+    """With the double Gauss on the Illum the micro-images lie nearer the axis than the thin lens's
+    (about its exit pupil): the table chose by the thin lens's and left 432 edge lenses out."""
+    from lfrefract.optics.presets import camera_preset
+    from lfrefract.optics.real_lens import RealLensCamera
+    from simulator.groundtruth import lens_table
+
+    camera = camera_preset("illum")
+    real = RealLensCamera.from_preset(camera, "double-gauss")
+    table = lens_table(camera, real.lens)
+    # Every candidate of a generous superset (a 10 % smaller scale reaches further out) whose real
+    # micro-image centre lies within the outermost pixel centres.
+    candidates = camera.lens_indices_on_sensor(micro_image_scale=0.9 * real.micro_image_scale)
+    px = real.micro_image_centres_px(candidates)
+    width, height = camera.sensor.width_px, camera.sensor.height_px
+    inside = (px[:, 0] >= 0) & (px[:, 0] <= width - 1) & (px[:, 1] >= 0) & (px[:, 1] <= height - 1)
+    assert {tuple(i) for i in table["lens_index"]} == {tuple(i) for i in candidates[inside]}
+    assert np.array_equal(table["micro_image_centre_px"], real.micro_image_centres_px(table["lens_index"]))
