@@ -969,3 +969,15 @@ VIEW_TRUTH_PARAXIAL_RELATIVE = 1e-4
 # either side in Mitsuba's float32 geometry (rounding of a 0.3 m hit point: ~3e-8 m); the NaN-mask comparison
 # leaves them out (at most 2 of 6348 pixels, asserted). Pixels are ~2 mm apart on the plane.
 VIEW_TRUTH_EDGE_M = 1e-6
+
+# ----------------------------------------------------------------------------- pixels seeing points
+# lfrefract/optics/seen_by.py; tests/lfrefract/test_seen_by.py.
+# Metres; the exact path of the raw-pixel position found for a point and an aperture point, traced back out
+# by the camera (rays_through_lenses with the MLA offset) and the port (FlatPort.trace_from_air), must pass
+# this close to the point (tiny camera, a port 2 cm away tilted (12, -8) deg with 5 mm of glass, points
+# 0.2-1 m away). The air ray is forward_project's, which passes within FORWARD_MISS_M; the pixel round trip
+# adds float64 round-off on the 6 mm lens / 0.2 mm MLA geometry, magnified by the object-to-sensor
+# magnification (~1 m / 6 mm ~ 170): 9.6e-13 m worst measured with the port (the solver's 1e-12 m residual),
+# 4.5e-16 m without (2000 pairs each). A wrong thin-lens or microlens
+# term moves the ray by millimetres (one microlens, 0.1 mm on the MLA, is ~15 mm at 1 m).
+SEEN_BY_MISS_M = 1e-9
