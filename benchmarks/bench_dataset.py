@@ -44,7 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lfrefract.errors import FileFormatError
 from simulator.dataset import parse_spec, run_dataset
+from simulator.dataset.manifest import read_dataset
 
 #: Every optional output that is a label (``--labels``).
 LABEL_OUTPUTS = ["refraction_free", "views", "labels", "raw_truth"]
@@ -93,6 +95,20 @@ def _bytes_per_sample(root: Path) -> dict[str, float]:
     return {kind: size / len(folders) for kind, size in totals.items()}
 
 
+def _fresh(out: Path) -> None:
+    """Clear ``out`` for a run: absent, empty, or a dataset this benchmark wrote (``bench``); anything
+    else under ``--out`` is the user's and is refused, not removed."""
+    if not out.exists() or (out.is_dir() and not any(out.iterdir())):
+        return
+    try:
+        ours = read_dataset(out).get("name") == "bench"
+    except (FileFormatError, OSError):
+        ours = False
+    if not ours:
+        raise SystemExit(f"{str(out)!r} exists and is not a dataset of this benchmark: refusing to remove it")
+    shutil.rmtree(out)
+
+
 def _labels(args, seed: int, base: Path) -> None:
     """``--labels``: the sweep without and with every label, one worker count."""
     workers = args.workers[0]
@@ -100,7 +116,7 @@ def _labels(args, seed: int, base: Path) -> None:
     for label, outputs in (("no labels", None), ("all labels", LABEL_OUTPUTS)):
         spec = _spec(args.samples, args.spp, seed, outputs=outputs, image_format=args.image_format)
         out = base / label.replace(" ", "_")
-        shutil.rmtree(out, ignore_errors=True)
+        _fresh(out)
         results[label] = r = _run(spec, out, workers=workers, scheduler=None, threads=args.threads)
         print(f"  {label:>10}: {r['samples']} samples in {r['seconds']:6.1f} s: {r['overall']:6.1f} samples/min "
               f"overall, {r['steady']:6.1f} samples/min steady")  # fmt: skip
@@ -138,7 +154,7 @@ def main() -> None:
         for workers, scheduler in runs:
             label = f"cluster {scheduler}" if scheduler else f"{workers} worker{'s' if workers > 1 else ''}"
             out = base / ("cluster" if scheduler else f"workers{workers}")
-            shutil.rmtree(out, ignore_errors=True)
+            _fresh(out)
             r = _run(spec, out, workers=workers, scheduler=scheduler, threads=args.threads)
             results.append(r)
             print(f"  {label:>12}: {r['samples']} samples in {r['seconds']:6.1f} s: {r['overall']:6.1f} samples/min "

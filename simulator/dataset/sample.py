@@ -169,7 +169,7 @@ def render_sample(task: SampleTask) -> dict:
             write_flat_port(stage / PORT_FILE, config.port)
         needs_raw = "refraction_free" in task.outputs or "views" in task.outputs
         raw = read_exr(stage / RAW_NAME, role="raw") if needs_raw else None
-        images = _render_images(stage, result.metadata, task.image_format)
+        images = _render_images(stage, result.metadata, task.image_format, raw=raw)
         if "refraction_free" in task.outputs:
             t0 = time.perf_counter()
             extras["refraction_free"] = _refraction_free(stage, config, raw, result.metadata, task, images)
@@ -229,16 +229,18 @@ def _check_inputs(task: SampleTask) -> None:
             )
 
 
-def _render_images(stage: Path, meta: dict, image_format: str) -> dict:
+def _render_images(stage: Path, meta: dict, image_format: str, *, raw=None) -> dict:
     """The entries of ``lfsim render``'s images; in another format than EXR they are converted
-    (the EXR files removed, ``meta.json``'s ``files`` naming the new ones)."""
+    (the EXR files removed, ``meta.json``'s ``files`` naming the new ones). ``raw``: the raw image
+    if already read (not read again)."""
     images = {}
     for name, (stem, role) in RENDER_IMAGES.items():
         path = stage / f"{stem}.exr"
         if image_format == "exr":
             images[name] = exr_entry(path, role=role)
             continue
-        images[name] = write_image(stage, stem, read_exr(path, role=role), image_format=image_format, role=role)
+        image = raw if name == "raw" and raw is not None else read_exr(path, role=role)
+        images[name] = write_image(stage, stem, image, image_format=image_format, role=role)
         path.unlink()
     if image_format != "exr":
         files = dict(meta["files"]) | {stem: images[name]["file"] for name, (stem, _) in RENDER_IMAGES.items()}

@@ -357,9 +357,14 @@ class Constraint:
         return value > other + self.margin
 
 
+def _is_dotted(key: Any) -> bool:
+    """Whether ``key`` is a dotted scene key: names and array indices joined by '.'."""
+    return isinstance(key, str) and all(_KEY_PART.match(part) for part in key.split("."))
+
+
 def _check_path(where: str, key: Any) -> str:
     """``key`` if it is a dotted path of names and indices, else :class:`ParameterError`."""
-    if not isinstance(key, str) or not all(_KEY_PART.match(part) for part in key.split(".")):
+    if not _is_dotted(key):
         raise ParameterError(f"{where} {key!r} is not a dotted scene key (e.g. 'object.1.position_m.2')")
     return key
 
@@ -548,7 +553,7 @@ def _freeze(value: Any) -> Any:
 
 
 def _check_key(where: str, key: Any) -> str:
-    if not isinstance(key, str) or not all(_KEY_PART.match(part) for part in key.split(".")):
+    if not _is_dotted(key):
         raise ParameterError(
             f"{where} key {key!r} is not a dotted scene key (names and array indices joined by '.', "
             "e.g. 'port.tilt_x_deg' or 'object.2.rotation_xyz_deg')"
