@@ -1,0 +1,603 @@
+"""Depth-aware refraction-free synthesis: exact wherever the scene point is seen, given its depth.
+
+The warp map (:mod:`lfrefract.synthesis.warp_map`) is exact where the camera recorded each output
+pixel's *necessary ray*, the ray through the main-lens centre: a cone about the port normal. A
+scene point outside that cone is still seen, by rays through other parts of the aperture; once its
+depth is known, the rays that see it are known, and its pixel can be as exact as one inside the
+cone. This module finds the depth from the light field itself and renders each pixel from the rays
+that see its point.
+
+Method (camera frame, metres; output pixels of a pinhole ``K`` centred at the main-lens centre)
+-------------------------------------------------------------------------------------------------
+1. *Rays in the water* (:func:`trace_scene_rays`, once per camera and port): every raw pixel whose
+   chief ray (pixel -> microlens centre -> main lens) passes the usable aperture is traced out
+   through the port into the water (:meth:`FlatPort.trace_from_air`); its value is divided by the
+   port's radiometric factor along it (Fresnel transmittance times ``(n_air / n_water)^2``), so
+   every ray carries radiance in the water. Without a port the rays go on straight: the same
+   estimator *without refraction handling*, for comparison.
+2. *Plane sweep* (:func:`estimate_depth`): for each of ``depth_steps`` planes ``Z = z_j``, uniform
+   in ``1 / z`` between ``depth_min_m`` and ``depth_max_m``, every ray is intersected with the plane
+   and binned into the output pixel whose line of sight holds the crossing. The rays in a pixel's
+   bin at ``z_j`` are the recorded rays that see the hypothesised point ``z_j K^-1 (u, v, 1)``
+   (within the pixel): at the true depth they agree, elsewhere they see different points. The
+   cost is their variance per channel; *occlusion-aware*, the least variance among the whole
+   aperture's rays and those of each aperture half (the rays are split by aperture quadrant), since
+   an occluder in front of a point hides it from part of the aperture only.
+3. *Aggregation and refinement*: the costs are averaged over a ``(2 r + 1)^2`` window of output
+   pixels (box filter, valid costs only), the least cost wins, and a parabola through it and its two
+   neighbours refines the plane index below one step (in ``1 / z``). The *confidence* is
+   ``1 - c_min / c_rival``, ``c_rival`` the best cost at least :data:`CONFIDENCE_GAP` planes away:
+   near 0 where another depth fits about as well (no texture), near 1 where one depth stands out.
+4. *Render given depth* (:func:`render_given_depth`): each ray goes to the first pixel, near to far,
+   at whose estimated depth it lands in that pixel; the pixel is the mean of its rays (of the most
+   consistent subset, as in the cost). A pixel rendered so from at least ``min_rays`` rays is *exact
+   given depth*: every ray in it saw its scene point, to within the pixel and the depth's error.
+5. *Composition* (:class:`DepthAwareSynthesis`): pixels inside the warp map's exact coverage keep
+   the warp map's value (exact at any depth); outside it, the depth-aware value where there is one
+   (class :data:`FILLED_EXACT_GIVEN_DEPTH`), else the warp map's nearby rays (approximated) or no
+   value.
+
+How well the depth can be found is the light field's own parallax: a depth error ``dz`` at depth
+``z`` moves the ray through aperture point ``a`` by ``f_px |a| dz / z^2`` output pixels. Between
+the aperture's edges, from 0.2 m to infinity, that is 1.6 px on the tiny preset (f = 120 px,
+aperture 2.7 mm) and 3.3 px on tiny-2x: such cameras tell depths apart coarsely, and need not do
+better for the image, since a depth error costs it that same shift averaged over the aperture
+(docs/synthesis.md gives the measured figures).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from lfrefract.errors import ParameterError
+from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
+from lfrefract.optics.port import FlatPort
+from lfrefract.synthesis._depth_kernels import render_at_depth, sweep_cost
+from lfrefract.synthesis.warp_map import (
+    FILLED_APPROXIMATED,
+    FILLED_EMPTY,
+    FILLED_EXACT,
+    SynthesisOptions,
+    WarpMap,
+    build_warp_map,
+)
+from lfrefract.validate import non_negative_float, positive_float, positive_int
+
+__all__ = [
+    "FILLED_EXACT_GIVEN_DEPTH",
+    "DepthAwareOptions",
+    "DepthAwareResult",
+    "DepthAwareSynthesis",
+    "DepthEstimate",
+    "SceneRays",
+    "depth_planes_m",
+    "estimate_depth",
+    "render_given_depth",
+    "trace_scene_rays",
+]
+
+#: Class of :attr:`DepthAwareResult.classes` beside :data:`FILLED_EMPTY`, :data:`FILLED_APPROXIMATED`
+#: and :data:`FILLED_EXACT`: outside the warp map's exact coverage, rendered from recorded rays that
+#: see the pixel's scene point at its estimated depth.
+FILLED_EXACT_GIVEN_DEPTH = 3
+
+#: Planes between the winning depth and the rival that :attr:`DepthEstimate.confidence` compares it with.
+CONFIDENCE_GAP = 3
+
+#: Raw pixels traced per block in :func:`trace_scene_rays` (a block's float64 buffers: about 1 kB each).
+_TRACE_BLOCK = 1 << 20
+
+
+@dataclass(frozen=True, kw_only=True)
+class DepthAwareOptions:
+    """Options of the depth search and the render given depth.
+
+    Parameters
+    ----------
+    depth_min_m, depth_max_m : float
+        Nearest and farthest depth searched, camera-frame z, metres (``0 < min < max``). Planes in
+        front of the port's water face along a line of sight get no rays there.
+    depth_steps : int
+        Depth planes, uniform in ``1 / z`` (at least 3, for the sub-step parabola).
+    aggregation_radius_px : int
+        Half-size of the square window of output pixels over which costs are averaged (0: none).
+        The window must reach texture from every pixel: on tiny-2x chessboards of 9 px squares the
+        share of board pixels more than 5 % off in depth was 54-82 % with 2, 12-50 % with 4 and
+        6-42 % with 6 (the default), the corners 0.80 / 0.21 / 0.18 px RMS. A larger window
+        spreads a depth edge further (about r pixels at an occlusion).
+    min_rays : int
+        Fewest rays a pixel's subset needs, at a depth plane and in the render.
+    occlusion_aware : bool
+        Score and render with the most consistent of the whole aperture and its halves (True) or
+        the whole aperture only.
+    rim_margin_px : float
+        Raw pixels within this many pixels of their micro-image's rim are not used (partly
+        vignetted; as :attr:`SynthesisOptions.rim_margin_px`).
+    compensate_port : bool
+        Divide each ray's value by the port's radiometric factor along it, so values are radiance
+        in the water (as :attr:`SynthesisOptions.compensate_port`).
+    """
+
+    depth_min_m: float = 0.1
+    depth_max_m: float = 3.0
+    depth_steps: int = 48
+    aggregation_radius_px: int = 6
+    min_rays: int = 4
+    occlusion_aware: bool = True
+    rim_margin_px: float = 0.71
+    compensate_port: bool = True
+
+    def __post_init__(self) -> None:
+        positive_float("depth_min_m", self.depth_min_m)
+        positive_float("depth_max_m", self.depth_max_m)
+        if not self.depth_max_m > self.depth_min_m:
+            raise ParameterError(
+                f"depth_max_m must exceed depth_min_m, got depth_min_m={self.depth_min_m!r}, "
+                f"depth_max_m={self.depth_max_m!r}"
+            )
+        if positive_int("depth_steps", self.depth_steps) < 3:
+            raise ParameterError(f"depth_steps must be at least 3 (the sub-step parabola), got {self.depth_steps!r}")
+        if isinstance(self.aggregation_radius_px, bool) or not isinstance(self.aggregation_radius_px, int):
+            raise ParameterError(f"aggregation_radius_px must be an integer, got {self.aggregation_radius_px!r}")
+        if self.aggregation_radius_px < 0:
+            raise ParameterError(f"aggregation_radius_px must be non-negative, got {self.aggregation_radius_px!r}")
+        positive_int("min_rays", self.min_rays)
+        for name in ("occlusion_aware", "compensate_port"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        non_negative_float("rim_margin_px", self.rim_margin_px)
+
+    def to_dict(self) -> dict:
+        """Plain data for sidecars."""
+        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+def depth_planes_m(options: DepthAwareOptions) -> np.ndarray:
+    """The depth planes searched, camera-frame z, metres, near to far, uniform in ``1 / z``, shape (D,)."""
+    inverse = np.linspace(1.0 / options.depth_min_m, 1.0 / options.depth_max_m, options.depth_steps)
+    return 1.0 / inverse
+
+
+@dataclass(frozen=True, eq=False)
+class SceneRays:
+    """The captured rays of a camera as they travel in the water (or the air, without a port).
+
+    Attributes
+    ----------
+    origins_cam : ndarray, float32, shape (N, 3)
+        Where each ray leaves the port's water-side face (without a port: the main-lens plane),
+        camera frame, metres.
+    directions_cam : ndarray, float32, shape (N, 3)
+        Unit directions into the scene (``z > 0``), camera frame.
+    raw_index : ndarray, int64, shape (N,)
+        Row-major index of the ray's raw pixel.
+    quadrant : ndarray, int8, shape (N,)
+        Main-lens aperture quadrant the ray passes: ``(x > 0) + 2 (y > 0)``.
+    gain : ndarray, float32, shape (N,)
+        Factor from the raw value to radiance in the water (1 without a port or compensation).
+    raw_shape : (int, int)
+        ``(height, width)`` of the raw images.
+    refracted : bool
+        Whether the rays were traced through a port.
+    """
+
+    origins_cam: np.ndarray
+    directions_cam: np.ndarray
+    raw_index: np.ndarray
+    quadrant: np.ndarray
+    gain: np.ndarray
+    raw_shape: tuple[int, int]
+    refracted: bool
+
+    def values(self, raw: np.ndarray, *, recorded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The rays' values in ``raw`` and which rays hold one.
+
+        Parameters
+        ----------
+        raw : ndarray, shape (H, W) or (H, W, C)
+            Raw lenslet image of :attr:`raw_shape`, float or integer, finite where used.
+        recorded : ndarray of bool, shape (H, W), optional
+            Raw pixels that hold a measurement (saturated or flagged pixels False); default all.
+
+        Returns
+        -------
+        values : ndarray, float32, shape (M, C)
+            Radiance in the water along each kept ray.
+        keep : ndarray of bool, shape (N,)
+            Rays kept (their raw pixel recorded).
+
+        Raises
+        ------
+        ParameterError
+            If ``raw`` or ``recorded`` has the wrong shape or type, or a used value is not finite.
+        """
+        arr = np.asarray(raw)
+        if arr.shape[:2] != tuple(self.raw_shape) or arr.ndim not in (2, 3):
+            raise ParameterError(f"raw must have shape {tuple(self.raw_shape)} (+ channels), got {arr.shape}")
+        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+            raise ParameterError(f"raw must be a real image, got dtype {arr.dtype}")
+        flat = arr.reshape(arr.shape[0] * arr.shape[1], -1)
+        keep = np.ones(len(self.raw_index), dtype=bool)
+        if recorded is not None:
+            mask = np.asarray(recorded)
+            if mask.shape != tuple(self.raw_shape) or mask.dtype != bool:
+                raise ParameterError(f"recorded must be a bool array of shape {tuple(self.raw_shape)}, got {mask.shape}")
+            keep = mask.reshape(-1)[self.raw_index]
+        values = flat[self.raw_index[keep]].astype(np.float32) * self.gain[keep, None]
+        if not np.all(np.isfinite(values)):
+            bad = int(np.count_nonzero(~np.all(np.isfinite(values), axis=1)))
+            raise ParameterError(f"raw holds {bad} non-finite values at pixels the synthesis uses")
+        return values, keep
+
+
+def trace_scene_rays(
+    camera: LightFieldCamera, port: FlatPort | None, *, rim_margin_px: float = 0.71, compensate_port: bool = True
+) -> SceneRays:
+    """Trace every usable captured ray of ``camera`` into the water behind ``port``.
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+        A thin-lens light-field camera (its captured-ray model: pixel -> microlens centre -> main lens).
+    port : FlatPort or None
+        The port; None continues the rays straight (the estimator without refraction handling).
+    rim_margin_px : float
+        Raw pixels whose chief ray passes outside ``camera.usable_aperture_radius_m(rim_margin_px)``
+        are left out.
+    compensate_port : bool
+        Fold the port's radiometric factor into :attr:`SceneRays.gain`.
+
+    Returns
+    -------
+    SceneRays
+        Rays lost to the port (total internal reflection, grazing) are left out.
+    """
+    if not isinstance(camera, LightFieldCamera):
+        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    if port is not None and not isinstance(port, FlatPort):
+        raise ParameterError(f"port must be a FlatPort or None, got {port!r}")
+    radius = camera.usable_aperture_radius_m(rim_margin_px)
+    height, width = camera.sensor.height_px, camera.sensor.width_px
+    parts: list[tuple[np.ndarray, ...]] = []
+    for first in range(0, height * width, _TRACE_BLOCK):
+        index = np.arange(first, min(first + _TRACE_BLOCK, height * width), dtype=np.int64)
+        uv = np.stack([index % width, index // width], axis=1).astype(np.float64)
+        rays = camera.captured_rays(uv)
+        origins, directions = rays.origins_cam, rays.directions_cam
+        keep = np.sum(origins[:, :2] ** 2, axis=1) <= radius**2
+        origins, directions, index = origins[keep], directions[keep], index[keep]
+        gain = np.ones(len(index))
+        if port is not None:
+            trace = port.trace_from_air(origins, directions)
+            ok = trace.valid
+            if compensate_port:
+                gain = 1.0 / np.where(ok, trace.transmittance * port.radiance_scale, 1.0)
+            origins_water, directions_water = trace.exit_points_cam, trace.directions_cam
+            quadrant = (origins[:, 0] > 0).astype(np.int8) + 2 * (origins[:, 1] > 0).astype(np.int8)
+            origins, directions, index, gain, quadrant = (
+                origins_water[ok], directions_water[ok], index[ok], gain[ok], quadrant[ok]
+            )
+        else:
+            quadrant = (origins[:, 0] > 0).astype(np.int8) + 2 * (origins[:, 1] > 0).astype(np.int8)
+        parts.append((origins, directions, index, quadrant, gain))
+    origins, directions, index, quadrant, gain = (np.concatenate(column) for column in zip(*parts, strict=True))
+    return SceneRays(
+        origins_cam=origins.astype(np.float32),
+        directions_cam=directions.astype(np.float32),
+        raw_index=index,
+        quadrant=quadrant.astype(np.int8),
+        gain=gain.astype(np.float32),
+        raw_shape=(height, width),
+        refracted=port is not None,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class DepthEstimate:
+    """Depth of every output pixel from one light field (:func:`estimate_depth`).
+
+    Attributes
+    ----------
+    depth_m : ndarray, float32, shape (H, W)
+        Camera-frame z of the surface seen through each pixel, metres; NaN where no depth plane
+        had ``min_rays`` rays.
+    confidence : ndarray, float32, shape (H, W)
+        ``1 - c_min / c_rival`` of the pixel's aggregated costs, in [0, 1], where ``c_rival`` is the
+        least cost at least :data:`CONFIDENCE_GAP` planes from the winner: near 0 where another
+        depth fits about as well (no texture, repeated texture), near 1 where one depth stands out;
+        NaN where no depth.
+    plane_index : ndarray, int64, shape (H, W)
+        The winning plane (before the sub-step refinement); -1 where no depth.
+    depths_m : ndarray, shape (D,)
+        The planes searched.
+    """
+
+    depth_m: np.ndarray
+    confidence: np.ndarray
+    plane_index: np.ndarray
+    depths_m: np.ndarray
+
+
+def _intrinsics(output: PinholeCamera) -> tuple[float, float, float, int, int]:
+    if not isinstance(output, PinholeCamera):
+        raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
+    return output.focal_px, output.cx_px, output.cy_px, output.width_px, output.height_px
+
+
+def _aggregate(cost: np.ndarray, radius: int) -> np.ndarray:
+    """Mean of the valid costs over a (2 r + 1)^2 window per plane; NaN where the window has none."""
+    if radius == 0:
+        return cost
+    valid = np.isfinite(cost)
+    size = (1, 2 * radius + 1, 2 * radius + 1)
+    total = ndimage.uniform_filter(np.where(valid, cost, 0.0).astype(np.float32), size=size, mode="constant")
+    count = ndimage.uniform_filter(valid.astype(np.float32), size=size, mode="constant")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0.5 / (2 * radius + 1) ** 2, total / count, np.nan).astype(np.float32)
+
+
+def estimate_depth(
+    rays: SceneRays,
+    values: np.ndarray,
+    output: PinholeCamera,
+    options: DepthAwareOptions,
+    *,
+    keep: np.ndarray | None = None,
+) -> DepthEstimate:
+    """Depth per output pixel by a refraction-aware plane sweep over the light field's rays.
+
+    Parameters
+    ----------
+    rays : SceneRays
+        From :func:`trace_scene_rays` (through the port; without one for the comparison).
+    values : ndarray, float32, shape (M, C)
+        The kept rays' values (:meth:`SceneRays.values`).
+    output : PinholeCamera
+        Geometry of the depth map (centre of projection at the main-lens centre).
+    options : DepthAwareOptions
+    keep : ndarray of bool, shape (N,), optional
+        Which of ``rays`` the ``values`` belong to (default: all).
+
+    Returns
+    -------
+    DepthEstimate
+    """
+    fx, cx, cy, width, height = _intrinsics(output)
+    origins, directions, quadrant = _kept(rays, keep, values)
+    depths = depth_planes_m(options)
+    cost = sweep_cost(
+        origins, directions, values, quadrant, depths, fx, cx, cy, width, height,
+        options.min_rays, options.occlusion_aware,
+    )  # fmt: skip
+    cost = _aggregate(cost, options.aggregation_radius_px)
+    has = np.any(np.isfinite(cost), axis=0)
+    filled = np.where(np.isfinite(cost), cost, np.inf)
+    best = np.argmin(filled, axis=0)
+    rows, cols = np.indices(best.shape)
+    c0 = filled[best, rows, cols]
+    below = filled[np.maximum(best - 1, 0), rows, cols]
+    above = filled[np.minimum(best + 1, len(depths) - 1), rows, cols]
+    inner = (best > 0) & (best < len(depths) - 1) & np.isfinite(below) & np.isfinite(above)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curvature = below - 2.0 * c0 + above
+        step = np.where(inner & (curvature > 0), 0.5 * (below - above) / curvature, 0.0)
+    step = np.clip(np.nan_to_num(step), -0.5, 0.5)
+    inverse = np.interp(best + step, np.arange(len(depths)), 1.0 / depths)
+    # Confidence: how far the winner stands below the best rival at least CONFIDENCE_GAP planes away.
+    planes = np.arange(len(depths))[:, None, None]
+    rival = np.min(np.where(np.abs(planes - best[None]) >= CONFIDENCE_GAP, filled, np.inf), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        confidence = np.where(np.isfinite(rival) & (rival > 0), 1.0 - c0 / rival, 0.0)
+    confidence = np.clip(confidence, 0.0, 1.0)
+    return DepthEstimate(
+        depth_m=np.where(has, 1.0 / inverse, np.nan).astype(np.float32),
+        confidence=np.where(has, confidence, np.nan).astype(np.float32),
+        plane_index=np.where(has, best, -1).astype(np.int64),
+        depths_m=depths,
+    )
+
+
+def _kept(rays: SceneRays, keep: np.ndarray | None, values: np.ndarray) -> tuple[np.ndarray, ...]:
+    if not isinstance(rays, SceneRays):
+        raise ParameterError(f"rays must be SceneRays, got {rays!r}")
+    origins, directions, quadrant = rays.origins_cam, rays.directions_cam, rays.quadrant
+    if keep is not None:
+        origins, directions, quadrant = origins[keep], directions[keep], quadrant[keep]
+    if values.ndim != 2 or values.shape[0] != origins.shape[0]:
+        raise ParameterError(f"values must have shape ({origins.shape[0]}, C), got {values.shape}")
+    return origins, directions, quadrant
+
+
+def render_given_depth(
+    rays: SceneRays,
+    values: np.ndarray,
+    output: PinholeCamera,
+    depth_m: np.ndarray,
+    options: DepthAwareOptions,
+    *,
+    keep: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each output pixel rendered from the rays that see its scene point at depth ``depth_m``.
+
+    Parameters
+    ----------
+    rays, values, output, options, keep
+        As :func:`estimate_depth`.
+    depth_m : ndarray, shape (output.height_px, output.width_px)
+        Camera-frame z of each pixel's scene point, metres; NaN for none. Depths outside
+        ``[depth_min_m, depth_max_m]`` get no rays.
+
+    Returns
+    -------
+    image : ndarray, float32, shape (H, W, C)
+        Mean radiance of the most consistent subset of the rays that see the point; NaN where fewer
+        than ``options.min_rays``.
+    rays_used : ndarray, int32, shape (H, W)
+        Rays averaged per pixel.
+    """
+    fx, cx, cy, width, height = _intrinsics(output)
+    depth = np.asarray(depth_m, dtype=np.float64)
+    if depth.shape != (height, width):
+        raise ParameterError(f"depth_m must have shape ({height}, {width}), got {depth.shape}")
+    origins, directions, quadrant = _kept(rays, keep, values)
+    depths = depth_planes_m(options)
+    inside = np.isfinite(depth) & (depth >= depths[0]) & (depth <= depths[-1])
+    plane_of = np.where(inside, np.clip(np.searchsorted(depths, np.where(inside, depth, 0.0)) - 1, 0, len(depths) - 2), -1)
+    return render_at_depth(
+        origins, directions, values, quadrant, depths, np.where(inside, depth, np.nan), plane_of.astype(np.int64),
+        fx, cx, cy, options.min_rays, options.occlusion_aware,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class DepthAwareResult:
+    """One frame of the depth-aware synthesis (:meth:`DepthAwareSynthesis.apply`).
+
+    Attributes
+    ----------
+    image : ndarray, float32, shape (H, W) or (H, W, C)
+        The refraction-free image; NaN where no value (class :data:`FILLED_EMPTY`).
+    depth : DepthEstimate
+        The depth found in the light field (every pixel, inside the exact coverage too).
+    classes : ndarray, uint8, shape (H, W)
+        :data:`FILLED_EMPTY`, :data:`FILLED_APPROXIMATED`, :data:`FILLED_EXACT` (the warp map's
+        exact coverage) or :data:`FILLED_EXACT_GIVEN_DEPTH`.
+    rays_used : ndarray, int32, shape (H, W)
+        Rays averaged by the render given depth (0 where it had none).
+    """
+
+    image: np.ndarray
+    depth: DepthEstimate
+    classes: np.ndarray
+    rays_used: np.ndarray
+
+    @property
+    def coverage(self) -> dict[str, float]:
+        """Shares of the output pixels: ``exact_fraction``, ``exact_given_depth_fraction``,
+        ``approximated_fraction``, ``filled_fraction``."""
+        return {
+            "exact_fraction": float(np.mean(self.classes == FILLED_EXACT)),
+            "exact_given_depth_fraction": float(np.mean(self.classes == FILLED_EXACT_GIVEN_DEPTH)),
+            "approximated_fraction": float(np.mean(self.classes == FILLED_APPROXIMATED)),
+            "filled_fraction": float(np.mean(self.classes != FILLED_EMPTY)),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class DepthAwareSynthesis:
+    """The depth-aware synthesis of one camera behind one port, built once, applied per frame.
+
+    Attributes
+    ----------
+    warp : WarpMap
+        The paper's synthesis (:func:`build_warp_map`): its exact coverage and, outside what the
+        depth-aware render fills, its approximated pixels.
+    rays : SceneRays
+        The camera's captured rays in the water behind the warp map's port.
+    options : DepthAwareOptions
+    """
+
+    warp: WarpMap
+    rays: SceneRays
+    options: DepthAwareOptions = field(default_factory=DepthAwareOptions)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.warp, WarpMap):
+            raise ParameterError(f"warp must be a WarpMap, got {self.warp!r}")
+        if not isinstance(self.rays, SceneRays) or not self.rays.refracted:
+            raise ParameterError(f"rays must be SceneRays traced through the port, got {self.rays!r}")
+        if tuple(self.rays.raw_shape) != tuple(self.warp.raw_shape):
+            raise ParameterError(
+                f"the rays are of {tuple(self.rays.raw_shape)} raw images, the warp map of {tuple(self.warp.raw_shape)}"
+            )
+        if not isinstance(self.options, DepthAwareOptions):
+            raise ParameterError(f"options must be DepthAwareOptions, got {self.options!r}")
+
+    @classmethod
+    def build(
+        cls,
+        camera: LightFieldCamera,
+        port: FlatPort,
+        *,
+        output: PinholeCamera | None = None,
+        options: DepthAwareOptions | None = None,
+        synthesis: SynthesisOptions | None = None,
+        warp: WarpMap | None = None,
+        progress: bool = False,
+    ) -> DepthAwareSynthesis:
+        """Trace the camera's rays behind ``port`` and build (or take) the warp map.
+
+        Parameters
+        ----------
+        camera : LightFieldCamera
+        port : FlatPort
+        output : PinholeCamera, optional
+            Output geometry; default :func:`virtual_camera_for` ``(camera)`` (or ``warp``'s).
+        options : DepthAwareOptions, optional
+        synthesis : SynthesisOptions, optional
+            The warp map's options (when it is built here).
+        warp : WarpMap, optional
+            A prebuilt warp map of this camera and port.
+        progress : bool
+            Show the warp map build's progress.
+        """
+        if not isinstance(port, FlatPort):
+            raise ParameterError(f"port must be a FlatPort, got {port!r}")
+        options = DepthAwareOptions() if options is None else options
+        if not isinstance(options, DepthAwareOptions):
+            raise ParameterError(f"options must be DepthAwareOptions, got {options!r}")
+        if warp is None:
+            warp = build_warp_map(
+                camera,
+                port,
+                output=output if output is not None else virtual_camera_for(camera),
+                options=synthesis,
+                progress=progress,
+            )
+        elif output is not None and output != warp.output:
+            raise ParameterError(f"output {output!r} differs from the warp map's {warp.output!r}")
+        rays = trace_scene_rays(
+            camera, port, rim_margin_px=options.rim_margin_px, compensate_port=options.compensate_port
+        )
+        return cls(warp=warp, rays=rays, options=options)
+
+    @property
+    def output(self) -> PinholeCamera:
+        """Geometry of the images and depth maps."""
+        return self.warp.output
+
+    def apply(self, raw: np.ndarray, *, recorded: np.ndarray | None = None) -> DepthAwareResult:
+        """Depth, then the refraction-free image of one raw frame.
+
+        Parameters
+        ----------
+        raw : ndarray, shape (H, W) or (H, W, C)
+            Raw lenslet image.
+        recorded : ndarray of bool, shape (H, W), optional
+            Raw pixels holding a measurement; the others are used by neither the depth search nor
+            the render (the warp map's pixels are the caller's to mask:
+            :func:`lfrefract.formats.capture.mask_warp_map`).
+
+        Returns
+        -------
+        DepthAwareResult
+        """
+        values, keep = self.rays.values(raw, recorded=recorded)
+        depth = estimate_depth(self.rays, values, self.output, self.options, keep=keep)
+        rendered, used = render_given_depth(self.rays, values, self.output, depth.depth_m, self.options, keep=keep)
+        classic = self.warp.apply(raw)
+        grey = np.ndim(raw) == 2
+        image = classic if grey else classic.copy()
+        classes = self.warp.filled_classes.astype(np.uint8)
+        given = (classes != FILLED_EXACT) & (used >= self.options.min_rays)
+        image = np.where(given if grey else given[..., None], rendered[..., 0] if grey else rendered, image)
+        classes[given] = FILLED_EXACT_GIVEN_DEPTH
+        image = image.astype(np.float32)
+        image[classes == FILLED_EMPTY] = math.nan
+        return DepthAwareResult(image=image, depth=depth, classes=classes, rays_used=used)
+
