@@ -981,3 +981,33 @@ VIEW_TRUTH_EDGE_M = 1e-6
 # 4.5e-16 m without (2000 pairs each). A wrong thin-lens or microlens
 # term moves the ray by millimetres (one microlens, 0.1 mm on the MLA, is ~15 mm at 1 m).
 SEEN_BY_MISS_M = 1e-9
+
+# ----------------------------------------------------------------------------- depth-aware synthesis
+# tests/lfrefract/test_depth_aware.py: tiny-2x behind a port 40 mm away tilted 26.8 deg, raw values
+# in closed form (each ray's texture value on the plane it meets; a texture of 0.1-0.9 with periods
+# of 14-20 px), pixels MARGIN_PX from the field's border and from depth edges.
+
+# Relative depth error counted as right, and the share of pixels that must be right. Measured on
+# the plane at 0.5 m: 100 % within 1 % (median -0.75 mm); 1 % of 0.5 m is a parallax of 0.09 px
+# between the aperture's edges on tiny-2x, the sub-step refinement's reach. Beside an occluding
+# edge (0.3 m in front of 0.6 m), farther from it than MARGIN_PX: 99.9 %.
+DEPTH_AWARE_DEPTH_RELATIVE = 0.01
+DEPTH_AWARE_DEPTH_SHARE = 0.95
+
+# Share of the depths within MARGIN_PX of that edge that lie outside the range between its two
+# surfaces (by more than DEPTH_AWARE_DEPTH_RELATIVE). Measured 5.7 %; 13.9 % before each pixel's say
+# in the aggregation was bounded (the curves of pixels mixing both surfaces then pulled the
+# background to about 1.2 m).
+DEPTH_AWARE_EDGE_OUTLIER_SHARE = 0.1
+
+# RMS error of the rendered values against the texture (values 0.1-0.9), given the true depth and
+# given the estimated one. Measured 0.0022 and 0.0022: the texture's curvature within a pixel,
+# which the per-pixel plane fit leaves. A ray landing half a pixel off would cost ~0.09 (the
+# texture's slope, up to 0.18 per pixel), the stand-in rays of the warp map cost 0.15 there.
+DEPTH_AWARE_TRUE_DEPTH_RMSE = 0.005
+DEPTH_AWARE_GIVEN_DEPTH_RMSE = 0.005
+
+# The same estimator with the rays continued straight through the port: the plane at 0.5 m appears
+# at 0.378 m (its apparent depth, about z / n_water), 24 % off. A refraction-unaware result within
+# 15 % would mean the port has no effect on the sweep.
+NO_REFRACTION_DEPTH_ERROR_MIN = 0.15

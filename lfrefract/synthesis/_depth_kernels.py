@@ -153,9 +153,8 @@ def _bilinear(image, u, v, out):
     fu = u - u0
     fv = v - v0
     for c in range(channels):
-        val = (
-            (1.0 - fv) * ((1.0 - fu) * image[v0, u0, c] + fu * image[v0, u0 + 1, c])
-            + fv * ((1.0 - fu) * image[v0 + 1, u0, c] + fu * image[v0 + 1, u0 + 1, c])
+        val = (1.0 - fv) * ((1.0 - fu) * image[v0, u0, c] + fu * image[v0, u0 + 1, c]) + fv * (
+            (1.0 - fu) * image[v0 + 1, u0, c] + fu * image[v0 + 1, u0 + 1, c]
         )
         if not np.isfinite(val):
             return False
@@ -258,7 +257,19 @@ def sweep_cost(origins, directions, values, quadrant, depths_m, fx, cx, cy, widt
 
 @numba.njit(cache=True, parallel=True)
 def render_at_depth(
-    origins, directions, values, quadrant, depths_m, depth_map, plane_of, fx, cx, cy, min_rays, occlusion_aware
+    origins,
+    directions,
+    values,
+    quadrant,
+    depths_m,
+    depth_map,
+    plane_of,
+    fx,
+    cx,
+    cy,
+    min_rays,
+    occlusion_aware,
+    n_chunks,
 ):
     """The value at each output pixel's centre, fitted to the consistent rays that land in it at its depth.
 
@@ -276,6 +287,8 @@ def render_at_depth(
     plane_of : int64 (height, width)
         Index of the plane interval ``[depths_m[j], depths_m[j + 1]]`` holding the pixel's depth;
         -1 for none.
+    n_chunks : int
+        Blocks of rays, each with its own accumulators (one per thread: :func:`numba.get_num_threads`).
 
     Returns
     -------
@@ -289,7 +302,6 @@ def render_at_depth(
     channels = values.shape[1]
     n_pix = width * height
     n_planes = depths_m.shape[0]
-    n_chunks = numba.get_num_threads()
     acc = np.zeros((n_chunks, n_pix, 4, N_GEOMETRY + 1 + 3 * channels))
     bounds = np.linspace(0, n_rays, n_chunks + 1).astype(np.int64)
     for chunk in numba.prange(n_chunks):

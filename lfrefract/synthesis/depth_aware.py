@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -226,7 +227,9 @@ class SceneRays:
         if recorded is not None:
             mask = np.asarray(recorded)
             if mask.shape != tuple(self.raw_shape) or mask.dtype != bool:
-                raise ParameterError(f"recorded must be a bool array of shape {tuple(self.raw_shape)}, got {mask.shape}")
+                raise ParameterError(
+                    f"recorded must be a bool array of shape {tuple(self.raw_shape)}, got {mask.shape}"
+                )
             keep = mask.reshape(-1)[self.raw_index]
         values = flat[self.raw_index[keep]].astype(np.float32) * self.gain[keep, None]
         if not np.all(np.isfinite(values)):
@@ -280,7 +283,11 @@ def trace_scene_rays(
             origins_water, directions_water = trace.exit_points_cam, trace.directions_cam
             quadrant = (origins[:, 0] > 0).astype(np.int8) + 2 * (origins[:, 1] > 0).astype(np.int8)
             origins, directions, index, gain, quadrant = (
-                origins_water[ok], directions_water[ok], index[ok], gain[ok], quadrant[ok]
+                origins_water[ok],
+                directions_water[ok],
+                index[ok],
+                gain[ok],
+                quadrant[ok],
             )
         else:
             quadrant = (origins[:, 0] > 0).astype(np.int8) + 2 * (origins[:, 1] > 0).astype(np.int8)
@@ -330,15 +337,31 @@ def _intrinsics(output: PinholeCamera) -> tuple[float, float, float, int, int]:
 
 
 def _aggregate(cost: np.ndarray, radius: int) -> np.ndarray:
-    """Mean of the valid costs over a (2 r + 1)^2 window per plane; NaN where the window has none."""
+    """Mean of the costs over a (2 r + 1)^2 window per plane, each pixel's say bounded.
+
+    A pixel without a cost at some plane (too few rays there) counts there with its own worst cost,
+    so that a plane is not made cheap by the pixels it leaves out; pixels without any cost are left
+    out of the mean. A pixel whose mean cost over the planes exceeds the image's median one is
+    scaled down to it: the curves of pixels that mix two surfaces (at an occluding edge every depth
+    costs much there) would otherwise outweigh their neighbours' and pull them to a depth between
+    (on a 0.3 m / 0.6 m edge: to 1.2 m, 10 px into the background); the pixels with less texture keep
+    their small say. NaN where the window has no pixel with a cost.
+    """
+    valid = np.isfinite(cost)
+    seen = np.any(valid, axis=0)
+    worst = np.max(np.where(valid, cost, -np.inf), axis=0)
+    cost = np.where(valid, cost, np.where(seen, worst, np.nan)[None]).astype(np.float32)
+    scale = np.mean(np.where(seen[None], cost, 0.0), axis=0)
+    positive = scale[seen & (scale > 0)]
+    if positive.size:
+        cost = cost / np.maximum(scale, float(np.median(positive)))[None]
     if radius == 0:
         return cost
-    valid = np.isfinite(cost)
     size = (1, 2 * radius + 1, 2 * radius + 1)
-    total = ndimage.uniform_filter(np.where(valid, cost, 0.0).astype(np.float32), size=size, mode="constant")
-    count = ndimage.uniform_filter(valid.astype(np.float32), size=size, mode="constant")
+    total = ndimage.uniform_filter(np.where(seen, cost, 0.0).astype(np.float32), size=size, mode="constant")
+    count = ndimage.uniform_filter(seen.astype(np.float32), size=(2 * radius + 1, 2 * radius + 1), mode="constant")
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(count > 0.5 / (2 * radius + 1) ** 2, total / count, np.nan).astype(np.float32)
+        return np.where(count[None] > 0.5 / (2 * radius + 1) ** 2, total / count[None], np.nan).astype(np.float32)
 
 
 def estimate_depth(
@@ -447,10 +470,12 @@ def render_given_depth(
     origins, directions, quadrant = _kept(rays, keep, values)
     depths = depth_planes_m(options)
     inside = np.isfinite(depth) & (depth >= depths[0]) & (depth <= depths[-1])
-    plane_of = np.where(inside, np.clip(np.searchsorted(depths, np.where(inside, depth, 0.0)) - 1, 0, len(depths) - 2), -1)
+    plane_of = np.where(
+        inside, np.clip(np.searchsorted(depths, np.where(inside, depth, 0.0)) - 1, 0, len(depths) - 2), -1
+    )
     return render_at_depth(
         origins, directions, values, quadrant, depths, np.where(inside, depth, np.nan), plane_of.astype(np.int64),
-        fx, cx, cy, options.min_rays, options.occlusion_aware,
+        fx, cx, cy, options.min_rays, options.occlusion_aware, numba.get_num_threads(),
     )  # fmt: skip
 
 
@@ -600,4 +625,3 @@ class DepthAwareSynthesis:
         image = image.astype(np.float32)
         image[classes == FILLED_EMPTY] = math.nan
         return DepthAwareResult(image=image, depth=depth, classes=classes, rays_used=used)
-

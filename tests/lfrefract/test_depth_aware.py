@@ -1,0 +1,302 @@
+"""Depth-aware synthesis on light fields whose every ray's value is known in closed form.
+
+The raw images here are made without rendering: each usable raw pixel's captured ray is traced
+into the water (:func:`trace_scene_rays`) and given the texture value of the first plane it meets,
+divided by the port's radiometric factor (what the camera records of that radiance). So the depth
+of every output pixel and the value its scene point has are exact, and the method is measured
+against them: the depth it finds, the image it renders given that depth and given the true one,
+and the same estimator without refraction handling.
+
+The camera is tiny-2x behind a port 40 mm away, tilted 26.8 deg in all: the warp map's exact
+coverage is then a small patch (88 of 26 508 pixels), so nearly the whole field is outside it.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from lfrefract.errors import ParameterError
+from lfrefract.optics.port import FlatPort
+from lfrefract.optics.presets import camera_preset
+from lfrefract.synthesis._depth_kernels import _landing
+from lfrefract.synthesis.depth_aware import (
+    FILLED_EXACT_GIVEN_DEPTH,
+    DepthAwareOptions,
+    DepthAwareSynthesis,
+    SceneRays,
+    depth_planes_m,
+    estimate_depth,
+    render_given_depth,
+    trace_scene_rays,
+)
+from lfrefract.synthesis.warp_map import FILLED_EMPTY, FILLED_EXACT, build_warp_map
+from tests.tolerances import (
+    DEPTH_AWARE_DEPTH_RELATIVE,
+    DEPTH_AWARE_DEPTH_SHARE,
+    DEPTH_AWARE_EDGE_OUTLIER_SHARE,
+    DEPTH_AWARE_GIVEN_DEPTH_RMSE,
+    DEPTH_AWARE_TRUE_DEPTH_RMSE,
+    FLOAT64_GEOMETRY_M,
+    FLOAT64_UNIT,
+    NO_REFRACTION_DEPTH_ERROR_MIN,
+)
+
+CAMERA = "tiny-2x"
+PORT = {"tilt_x_deg": 25.0, "tilt_y_deg": 10.0, "distance_m": 0.04, "thickness_m": 0.004}
+PLANE_Z_M = 0.5
+# Pixels from the field's border and from a depth edge left out of the depth figures: the
+# aggregation window (default radius 6) and two pixels more.
+MARGIN_PX = DepthAwareOptions().aggregation_radius_px + 2
+
+
+def texture(x_m: np.ndarray, y_m: np.ndarray, phase: float = 0.0) -> np.ndarray:
+    """A smooth texture on a plane (periods of 30 and 41 mm: 14-20 px at 0.5 m), values 0.1-0.9."""
+    return 0.5 + 0.4 * np.sin(2 * np.pi * x_m / 0.03 + phase) * np.cos(2 * np.pi * y_m / 0.041)
+
+
+def crossing(rays: SceneRays, z_m: float) -> np.ndarray:
+    """Where each ray crosses the camera-frame plane Z = z_m, (N, 3) metres."""
+    o = rays.origins_cam.astype(np.float64)
+    d = rays.directions_cam.astype(np.float64)
+    return o + ((z_m - o[:, 2]) / d[:, 2])[:, None] * d
+
+
+def raw_of(rays: SceneRays, ray_values: np.ndarray) -> np.ndarray:
+    """A raw image holding each ray's radiance as the camera records it (unused pixels 0)."""
+    raw = np.zeros(rays.raw_shape[0] * rays.raw_shape[1], dtype=np.float32)
+    raw[rays.raw_index] = ray_values / rays.gain
+    return raw.reshape(rays.raw_shape)
+
+
+@functools.cache
+def setup() -> DepthAwareSynthesis:
+    camera = camera_preset(CAMERA)
+    port = FlatPort.from_degrees(**PORT)
+    return DepthAwareSynthesis.build(camera, port, warp=build_warp_map(camera, port))
+
+
+def plane_raw(synthesis: DepthAwareSynthesis) -> np.ndarray:
+    x = crossing(synthesis.rays, PLANE_Z_M)
+    return raw_of(synthesis.rays, texture(x[:, 0], x[:, 1]))
+
+
+def lines_of_sight(synthesis: DepthAwareSynthesis) -> tuple[np.ndarray, np.ndarray]:
+    """x / z and y / z of every output pixel's line of sight, (H, W) each."""
+    out = synthesis.output
+    vv, uu = np.mgrid[0 : out.height_px, 0 : out.width_px]
+    return (uu - out.cx_px) / out.focal_px, (vv - out.cy_px) / out.focal_px
+
+
+@functools.cache
+def plane_result():
+    synthesis = setup()
+    return synthesis.apply(plane_raw(synthesis))
+
+
+def interior(mask: np.ndarray) -> np.ndarray:
+    """``mask`` less MARGIN_PX pixels along its border."""
+    return ndimage.binary_erosion(mask, iterations=MARGIN_PX)
+
+
+def test_coverage_outside_the_exact_patch_is_given_depth():
+    synthesis = setup()
+    result = plane_result()
+    exact = synthesis.warp.exact
+    assert np.array_equal(result.classes == FILLED_EXACT, exact)
+    assert not np.any((result.classes == FILLED_EXACT_GIVEN_DEPTH) & exact)
+    coverage = result.coverage
+    assert coverage["exact_given_depth_fraction"] > 10 * coverage["exact_fraction"]
+    assert coverage["filled_fraction"] == pytest.approx(
+        coverage["exact_fraction"] + coverage["exact_given_depth_fraction"] + coverage["approximated_fraction"]
+    )
+    # The composition keeps the warp map's values where it is exact, and says "no value" with NaN.
+    raw = plane_raw(synthesis)
+    classic = synthesis.warp.apply(raw)
+    assert np.array_equal(result.image[exact], classic[exact])
+    assert np.all(np.isnan(result.image[result.classes == FILLED_EMPTY]))
+    assert np.all(np.isfinite(result.image[result.classes != FILLED_EMPTY]))
+
+
+def test_depth_of_a_textured_plane_behind_a_tilted_port():
+    result = plane_result()
+    region = interior(result.classes == FILLED_EXACT_GIVEN_DEPTH)
+    assert region.sum() > 5000
+    error = result.depth.depth_m[region] - PLANE_Z_M
+    assert np.mean(np.abs(error) < DEPTH_AWARE_DEPTH_RELATIVE * PLANE_Z_M) > DEPTH_AWARE_DEPTH_SHARE
+    assert np.all((result.depth.confidence[region] >= 0) & (result.depth.confidence[region] <= 1))
+
+
+def test_the_same_estimator_without_refraction_handling_misses_the_depth():
+    synthesis = setup()
+    raw = plane_raw(synthesis)
+    camera = camera_preset(CAMERA)
+    rays_in_air = trace_scene_rays(camera, None)
+    values, keep = rays_in_air.values(raw)
+    estimate = estimate_depth(rays_in_air, values, synthesis.output, DepthAwareOptions(), keep=keep)
+    region = interior(plane_result().classes == FILLED_EXACT_GIVEN_DEPTH) & np.isfinite(estimate.depth_m)
+    relative = np.median(np.abs(estimate.depth_m[region] - PLANE_Z_M)) / PLANE_Z_M
+    assert relative > NO_REFRACTION_DEPTH_ERROR_MIN
+
+
+def test_render_given_the_true_depth_reproduces_the_texture():
+    synthesis = setup()
+    raw = plane_raw(synthesis)
+    values, keep = synthesis.rays.values(raw)
+    out = synthesis.output
+    truth_depth = np.full((out.height_px, out.width_px), PLANE_Z_M)
+    image, used = render_given_depth(synthesis.rays, values, out, truth_depth, synthesis.options, keep=keep)
+    xz, yz = lines_of_sight(synthesis)
+    truth = texture(xz * PLANE_Z_M, yz * PLANE_Z_M)
+    rendered = used >= synthesis.options.min_rays
+    region = interior(rendered)
+    rmse = np.sqrt(np.mean((image[..., 0][region] - truth[region]) ** 2))
+    assert rmse < DEPTH_AWARE_TRUE_DEPTH_RMSE
+
+
+def test_render_given_the_estimated_depth_beats_the_stand_in_rays():
+    synthesis = setup()
+    result = plane_result()
+    classic = synthesis.warp.apply(plane_raw(synthesis))
+    xz, yz = lines_of_sight(synthesis)
+    truth = texture(xz * PLANE_Z_M, yz * PLANE_Z_M)
+    region = interior(result.classes == FILLED_EXACT_GIVEN_DEPTH)
+    ours = np.sqrt(np.mean((result.image[region] - truth[region]) ** 2))
+    stand_in = np.sqrt(np.mean((classic[region] - truth[region]) ** 2))
+    assert ours < DEPTH_AWARE_GIVEN_DEPTH_RMSE
+    assert ours < stand_in / 5
+
+
+def test_occluding_edge_depth_away_from_the_edge():
+    """A textured half-plane at 0.3 m (x < 0) in front of another texture at 0.6 m."""
+    synthesis = setup()
+    front = crossing(synthesis.rays, 0.3)
+    back = crossing(synthesis.rays, 0.6)
+    in_front = front[:, 0] < 0.0
+    ray_values = np.where(in_front, texture(front[:, 0], front[:, 1]), texture(back[:, 0], back[:, 1], phase=1.7))
+    result = synthesis.apply(raw_of(synthesis.rays, ray_values))
+    xz, _ = lines_of_sight(synthesis)
+    truth = np.where(xz < 0, 0.3, 0.6)
+    edge_px = np.abs(xz * synthesis.output.focal_px)
+    given = interior(result.classes != FILLED_EMPTY) & (result.classes == FILLED_EXACT_GIVEN_DEPTH)
+    away = given & (edge_px > MARGIN_PX)
+    near = given & (edge_px <= MARGIN_PX)
+    good = np.abs(result.depth.depth_m - truth) < DEPTH_AWARE_DEPTH_RELATIVE * truth
+    assert np.mean(good[away]) > DEPTH_AWARE_DEPTH_SHARE
+    # Near the edge the window mixes both surfaces: the depth ramps from one to the other over
+    # about the window's width (docs/synthesis.md), and seldom leaves the range between them.
+    depth_near = result.depth.depth_m[near]
+    assert near.sum() > 500
+    beyond = (depth_near < 0.3 * (1 - DEPTH_AWARE_DEPTH_RELATIVE)) | (
+        depth_near > 0.6 * (1 + DEPTH_AWARE_DEPTH_RELATIVE)
+    )
+    assert np.mean(beyond) < DEPTH_AWARE_EDGE_OUTLIER_SHARE
+
+
+def test_landing_matches_the_pinhole_projection():
+    out = setup().output
+    rng = np.random.default_rng(3)
+    origins = rng.uniform([-0.01, -0.01, 0.04], [0.01, 0.01, 0.05], size=(500, 3))
+    directions = rng.normal([0, 0, 1], [0.25, 0.2, 0.01], size=(500, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for o, d, z in zip(origins, directions, rng.uniform(0.1, 2.0, 500), strict=True):
+        p, du, dv = _landing(*o, *d, z, out.focal_px, out.cx_px, out.cy_px, out.width_px, out.height_px)
+        point = o + (z - o[2]) / d[2] * d
+        uv = out.project(point[None])[0]
+        iu, iv = np.floor(uv + 0.5).astype(int)
+        if 0 <= iu < out.width_px and 0 <= iv < out.height_px:
+            assert p == iv * out.width_px + iu
+            assert (du, dv) == pytest.approx(tuple(uv - [iu, iv]), abs=1e-9)
+        else:
+            assert p == -1
+
+
+def test_rays_leave_the_water_face_as_the_port_traces_them():
+    synthesis = setup()
+    rays = synthesis.rays
+    port = FlatPort.from_degrees(**PORT)
+    normal = port.normal
+    water_face = port.distance_m + port.thickness_m
+    # float32 storage: about 1e-8 m at 0.05 m.
+    assert np.allclose(rays.origins_cam @ normal, water_face, atol=1e-7)
+    assert np.allclose(np.linalg.norm(rays.directions_cam, axis=1), 1.0, atol=1e-6)
+    camera = camera_preset(CAMERA)
+    uv = np.stack([rays.raw_index % camera.sensor.width_px, rays.raw_index // camera.sensor.width_px], axis=1)
+    sample = slice(0, None, 997)
+    air = camera.captured_rays(uv[sample].astype(np.float64))
+    trace = port.trace_from_air(air.origins_cam, air.directions_cam)
+    assert np.allclose(rays.origins_cam[sample], trace.exit_points_cam, atol=1e-7)
+    assert np.allclose(rays.directions_cam[sample], trace.directions_cam, atol=1e-6)
+    quadrant = (air.origins_cam[:, 0] > 0).astype(int) + 2 * (air.origins_cam[:, 1] > 0)
+    assert np.array_equal(rays.quadrant[sample], quadrant)
+    expected_gain = 1.0 / (trace.transmittance * port.radiance_scale)
+    assert np.allclose(rays.gain[sample], expected_gain, rtol=1e-6)
+    # Without a port the rays are the captured rays themselves, from the lens plane.
+    in_air = trace_scene_rays(camera, None)
+    assert np.all(np.abs(in_air.origins_cam[:, 2]) <= FLOAT64_GEOMETRY_M)
+    assert np.all(in_air.gain == 1.0)
+    assert not in_air.refracted
+    assert rays.refracted
+    assert np.max(np.abs(np.linalg.norm(in_air.directions_cam, axis=1) - 1)) < 1e-6 + FLOAT64_UNIT
+
+
+def test_values_leave_out_unrecorded_pixels_and_refuse_bad_input():
+    synthesis = setup()
+    raw = plane_raw(synthesis)
+    recorded = np.ones(raw.shape, dtype=bool)
+    recorded[: raw.shape[0] // 2] = False
+    values, keep = synthesis.rays.values(raw, recorded=recorded)
+    assert len(values) == keep.sum() < len(keep)
+    assert np.all(synthesis.rays.raw_index[keep] >= (raw.shape[0] // 2) * raw.shape[1])
+    with pytest.raises(ParameterError, match="raw must have shape"):
+        synthesis.rays.values(raw[:-1])
+    with pytest.raises(ParameterError, match="recorded must be a bool array"):
+        synthesis.rays.values(raw, recorded=recorded[:-1])
+    bad = raw.copy()
+    bad.reshape(-1)[synthesis.rays.raw_index[0]] = np.nan
+    with pytest.raises(ParameterError, match="non-finite"):
+        synthesis.rays.values(bad)
+    # A non-finite value at a pixel no ray uses is no error.
+    unused = np.setdiff1d(np.arange(raw.size), synthesis.rays.raw_index)[0]
+    fine = raw.copy()
+    fine.reshape(-1)[unused] = np.nan
+    synthesis.rays.values(fine)
+
+
+@pytest.mark.parametrize(
+    ("options", "name"),
+    [
+        ({"depth_min_m": 0.0}, "depth_min_m"),
+        ({"depth_min_m": 1.0, "depth_max_m": 0.5}, "depth_max_m"),
+        ({"depth_steps": 2}, "depth_steps"),
+        ({"depth_steps": 4.5}, "depth_steps"),
+        ({"aggregation_radius_px": -1}, "aggregation_radius_px"),
+        ({"aggregation_radius_px": True}, "aggregation_radius_px"),
+        ({"min_rays": 0}, "min_rays"),
+        ({"occlusion_aware": 1}, "occlusion_aware"),
+        ({"compensate_port": "yes"}, "compensate_port"),
+        ({"rim_margin_px": -0.5}, "rim_margin_px"),
+    ],
+)
+def test_options_refuse_bad_values(options, name):
+    with pytest.raises(ParameterError, match=name):
+        DepthAwareOptions(**options)
+
+
+def test_depth_planes_are_uniform_in_inverse_depth():
+    planes = depth_planes_m(DepthAwareOptions(depth_min_m=0.2, depth_max_m=2.0, depth_steps=5))
+    assert planes[0] == pytest.approx(0.2)
+    assert planes[-1] == pytest.approx(2.0)
+    assert np.allclose(np.diff(1.0 / planes), (1 / 2.0 - 1 / 0.2) / 4)
+
+
+def test_build_refuses_a_warp_map_of_another_camera():
+    synthesis = setup()
+    other = camera_preset("tiny")
+    with pytest.raises(ParameterError, match="raw images"):
+        DepthAwareSynthesis(warp=synthesis.warp, rays=trace_scene_rays(other, FlatPort.from_degrees(**PORT)))
+    with pytest.raises(ParameterError, match="traced through the port"):
+        DepthAwareSynthesis(warp=synthesis.warp, rays=trace_scene_rays(camera_preset(CAMERA), None))
