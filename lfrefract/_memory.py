@@ -17,6 +17,7 @@ __all__ = [
     "MEMINFO",
     "available_cpus",
     "available_memory",
+    "depth_aware_bytes",
     "format_bytes",
     "require_memory",
     "warp_map_bytes",
@@ -88,6 +89,32 @@ def require_memory(what: str, nbytes: int) -> None:
             f"{what} needs about {format_bytes(nbytes)} of memory ({int(nbytes)} bytes, estimated), more than the "
             f"{format_bytes(available)} available ({source}); choose a smaller size"
         )
+
+
+def depth_aware_bytes(
+    *, raw_pixels: int, output_pixels: int, channels: int, depth_steps: int, threads: int, render_chunks: int
+) -> int:
+    """Estimated peak memory of the depth-aware synthesis of one frame, rays included, bytes.
+
+    What :mod:`lfrefract.synthesis.depth_aware` allocates beyond the warp map (:func:`warp_map_bytes`):
+
+    * the traced rays, 37 bytes per usable raw pixel (float32 origin and direction, int64 raw index,
+      int8 quadrant, float32 gain), taken here as every raw pixel, plus the trace's float64
+      temporaries, about 500 bytes per raw pixel of one block of 2^20;
+    * per frame the rays' values and the kept rays' copies, ``4 channels + 28`` bytes per ray, twice;
+    * the plane sweep: the cost volume, ``depth_steps`` float32 per output pixel, about five times
+      over while it is aggregated, and per thread one plane's accumulators (``7 + 3 channels``
+      float64), refocused image and residuals, ``8 (8 + 4 channels) + 64`` bytes per output pixel;
+    * the render: ``render_chunks`` sets of accumulators, ``4 (7 + 3 channels)`` float64 per output
+      pixel each, and the image.
+
+    The sweep and the render do not overlap.
+    """
+    rays = 37 * raw_pixels + 500 * (1 << 20)
+    per_frame = 2 * (4 * channels + 28) * raw_pixels
+    sweep = 5 * 4 * depth_steps * output_pixels + threads * (8 * (8 + 4 * channels) + 64) * output_pixels
+    render = render_chunks * 32 * (7 + 3 * channels) * output_pixels + 8 * channels * output_pixels
+    return rays + per_frame + max(sweep, render)
 
 
 def warp_map_bytes(

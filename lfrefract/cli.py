@@ -3,7 +3,8 @@
     lfrefract describe (PRESET | CAMERA.toml | META.json) [--json]
     lfrefract synth RAW.exr --out OUT.exr [--k K] [--supersample S] [--lambda L] [--map-cache DIR]
                     [--camera PRESET|FILE] [--port PORT.toml|.json|.txt] [--mla MLA.json] [--nonfinite refuse|mask]
-                    [--overwrite]
+                    [--method proposed|depth-aware] [--depth-range MIN MAX] [--depth-steps N]
+                    [--aggregation-radius R] [--occlusion-aware] [--overwrite]
     lfrefract naive RAW.exr --out OUT.exr [--kind central|full] [--camera PRESET|FILE] [--nonfinite refuse|mask]
                     [--overwrite]
     lfrefract views RAW.exr --out DIR [--grid 9] [--spacing-px S] [--format png|exr] [--overwrite]
@@ -23,9 +24,16 @@ the version; ``python -m lfrefract`` is the same command line.
 
 ``describe`` prints a camera's derived optics and the default refraction-free image geometry.
 ``synth`` reads the camera and port from the ``meta.json`` beside ``RAW.exr`` and writes the
-refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (K, size, pose, options, coverage
+refraction-free image ``OUT.exr``, its sidecar ``OUT.json`` (method, K, size, pose, options, coverage
 statistics), the coverage map ``OUT.coverage.exr``, the classes ``OUT.filled.exr`` (2 exact, 1
-approximated, 0 empty: NaN in ``OUT.exr``) and a figure ``OUT.png``. ``naive`` writes the
+approximated, 0 empty: NaN in ``OUT.exr``) and a figure ``OUT.png``. ``--method proposed`` (the
+default) is the warp map alone. ``--method depth-aware`` keeps the warp map's exact pixels and
+renders each pixel outside them, where it can, from the recorded rays that see the pixel's scene
+point at the depth that a plane sweep over the light field itself finds (no other source of depth):
+class 3 in ``OUT.filled.exr``, exact given that depth. It also writes the depth, ``OUT.depth.exr``
+(camera-frame z in metres, NaN where none), and its confidence, ``OUT.confidence.exr`` (0 to 1);
+``--depth-range``, ``--depth-steps``, ``--aggregation-radius`` and ``--occlusion-aware`` are its
+options (:class:`DepthAwareOptions`), refused with the other method. ``naive`` writes the
 conventional view with no refraction handling, for comparison. ``views`` writes a regular grid of
 sub-aperture views (no refraction handling either) in the HCI 4D light field benchmark layout that
 light-field depth-estimation methods read (``lfrefract.formats.viewstack.write_view_stack``).
@@ -74,7 +82,7 @@ from lfrefract import (
     camera_preset,
     virtual_camera_for,
 )
-from lfrefract._memory import available_cpus, require_memory, warp_map_bytes
+from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
@@ -104,6 +112,14 @@ from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
+from lfrefract.synthesis.depth_aware import (
+    FILLED_EXACT_GIVEN_DEPTH,
+    DepthAwareOptions,
+    DepthAwareResult,
+    DepthAwareSynthesis,
+    render_chunks,
+    trace_scene_rays,
+)
 from lfrefract.synthesis.views import VIEW_KINDS, naive_view, subaperture_stack, view_stack_bytes
 from lfrefract.synthesis.warp_map import (
     BLOCK_PIXELS,
@@ -132,6 +148,17 @@ DEFAULT_COLOUR_MODE = "demosaic"
 #: ``calibrate camera`` and ``calibrate approx`` on the demosaiced image (the camera's rays 0.048 mm
 #: from the truth at the port against 0.096 on the grey mosaic).
 DEFAULT_BOARD_COLOUR = {"port": "cfa", "camera": "demosaic", "approx": "demosaic"}
+
+#: The methods of ``synth --method``: ``proposed``, the warp map alone (exact inside its coverage,
+#: the nearby rays' approximation outside it); ``depth-aware``, the warp map's exact coverage with,
+#: outside it, each pixel rendered from the rays that see its point at the depth the light field
+#: itself gives (:mod:`lfrefract.synthesis.depth_aware`). The first is the default.
+SYNTH_METHODS = ("proposed", "depth-aware")
+#: EXR roles of the depth-aware outputs ``OUT.depth.exr`` and ``OUT.confidence.exr``. The depth is
+#: an estimate, so not of the role ``depth`` of a render's ground truth (``--overwrite`` never
+#: replaces one with the other).
+SYNTH_DEPTH_ROLE = "estimated_depth"
+SYNTH_CONFIDENCE_ROLE = "confidence"
 
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"
@@ -211,21 +238,65 @@ def _exr_out(args: argparse.Namespace) -> Path:
     return out
 
 
-def synth_outputs(out: Path) -> dict[Path, ExpectedKind]:
-    """The files ``lfrefract synth --out OUT.exr`` writes, with what each must be to be replaced."""
+def synth_outputs(out: Path, method: str = SYNTH_METHODS[0]) -> dict[Path, ExpectedKind]:
+    """The files ``lfrefract synth --out OUT.exr --method METHOD`` writes, with what each must be to
+    be replaced. Only ``depth-aware`` writes (and so claims) ``OUT.depth.exr`` and ``OUT.confidence.exr``."""
+    if method not in SYNTH_METHODS:
+        raise ParameterError(f"method must be one of {', '.join(SYNTH_METHODS)}, got {method!r}")
     sidecar = out.with_suffix(".json")
-    return {
+    outputs = {
         out: ExpectedKind(exr_role="refraction_free"),
         out.with_suffix(".coverage.exr"): ExpectedKind(exr_role="coverage"),
         out.with_suffix(".filled.exr"): ExpectedKind(exr_role="filled"),
+    }
+    if method == "depth-aware":
+        outputs[out.with_suffix(".depth.exr")] = ExpectedKind(exr_role=SYNTH_DEPTH_ROLE)
+        outputs[out.with_suffix(".confidence.exr")] = ExpectedKind(exr_role=SYNTH_CONFIDENCE_ROLE)
+    return {
+        **outputs,
         sidecar: ExpectedKind(json_kind=SYNTH_KIND),
         out.with_suffix(".png"): ExpectedKind(listed_in=sidecar, listed_kind=SYNTH_KIND),
     }
 
 
+def _depth_aware_options(args: argparse.Namespace) -> DepthAwareOptions | None:
+    """The :class:`DepthAwareOptions` of ``synth --method depth-aware`` (None for another method).
+
+    Raises
+    ------
+    ParameterError
+        If a depth-aware option is given with another method, or a value is invalid (naming the option).
+    """
+    given: dict[str, dict[str, Any]] = {}  # option -> the DepthAwareOptions fields it sets
+    if args.depth_range is not None:
+        given["--depth-range"] = {"depth_min_m": args.depth_range[0], "depth_max_m": args.depth_range[1]}
+    if args.depth_steps is not None:
+        given["--depth-steps"] = {"depth_steps": args.depth_steps}
+    if args.aggregation_radius is not None:
+        given["--aggregation-radius"] = {"aggregation_radius_px": args.aggregation_radius}
+    if args.occlusion_aware:
+        given["--occlusion-aware"] = {"occlusion_aware": True}
+    if args.method != "depth-aware":
+        if given:
+            raise ParameterError(
+                f"{' and '.join(given)} {'applies' if len(given) == 1 else 'apply'} to --method depth-aware only "
+                f"(--method is {args.method})"
+            )
+        return None
+    values: dict[str, Any] = {}
+    for flag, fields in given.items():  # each checked alone, the others at their defaults: the error names it
+        try:
+            DepthAwareOptions(**fields)
+        except ParameterError as exc:
+            raise ParameterError(f"{flag}: {exc}") from None
+        values.update(fields)
+    return DepthAwareOptions(**values)
+
+
 def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
     out = _exr_out(args)
+    depth_options = _depth_aware_options(args)
     capture = read_capture(
         args.raw,
         camera=_given_camera(args),
@@ -243,17 +314,22 @@ def synth(args: argparse.Namespace) -> int:
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     by_cfa = _colour_by_cfa(args, capture)
+    ray_correction = ray_correction_from_option(args.camera)
+    if depth_options is not None:
+        _depth_aware_takes(args, by_cfa, ray_correction is not None)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
-    prepare_output_files(synth_outputs(out), inputs=inputs, overwrite=args.overwrite)  # before the map is built
+    prepare_output_files(synth_outputs(out, args.method), inputs=inputs, overwrite=args.overwrite)  # before the map
     options = SynthesisOptions(
         k=args.k,
         supersample=args.supersample,
         lambda_m_per_rad=args.lam,
         search=args.search,
-        ray_correction=ray_correction_from_option(args.camera),
+        ray_correction=ray_correction,
     )
     output = capture.output
     developed = capture.developed
+    result: DepthAwareResult | None = None
+    rays_seconds = 0.0
     if by_cfa and developed is not None:
         # One map per colour, each gathering from that colour's raw pixels of the developed mosaic.
         per_colour = {
@@ -278,28 +354,71 @@ def synth(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         warp, how = _synth_map(args, camera, port, output, options, capture.channels)
         map_seconds = time.perf_counter() - start
+        if depth_options is not None:
+            require_memory(
+                f"synth --method depth-aware: {depth_options.depth_steps} depth planes of a {output.width_px} x "
+                f"{output.height_px} px image from {camera.sensor.width_px} x {camera.sensor.height_px} raw pixels",
+                depth_aware_bytes(
+                    raw_pixels=camera.sensor.width_px * camera.sensor.height_px,
+                    output_pixels=output.width_px * output.height_px,
+                    channels=capture.channels,
+                    depth_steps=depth_options.depth_steps,
+                    threads=available_cpus(),
+                    render_chunks=render_chunks(),
+                ),
+            )
+            start = time.perf_counter()
+            rays = trace_scene_rays(
+                camera, port, rim_margin_px=depth_options.rim_margin_px, compensate_port=depth_options.compensate_port
+            )
+            rays_seconds = time.perf_counter() - start
         start = time.perf_counter()
         warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
-        image = warp.apply(capture.raw)
+        if depth_options is None:
+            image = warp.apply(capture.raw)
+            classes = warp.filled_classes
+        else:
+            synthesis = DepthAwareSynthesis(warp=warp, rays=rays, options=depth_options)
+            result = synthesis.apply(capture.raw, recorded=capture.recorded)
+            image, classes = result.image, result.classes
         apply_seconds = time.perf_counter() - start
         nonzeros = float(len(warp.indices) / max(1, len(warp.gain)))
         keys = warp.key
-        classes = warp.filled_classes
     image[classes == FILLED_EMPTY] = np.nan  # the project's "no value" (docs/conventions.md)
-    stats = {
-        "exact_fraction": float(np.mean(classes == FILLED_EXACT)),
-        "filled_fraction": float(np.mean(classes != FILLED_EMPTY)),
-        "mean_coverage": float(warp.coverage.mean()),
-        "nonzeros_per_pixel": nonzeros,
-    }
+    if result is None:
+        stats = {
+            "exact_fraction": float(np.mean(classes == FILLED_EXACT)),
+            "filled_fraction": float(np.mean(classes != FILLED_EMPTY)),
+        }
+    else:
+        stats = result.coverage
+    stats = {**stats, "mean_coverage": float(warp.coverage.mean()), "nonzeros_per_pixel": nonzeros}
     figure = out.with_suffix(".png")
+    files = {
+        "image": out.name,
+        "coverage": out.with_suffix(".coverage.exr").name,
+        "filled": out.with_suffix(".filled.exr").name,
+    }
+    filled_classes = {"empty": FILLED_EMPTY, "approximated": FILLED_APPROXIMATED, "exact": FILLED_EXACT}
+    extra: dict[str, Any] = {}  # the depth-aware method's own keys
+    seconds = {"map": map_seconds, "apply": apply_seconds}
     write_exr(out, image, role="refraction_free")
     write_exr(out.with_suffix(".coverage.exr"), warp.coverage.astype(np.float32), role="coverage")
     write_exr(out.with_suffix(".filled.exr"), classes, role="filled")
+    if result is not None and depth_options is not None:  # the depth-aware method
+        write_exr(out.with_suffix(".depth.exr"), result.depth.depth_m.astype(np.float32), role=SYNTH_DEPTH_ROLE)
+        write_exr(
+            out.with_suffix(".confidence.exr"), result.depth.confidence.astype(np.float32), role=SYNTH_CONFIDENCE_ROLE
+        )
+        files.update(depth=out.with_suffix(".depth.exr").name, confidence=out.with_suffix(".confidence.exr").name)
+        filled_classes["exact_given_depth"] = FILLED_EXACT_GIVEN_DEPTH
+        extra = {"depth_options": depth_options.to_dict()}
+        seconds = {"map": map_seconds, "rays": rays_seconds, "apply": apply_seconds}
     write_json(
         out.with_suffix(".json"),
         {
             "kind": SYNTH_KIND,
+            "method": args.method,
             "source": str(args.raw),
             "K": warp.output.K.tolist(),
             "width_px": warp.output.width_px,
@@ -308,26 +427,48 @@ def synth(args: argparse.Namespace) -> int:
             "camera": camera.to_dict(),
             "port": port.to_dict(),
             "options": options.to_dict(),
+            **extra,
             "colour": "cfa" if by_cfa else ("demosaic" if developed is not None else "raw"),
             "unrecorded_raw": _unrecorded_summary(capture, by_cfa),
             "map_key": keys,
             "coverage": stats,
-            "seconds": {"map": map_seconds, "apply": apply_seconds},
-            "files": {
-                "image": out.name,
-                "coverage": out.with_suffix(".coverage.exr").name,
-                "filled": out.with_suffix(".filled.exr").name,
-                "figure": figure.name,
-            },
-            "filled_classes": {"empty": FILLED_EMPTY, "approximated": FILLED_APPROXIMATED, "exact": FILLED_EXACT},
+            "seconds": seconds,
+            "files": {**files, "figure": figure.name},
+            "filled_classes": filled_classes,
         },
     )
-    _figure(figure, image, warp)
+    if result is None or depth_options is None:  # the proposed method
+        _figure(figure, image, warp)
+        print(
+            f"{how} warp map ({map_seconds:.2f} s), applied in {apply_seconds * 1e3:.1f} ms; exact coverage "
+            f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
+        )
+        return 0
+    _depth_aware_figure(figure, image, warp, result, depth_options)
     print(
-        f"{how} warp map ({map_seconds:.2f} s), applied in {apply_seconds * 1e3:.1f} ms; exact coverage "
-        f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
+        f"{how} warp map ({map_seconds:.2f} s), rays traced in {rays_seconds:.2f} s, depth-aware synthesis in "
+        f"{apply_seconds:.2f} s; exact coverage {stats['exact_fraction']:.1%}, exact given depth "
+        f"{stats['exact_given_depth_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; "
+        f"wrote {out}"
     )
     return 0
+
+
+def _depth_aware_takes(args: argparse.Namespace, by_cfa: bool, ray_corrected: bool) -> None:
+    """Refuse what ``synth --method depth-aware`` cannot take: a Lytro capture's colours from their own
+    Bayer sites (``--colour cfa``), and a camera calibration's ray correction (its rays are the thin
+    lens's captured rays)."""
+    if by_cfa:
+        raise ParameterError(
+            "--colour cfa does not apply to --method depth-aware: it searches the depth and renders on the "
+            "demosaiced image (use --colour demosaic)"
+        )
+    if ray_corrected:
+        raise ParameterError(
+            f"--method depth-aware traces the thin lens's captured rays, without the ray correction of the camera "
+            f"calibration {args.camera!r}: give the camera without it (a preset or camera file), or use --method "
+            "proposed"
+        )
 
 
 def _unrecorded_summary(capture: Capture, by_cfa: bool) -> dict | None:
@@ -401,6 +542,41 @@ def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
     ax.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)
     ax.set_title("refraction-free image; yellow: edge of exact coverage")
     ax.set_axis_off()
+    with atomic_file(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+
+
+def _depth_aware_figure(
+    path: Path, image: np.ndarray, warp: WarpMap, result: DepthAwareResult, options: DepthAwareOptions
+) -> None:
+    """The figure of ``synth --method depth-aware``: the image (with the edge of the exact coverage,
+    as :func:`_figure`) beside the depth found in the light field."""
+    import matplotlib as mpl
+
+    mpl.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = image if image.ndim == 2 else image[..., :3]
+    finite = shown[np.isfinite(shown)]
+    white = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    height = 6 * warp.output.height_px / warp.output.width_px + 0.5
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12.5, height), dpi=120)
+    left.imshow(np.clip(shown / (white or 1.0), 0, 1) ** (1 / 2.2), cmap="gray", interpolation="nearest")
+    left.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)
+    left.set_title("depth-aware refraction-free image\nyellow: edge of exact coverage")
+    left.set_axis_off()
+    colours = mpl.colormaps["viridis"].with_extremes(bad="0.5")  # grey: no depth
+    shown_depth = right.imshow(
+        result.depth.depth_m,
+        cmap=colours,
+        vmin=options.depth_min_m,
+        vmax=options.depth_max_m,
+        interpolation="nearest",
+    )
+    right.set_title("depth-aware: depth from the light field\ngrey: no depth")
+    right.set_axis_off()
+    fig.colorbar(shown_depth, ax=right, fraction=0.046, pad=0.02).set_label("depth (m)")
     with atomic_file(path) as tmp:
         fig.savefig(tmp, format="png", bbox_inches="tight")
     plt.close(fig)
@@ -704,6 +880,8 @@ def describe_command(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- the parser
 #: Defaults of the synthesis options, from :class:`SynthesisOptions` itself (``synth --k`` etc.).
 SYNTHESIS_DEFAULTS = {f.name: f.default for f in dataclasses.fields(SynthesisOptions)}
+#: Defaults of the depth-aware options, from :class:`DepthAwareOptions` itself (``synth --depth-steps`` etc.).
+DEPTH_AWARE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(DepthAwareOptions)}
 
 
 def _default_of(function: Callable, parameter: str) -> Any:
@@ -789,6 +967,44 @@ def _synth_arguments(parser: argparse.ArgumentParser) -> None:
         choices=COLOUR_MODES,
         help="for a Lytro capture: gather from the demosaiced image (demosaic, the default) or each colour from "
         "its own Bayer sites (cfa: nothing is interpolated across a micro-image's edge)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=SYNTH_METHODS,
+        default=SYNTH_METHODS[0],
+        help="proposed: the warp map alone (exact inside its coverage, approximated from nearby rays outside "
+        "it); depth-aware: outside the exact coverage, each pixel rendered from the rays that see its point at "
+        "the depth found in the light field itself (also writes OUT.depth.exr and OUT.confidence.exr)",
+    )
+    depth = DEPTH_AWARE_DEFAULTS
+    parser.add_argument(
+        "--depth-range",
+        type=float,
+        nargs=2,
+        metavar=("MIN", "MAX"),
+        help="with --method depth-aware: nearest and farthest depth searched, camera-frame z, metres "
+        f"(default: {depth['depth_min_m']} {depth['depth_max_m']})",
+    )
+    parser.add_argument(
+        "--depth-steps",
+        type=int,
+        metavar="N",
+        help=f"with --method depth-aware: depth planes searched, uniform in 1/z, at least 3 (default: "
+        f"{depth['depth_steps']})",
+    )
+    parser.add_argument(
+        "--aggregation-radius",
+        type=int,
+        metavar="R",
+        help="with --method depth-aware: the depth costs are averaged over (2 R + 1) x (2 R + 1) output pixels; "
+        f"0 for none (default: {depth['aggregation_radius_px']})",
+    )
+    parser.add_argument(
+        "--occlusion-aware",
+        action="store_true",
+        help="with --method depth-aware: score and render each pixel with the most consistent of the whole "
+        "aperture's rays and each aperture half's (which sees past an occluder that hides the point from the "
+        "other half); default: the whole aperture's (docs/synthesis.md measures both)",
     )
     parser.add_argument("--map-cache", help="directory of warp maps, keyed by their parameters")
     parser.add_argument("--quiet", action="store_true", help="no progress bar while building the map")

@@ -47,6 +47,11 @@ SLOPE_RIDGE = 1e-3
 #: 0 (the comparison alone) 71-73 %.
 FIT_WEIGHT = 10.0
 
+#: An aperture half stands in for the whole aperture only where its variance is below this share of
+#: the whole's: an occluder makes the whole aperture's rays disagree many times over, while at a mere
+#: texture edge a half is only a little more consistent and would shift the edge towards its side.
+HALF_RATIO = 0.25
+
 
 def moments_per_quadrant(channels: int) -> int:
     """Accumulated numbers per quadrant of a pixel for ``channels`` channels."""
@@ -129,14 +134,17 @@ def _best_subset(acc, p, channels, min_rays, occlusion_aware, centre):
     """The subset of quadrants of pixel ``p`` with the least residual variance:
     (variance, ray count); its centre values in ``centre``. (inf, 0) if none has ``min_rays``."""
     best = np.inf
+    best_score = np.inf
     best_n = 0.0
     trial = np.empty(channels)
     n_subsets = len(SUBSETS) if occlusion_aware else 1
     for s in range(n_subsets):
         n, var = _fit(acc, p, SUBSETS[s], channels, trial)
-        if n < min_rays or not var < best:
+        score = var if s == 0 else var / HALF_RATIO
+        if n < min_rays or not score < best_score:
             continue
         best = var
+        best_score = score
         best_n = n
         centre[:] = trial
     return best, best_n
@@ -241,6 +249,7 @@ def sweep_cost(origins, directions, values, quadrant, depths_m, fx, cx, cy, widt
             residual[p, q, 1] += sq
         for p in range(n_pix):
             best = np.inf
+            best_score = np.inf
             for s in range(n_subsets):
                 mask = SUBSETS[s]
                 n = 0.0
@@ -249,7 +258,11 @@ def sweep_cost(origins, directions, values, quadrant, depths_m, fx, cx, cy, widt
                     if (mask >> q) & 1:
                         n += residual[p, q, 0]
                         total += residual[p, q, 1]
-                if n >= min_rays and n > 0 and total / (n * channels) < best:
+                if n < min_rays or n == 0:
+                    continue
+                score = total / (n * channels) if s == 0 else total / (n * channels * HALF_RATIO)
+                if score < best_score:
+                    best_score = score
                     best = total / (n * channels)
             cost[k, p // width, p % width] = best + FIT_WEIGHT * fit_var[p] if np.isfinite(best) else np.nan
     return cost

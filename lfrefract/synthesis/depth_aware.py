@@ -20,18 +20,23 @@ Method (camera frame, metres; output pixels of a pinhole ``K`` centred at the ma
    and binned into the output pixel whose line of sight holds the crossing. The rays in a pixel's
    bin at ``z_j`` are the recorded rays that see the hypothesised point ``z_j K^-1 (u, v, 1)``
    (within the pixel): at the true depth they agree, elsewhere they see different points. The
-   cost is their variance per channel; *occlusion-aware*, the least variance among the whole
-   aperture's rays and those of each aperture half (the rays are split by aperture quadrant), since
-   an occluder in front of a point hides it from part of the aperture only.
+   cost (:func:`~lfrefract.synthesis._depth_kernels.sweep_cost`) compares every ray with the
+   plane's *refocused image* (each pixel's rays fitted by a plane in their landing offsets, read at
+   the pixel centre, interpolated at the ray's landing point), plus the residual of each pixel's
+   own fit: both vanish at the true depth for a texture smooth within a pixel, wherever in the
+   pixel the rays land. *Occlusion-aware* (an option), a pixel may take the rays of one aperture
+   half instead of the whole aperture's where they agree markedly better, since an occluder in
+   front of a point hides it from part of the aperture only.
 3. *Aggregation and refinement*: the costs are averaged over a ``(2 r + 1)^2`` window of output
-   pixels (box filter, valid costs only), the least cost wins, and a parabola through it and its two
-   neighbours refines the plane index below one step (in ``1 / z``). The *confidence* is
-   ``1 - c_min / c_rival``, ``c_rival`` the best cost at least :data:`CONFIDENCE_GAP` planes away:
-   near 0 where another depth fits about as well (no texture), near 1 where one depth stands out.
+   pixels (box filter; each pixel's say bounded, see :func:`_aggregate`), the least cost wins, and
+   a parabola through it and its two neighbours refines the plane index below one step (in
+   ``1 / z``). The *confidence* is ``1 - c_min / c_rival``, ``c_rival`` the best cost at least
+   :data:`CONFIDENCE_GAP` planes away: near 0 where another depth fits about as well (no texture),
+   near 1 where one depth stands out.
 4. *Render given depth* (:func:`render_given_depth`): each ray goes to the first pixel, near to far,
-   at whose estimated depth it lands in that pixel; the pixel is the mean of its rays (of the most
-   consistent subset, as in the cost). A pixel rendered so from at least ``min_rays`` rays is *exact
-   given depth*: every ray in it saw its scene point, to within the pixel and the depth's error.
+   at whose estimated depth it lands in that pixel; the pixel's value is its rays' plane fit at the
+   pixel centre. A pixel rendered so from at least ``min_rays`` rays is *exact given depth*: every
+   ray in it saw its scene point, to within the pixel and the depth's error.
 5. *Composition* (:class:`DepthAwareSynthesis`): pixels inside the warp map's exact coverage keep
    the warp map's value (exact at any depth); outside it, the depth-aware value where there is one
    (class :data:`FILLED_EXACT_GIVEN_DEPTH`), else the warp map's nearby rays (approximated) or no
@@ -90,6 +95,10 @@ FILLED_EXACT_GIVEN_DEPTH = 3
 #: Planes between the winning depth and the rival that :attr:`DepthEstimate.confidence` compares it with.
 CONFIDENCE_GAP = 3
 
+#: Most blocks of rays the render accumulates apart (one per thread up to this; each block holds
+#: ``4 (7 + 3 C)`` float64 per output pixel: 0.4 GB at Illum size with RGB).
+RENDER_CHUNKS_MAX = 4
+
 #: Raw pixels traced per block in :func:`trace_scene_rays` (a block's float64 buffers: about 1 kB each).
 _TRACE_BLOCK = 1 << 20
 
@@ -114,8 +123,12 @@ class DepthAwareOptions:
     min_rays : int
         Fewest rays a pixel's subset needs, at a depth plane and in the render.
     occlusion_aware : bool
-        Score and render with the most consistent of the whole aperture and its halves (True) or
-        the whole aperture only.
+        Score and render with the most consistent of the whole aperture and its halves (True; a half
+        must do markedly better, :data:`~lfrefract.synthesis._depth_kernels.HALF_RATIO`) or the
+        whole aperture only (the default). Measured at an occluding edge (a half-plane at 0.3 m
+        before a plane at 0.6 m) on tiny-2x and the Illum and on tiny-2x chessboards, the halves
+        changed no figure beyond noise (the aggregation window, not the rays' subset, decides the
+        depth within a few pixels of an edge) and doubled the time (docs/synthesis.md).
     rim_margin_px : float
         Raw pixels within this many pixels of their micro-image's rim are not used (partly
         vignetted; as :attr:`SynthesisOptions.rim_margin_px`).
@@ -129,7 +142,7 @@ class DepthAwareOptions:
     depth_steps: int = 48
     aggregation_radius_px: int = 6
     min_rays: int = 4
-    occlusion_aware: bool = True
+    occlusion_aware: bool = False
     rim_margin_px: float = 0.71
     compensate_port: bool = True
 
@@ -156,6 +169,11 @@ class DepthAwareOptions:
     def to_dict(self) -> dict:
         """Plain data for sidecars."""
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+def render_chunks() -> int:
+    """Blocks of rays the render accumulates apart: the threads, at most :data:`RENDER_CHUNKS_MAX`."""
+    return max(1, min(numba.get_num_threads(), RENDER_CHUNKS_MAX))
 
 
 def depth_planes_m(options: DepthAwareOptions) -> np.ndarray:
@@ -475,7 +493,7 @@ def render_given_depth(
     )
     return render_at_depth(
         origins, directions, values, quadrant, depths, np.where(inside, depth, np.nan), plane_of.astype(np.int64),
-        fx, cx, cy, options.min_rays, options.occlusion_aware, numba.get_num_threads(),
+        fx, cx, cy, options.min_rays, options.occlusion_aware, render_chunks(),
     )  # fmt: skip
 
 

@@ -33,6 +33,13 @@ pinhole image; all full angles, degrees):
 - ``original_fov_water_h_deg`` / ``_v_deg``: the field the camera sees in the water through the
   port: the lines of sight through the outer edges of the image's centre row / column, refracted
   by the port, and the angle between them.
+- ``given_depth_share``: the pixels that the depth-aware synthesis
+  (:mod:`lfrefract.synthesis.depth_aware`) can make exact given their depth: those whose scene
+  point at :data:`GIVEN_DEPTH_M` the camera records at all, i.e. that some point of the usable
+  aperture sees through the port onto the sensor inside the micro-image of its lens
+  (:func:`lfrefract.optics.seen_by.pixels_seeing_points` from :data:`SEEN_APERTURE_POINTS` aperture
+  points: the centre and a ring at :data:`SEEN_RING` of the usable radius), over every
+  :data:`SEEN_STRIDE` -th pixel in each direction (:func:`seen_share`). Exact pixels are among them.
 
 The grid: port tilts about the camera x axis (``tilt_x_deg``, normal turned up) from 0 to 40 deg,
 main-lens f-numbers from the preset's upwards (larger ones are always allowed: the image-side
@@ -58,6 +65,7 @@ from tqdm import tqdm
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
 from lfrefract.optics.lens import trace_lens
 from lfrefract.optics.real_lens import RealLensCamera
+from lfrefract.optics.seen_by import pixels_seeing_points
 from lfrefract.synthesis.warp_map import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
 from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
 
@@ -72,6 +80,7 @@ __all__ = [
     "reference_port",
     "required_aperture_radius",
     "run",
+    "seen_share",
     "setup_for",
 ]
 
@@ -93,6 +102,15 @@ REFERENCE_N_WATER = 1.33
 
 #: The apertures a distance row is evaluated with: the usable radius, and twice it.
 APERTURES = {"usable": 1.0, "doubled": 2.0}
+
+#: Depth of the scene points whose visibility ``given_depth_share`` counts, camera-frame z, metres.
+GIVEN_DEPTH_M = 0.5
+#: Aperture points of the visibility test: the centre and a ring of six, at SEEN_RING of the usable
+#: radius (a point is recorded if any of them sees it).
+SEEN_APERTURE_POINTS = 7
+SEEN_RING = 0.7
+#: Pixels between those tested, per direction and scale (the share is over the tested ones).
+SEEN_STRIDE = {"tiny": 2, "illum": 4}
 
 
 def reference_port() -> FlatPort:
@@ -129,6 +147,8 @@ class FovSetup:
         Tilts whose masks are drawn.
     reference_port : FlatPort or None
         The authors' port (scale ``illum``).
+    seen_stride : int
+        Pixel stride of ``given_depth_share`` (:data:`SEEN_STRIDE`).
     """
 
     camera: LightFieldCamera
@@ -140,6 +160,7 @@ class FovSetup:
     distances_m: tuple[float, ...]
     mask_tilts_deg: tuple[float, ...]
     reference_port: FlatPort | None = None
+    seen_stride: int = 1
 
     def port(self, tilt_x_deg: float, distance_m: float | None = None) -> FlatPort:
         """The swept port, tilted ``tilt_x_deg`` about x, at ``distance_m`` (default :attr:`distance_m`)."""
@@ -202,6 +223,7 @@ def setup_for(scale: str, options: ExperimentOptions | None = None) -> FovSetup:
         distances_m=distances,
         mask_tilts_deg=mask_tilts,
         reference_port=reference,
+        seen_stride=SEEN_STRIDE[scale],
     )
 
 
@@ -269,6 +291,51 @@ def exact_mask(
     options = options if options is not None else SynthesisOptions()
     radius = required_aperture_radius(camera, port, output, supersample=options.supersample)
     return radius <= camera.usable_aperture_radius_m(options.rim_margin_px)
+
+
+def seen_share(
+    camera: LightFieldCamera,
+    port: FlatPort,
+    output: PinholeCamera,
+    *,
+    depth_m: float = GIVEN_DEPTH_M,
+    rim_margin_px: float = SynthesisOptions().rim_margin_px,
+    stride: int = 1,
+) -> float:
+    """Share of output pixels whose scene point at ``depth_m`` the camera records (``given_depth_share``).
+
+    The point on a pixel's line of sight at camera-frame z ``depth_m`` is recorded when some of the
+    :data:`SEEN_APERTURE_POINTS` aperture points (centre, ring at :data:`SEEN_RING` of
+    ``camera.usable_aperture_radius_m(rim_margin_px)``) sees it through ``port`` onto the sensor,
+    inside the micro-image of its lens (:func:`~lfrefract.optics.seen_by.pixels_seeing_points`).
+
+    Parameters
+    ----------
+    camera : LightFieldCamera
+    port : FlatPort
+    output : PinholeCamera
+        The refraction-free image.
+    depth_m : float
+        Depth of the scene points, metres.
+    rim_margin_px : float
+        Rim margin of the usable aperture.
+    stride : int
+        Test every ``stride``-th pixel in each direction.
+
+    Returns
+    -------
+    float
+        Recorded pixels over tested pixels.
+    """
+    vv, uu = np.mgrid[0 : output.height_px : stride, 0 : output.width_px : stride]
+    uv = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
+    directions = output.pixel_directions(uv)
+    points = directions * (depth_m / directions[:, 2:3])
+    angles = np.linspace(0.0, 2.0 * np.pi, SEEN_APERTURE_POINTS)[:-1]
+    ring = SEEN_RING * camera.usable_aperture_radius_m(rim_margin_px)
+    aperture = np.concatenate([[[0.0, 0.0]], ring * np.stack([np.cos(angles), np.sin(angles)], axis=1)])
+    seen = pixels_seeing_points(camera, port, points, aperture, rim_margin_px=rim_margin_px).valid
+    return float(np.mean(np.any(seen, axis=1)))
 
 
 def real_lens_exact_mask(
@@ -415,6 +482,11 @@ def _rows_for(
     for n in f_numbers:
         camera = dataclasses.replace(setup.camera, f_number=n)
         usable = camera.usable_aperture_radius_m(options.rim_margin_px) * APERTURES[aperture]
+        given = (
+            seen_share(camera, port, output, rim_margin_px=options.rim_margin_px, stride=setup.seen_stride)
+            if aperture == "usable"
+            else math.nan  # a doubled aperture is a what-if of the paper's code, not a camera
+        )
         mask = radius <= usable
         masks[n] = mask
         rows.append(
@@ -426,6 +498,7 @@ def _rows_for(
                 "aperture": aperture,
                 "usable_aperture_radius_mm": usable * 1e3,
                 "exact_share": float(mask.mean()),
+                "given_depth_share": given,
                 **fov_measures(mask, output),
                 **original,
             }
@@ -479,13 +552,21 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
             "o-",
             ms=3,
             color=colour,
-            label=f"f/{n:g}",
+            label=f"f/{n:g}, exact",
+        )
+        ax.plot(
+            [r["tilt_deg"] for r in sel],
+            [100 * r["given_depth_share"] for r in sel],
+            "x--",
+            ms=3,
+            color=colour,
+            label=f"f/{n:g}, exact given depth ({GIVEN_DEPTH_M:g} m)",
         )
     ax.set_xlabel("port tilt about x [deg]")
-    ax.set_ylabel("exact pixels [% of the refraction-free image]")
-    ax.set_title(f"exact share: {setup.title}", fontsize=9)
+    ax.set_ylabel("pixels [% of the refraction-free image]")
+    ax.set_title(f"exact share (paper's method) and recorded share (depth-aware): {setup.title}", fontsize=8)
     ax.grid(alpha=0.3)
-    ax.legend(title="main lens")
+    ax.legend(title="main lens", fontsize=7)
     paths.append(out_dir / "fov_exact_share.png")
     fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
 
@@ -637,6 +718,8 @@ def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> Experim
         "output": output.to_dict(),
         "supersample": synthesis.supersample,
         "rim_margin_px": synthesis.rim_margin_px,
+        "given_depth_m": GIVEN_DEPTH_M,
+        "given_depth_stride_px": setup.seen_stride,
     }
     return ExperimentResult(
         name="fov",

@@ -32,6 +32,8 @@ from tests.tolerances import (
     FOV_EQUIV_CONE_PX,
     FOV_MASK_MISMATCH_MAX_PX,
     FOV_RUN_PX,
+    FOV_SEEN_SHARE_RENDERED,
+    FOV_SEEN_SHARE_SAMPLING,
     FOV_SHARE_RISE_MAX,
 )
 
@@ -291,3 +293,38 @@ def test_a_real_lens_records_no_necessary_ray_the_thin_lens_misses(tilt_x_deg):
     assert np.array_equal(real, real[:, ::-1])
     rows, rows_thin = np.nonzero(real)[0], np.nonzero(thin)[0]
     assert abs(rows.mean() - rows_thin.mean()) < 3.0  # pixels
+
+
+def test_given_depth_share_holds_the_exact_pixels(tiny_run):
+    _, _, rows = tiny_run
+    usable = [r for r in rows if r["aperture"] == "usable"]
+    assert usable
+    for row in usable:
+        # Exact pixels are recorded at every depth; every share is of the same image.
+        assert float(row["exact_share"]) <= float(row["given_depth_share"]) + FOV_SEEN_SHARE_SAMPLING
+    tilted = [r for r in usable if r["series"] == "tilt" and float(r["tilt_deg"]) >= 30]
+    # Where the exact cone has left the image, the recorded field has not.
+    assert all(float(r["exact_share"]) < 0.03 < 0.3 < float(r["given_depth_share"]) for r in tilted)
+    doubled = [r for r in rows if r["aperture"] == "doubled"]
+    assert all(math.isnan(float(r["given_depth_share"])) for r in doubled)
+
+
+@pytest.mark.parametrize("tilt_x_deg", [0.0, 30.0])
+def test_given_depth_share_is_what_the_depth_aware_synthesis_renders(tilt_x_deg):
+    """On a closed-form plane at GIVEN_DEPTH_M the depth-aware synthesis fills the pixels counted as recorded."""
+    from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareSynthesis
+    from simulator.experiments.fov import GIVEN_DEPTH_M, seen_share
+
+    setup = setup_for("tiny")
+    port = setup.port(tilt_x_deg)
+    synthesis = DepthAwareSynthesis.build(setup.camera, port)
+    rays = synthesis.rays
+    o, d = rays.origins_cam.astype(np.float64), rays.directions_cam.astype(np.float64)
+    x = o + ((GIVEN_DEPTH_M - o[:, 2]) / d[:, 2])[:, None] * d
+    texture = 0.5 + 0.4 * np.sin(2 * np.pi * x[:, 0] / 0.05) * np.cos(2 * np.pi * x[:, 1] / 0.07)
+    raw = np.zeros(rays.raw_shape[0] * rays.raw_shape[1], dtype=np.float32)
+    raw[rays.raw_index] = texture / rays.gain
+    result = synthesis.apply(raw.reshape(rays.raw_shape))
+    rendered = float(np.mean(np.isin(result.classes, (FILLED_EXACT_GIVEN_DEPTH, 2))))
+    share = seen_share(setup.camera, port, synthesis.output)
+    assert share == pytest.approx(rendered, abs=FOV_SEEN_SHARE_RENDERED)
