@@ -136,12 +136,17 @@ def corners(args: argparse.Namespace) -> None:
             )
             print(rows[-1], flush=True)
     distance = 0.04
-    tilts = ((25.0, 10.0), (15.0, -20.0), (-20.0, 15.0))
-    directions = ((0.16, -0.125), (0.1, -0.06), (-0.1, 0.1), (0.0, 0.15), (-0.15, -0.05), (0.15, 0.1))
+    # Per compound tilt, lines of sight whose board lies wholly in the approximated band at every
+    # depth (found on a 0.05 grid of x / z and y / z).
+    sight_lines = {
+        (25.0, 10.0): ((0.16, -0.125), (0.1, -0.06), (0.0, -0.1)),
+        (15.0, -20.0): ((0.0, -0.1), (0.0, -0.05)),
+        (-20.0, 15.0): ((0.0, 0.05), (0.05, 0.05)),
+    }
     out = Path(args.out) if args.out else None
     if out is not None and out.exists() and any(out.iterdir()):
         raise SystemExit(f"--out {out} is not empty; name a new or empty folder")
-    for tilt in tilts:
+    for tilt, directions in sight_lines.items():
         empty = _board_scene(tilt, distance, [], args.spp)
         camera, port = empty.camera, empty.port
         warp = build_warp_map(camera, port)

@@ -18,9 +18,14 @@ A method turns a raw lenslet image into a central-projection image with a known 
 ``proposed+distortion``
     Paper condition (d): the synthesized image, with a residual distortion fitted on the
     synthesized images of the calibration views (``K`` fixed to the warp map's) removed.
+``depth-aware``
+    The depth-aware synthesis (:mod:`lfrefract.synthesis.depth_aware`): the warp map's image inside
+    its exact coverage; outside it, pixels rendered from the rays that see their scene point at a
+    depth estimated from the light field itself (exact given that depth), else the warp map's.
 
 Every projector's :meth:`~CentralProjector.apply` returns float32 with NaN where it has no value
-(outside the lenses' hull, or output pixels the warp map did not fill).
+(outside the lenses' hull, or output pixels the warp map did not fill and, for ``depth-aware``,
+the render given depth did not either).
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.synthesis.depth_aware import DepthAwareOptions, DepthAwareSynthesis
 from lfrefract.synthesis.views import (
     apply_resampling,
     micro_image_samples,
@@ -55,6 +61,7 @@ __all__ = [
     "CalibrationViews",
     "CentralProjector",
     "ConventionalView",
+    "DepthAwareProjector",
     "NaiveProjector",
     "ProposedDistortionProjector",
     "ProposedProjector",
@@ -68,9 +75,10 @@ class CentralProjector(Protocol):
     """Turns a raw lenslet image into a central-projection image with intrinsics ``output.K``.
 
     What each method claims: the image's centre of projection is the main-lens centre and its axes
-    are the camera frame's. ``proposed`` makes it true inside its coverage, ``approx`` near its
-    calibration depth, ``naive`` nowhere behind a port. A calibration fitted without known corners
-    (``ApproxCalibration.known_corners`` False) gives images in the fit's own frame instead.
+    are the camera frame's. ``proposed`` makes it true inside its coverage, ``depth-aware`` there and
+    wherever its depth is right, ``approx`` near its calibration depth, ``naive`` nowhere behind a
+    port. A calibration fitted without known corners (``ApproxCalibration.known_corners`` False)
+    gives images in the fit's own frame instead.
     """
 
     @property
@@ -213,6 +221,40 @@ class ProposedProjector:
             "warp_map_key": self.warp.key,
             "port": self.warp.meta["port"],
             "options": self.warp.meta["options"],
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class DepthAwareProjector:
+    """``depth-aware``: a :class:`~lfrefract.synthesis.depth_aware.DepthAwareSynthesis`'s images.
+
+    Inside the warp map's exact coverage they are :class:`ProposedProjector`'s; outside it, pixels
+    rendered from the rays that see their scene point at the depth found in the frame's light field,
+    else the warp map's approximated pixels; NaN where neither has a value.
+    """
+
+    synthesis: DepthAwareSynthesis
+    name: str = field(default="depth-aware", init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.synthesis, DepthAwareSynthesis):
+            raise ParameterError(f"synthesis must be a DepthAwareSynthesis, got {self.synthesis!r}")
+
+    @property
+    def output(self) -> PinholeCamera:
+        """The warp map's output geometry."""
+        return self.synthesis.output
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """See :class:`CentralProjector`: ``synthesis.apply(raw).image``."""
+        return self.synthesis.apply(raw).image
+
+    def to_dict(self) -> dict:
+        """See :class:`CentralProjector`; :meth:`ProposedProjector.to_dict` plus ``depth_options``."""
+        return {
+            **ProposedProjector(self.synthesis.warp).to_dict(),
+            "method": self.name,
+            "depth_options": self.synthesis.options.to_dict(),
         }
 
 
@@ -394,11 +436,11 @@ def _warp(camera, port, output, options, warp) -> WarpMap:
     return build_warp_map(camera, port, output=output, options=options)
 
 
-def _build_naive(camera, port, *, calibration, output, options, warp) -> NaiveProjector:
+def _build_naive(camera, port, *, calibration, output, options, warp, depth_options) -> NaiveProjector:
     return NaiveProjector(ConventionalView(camera, output if output is not None else virtual_camera_for(camera)))
 
 
-def _build_approx(camera, port, *, calibration, output, options, warp) -> ApproxProjector:
+def _build_approx(camera, port, *, calibration, output, options, warp, depth_options) -> ApproxProjector:
     views = _need_calibration("approx", calibration)
     view = virtual_camera_for(camera)
     conventional = ConventionalView(camera, view)
@@ -408,15 +450,24 @@ def _build_approx(camera, port, *, calibration, output, options, warp) -> Approx
     )
 
 
-def _build_proposed(camera, port, *, calibration, output, options, warp) -> ProposedProjector:
+def _build_proposed(camera, port, *, calibration, output, options, warp, depth_options) -> ProposedProjector:
     return ProposedProjector(_warp(camera, port, output, options, warp))
 
 
-def _build_proposed_distortion(camera, port, *, calibration, output, options, warp) -> ProposedDistortionProjector:
+def _build_proposed_distortion(
+    camera, port, *, calibration, output, options, warp, depth_options
+) -> ProposedDistortionProjector:
     views = _need_calibration("proposed+distortion", calibration)
     proposed = ProposedProjector(_warp(camera, port, output, options, warp))
     images = [proposed.apply(raw) for raw in views.raws]
     return ProposedDistortionProjector(proposed.warp, views.calibrate(images, intrinsics=proposed.output))
+
+
+def _build_depth_aware(camera, port, *, calibration, output, options, warp, depth_options) -> DepthAwareProjector:
+    if port is None:
+        raise ParameterError("method 'depth-aware' needs the port (it traces the camera's rays through it)")
+    warp = _warp(camera, port, output, options, warp)
+    return DepthAwareProjector(DepthAwareSynthesis.build(camera, port, warp=warp, options=depth_options))
 
 
 #: Method names and their builders (see :func:`build_projector`).
@@ -425,6 +476,7 @@ METHODS: dict[str, Callable[..., CentralProjector]] = {
     "approx": _build_approx,
     "proposed": _build_proposed,
     "proposed+distortion": _build_proposed_distortion,
+    "depth-aware": _build_depth_aware,
 }
 
 
@@ -437,27 +489,33 @@ def build_projector(
     output: PinholeCamera | None = None,
     options: SynthesisOptions | None = None,
     warp: WarpMap | None = None,
+    depth_options: DepthAwareOptions | None = None,
 ) -> CentralProjector:
     """Build the projector of a method by name.
 
     Parameters
     ----------
     name : str
-        One of :data:`METHODS`: ``"naive"``, ``"approx"``, ``"proposed"``, ``"proposed+distortion"``.
+        One of :data:`METHODS`: ``"naive"``, ``"approx"``, ``"proposed"``, ``"proposed+distortion"``,
+        ``"depth-aware"``.
     camera : LightFieldCamera
     port : FlatPort, optional
-        Needed by the proposed methods unless ``warp`` is given; the others never look at it
-        (the approximation knows the port only through its calibration views).
+        Needed by the proposed methods unless ``warp`` is given, and always by ``depth-aware``
+        (it traces the camera's rays through it; ``warp`` must be of this port); the others never
+        look at it (the approximation knows the port only through its calibration views).
     calibration : CalibrationViews, optional
         Needed by ``approx`` (calibrated on their conventional images; the calibration depth is
         theirs) and ``proposed+distortion`` (on their synthesized images, ``K`` fixed).
     output : PinholeCamera, optional
         Output geometry; default :func:`virtual_camera_for` ``(camera)`` (the warp map's for the
-        proposed methods), so that every method's images share one ``K``.
+        proposed methods and ``depth-aware``), so that every method's images share one ``K``.
     options : SynthesisOptions, optional
-        For the proposed methods' warp map.
+        For the warp map of the proposed methods and ``depth-aware``.
     warp : WarpMap, optional
-        A prebuilt warp map for the proposed methods (it fixes ``output``).
+        A prebuilt warp map for the proposed methods and ``depth-aware`` (it fixes ``output``).
+    depth_options : DepthAwareOptions, optional
+        The depth search and render of ``depth-aware`` (default :class:`DepthAwareOptions` ``()``);
+        refused for the other methods.
 
     Returns
     -------
@@ -468,4 +526,11 @@ def build_projector(
         raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
     if output is not None and not isinstance(output, PinholeCamera):
         raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
-    return METHODS[name](camera, port, calibration=calibration, output=output, options=options, warp=warp)
+    if depth_options is not None:
+        if name != "depth-aware":
+            raise ParameterError(f"depth_options are for method 'depth-aware' only, not {name!r}")
+        if not isinstance(depth_options, DepthAwareOptions):
+            raise ParameterError(f"depth_options must be DepthAwareOptions, got {depth_options!r}")
+    return METHODS[name](
+        camera, port, calibration=calibration, output=output, options=options, warp=warp, depth_options=depth_options
+    )

@@ -31,16 +31,16 @@ Method (camera frame, metres; output pixels of a pinhole ``K`` centred at the ma
    pixels (box filter; each pixel's say bounded, see :func:`_aggregate`), the least cost wins, and
    a parabola through it and its two neighbours refines the plane index below one step (in
    ``1 / z``). The *confidence* is ``1 - c_min / c_rival``, ``c_rival`` the best cost at least
-   :data:`CONFIDENCE_GAP` planes away: near 0 where another depth fits about as well (no texture),
-   near 1 where one depth stands out.
+   planes at least :data:`CONFIDENCE_GAP_PX` of parallax across the aperture's radius away: near 0
+   where another depth fits about as well (no texture), near 1 where one depth stands out.
 4. *Render given depth* (:func:`render_given_depth`): each ray goes to the first pixel, near to far,
    at whose estimated depth it lands in that pixel; the pixel's value is its rays' plane fit at the
    pixel centre. A pixel rendered so from at least ``min_rays`` rays is *exact given depth*: every
    ray in it saw its scene point, to within the pixel and the depth's error.
 5. *Composition* (:class:`DepthAwareSynthesis`): pixels inside the warp map's exact coverage keep
    the warp map's value (exact at any depth); outside it, the depth-aware value where there is one
-   (class :data:`FILLED_EXACT_GIVEN_DEPTH`), else the warp map's nearby rays (approximated) or no
-   value.
+   and the depth's confidence reaches ``min_confidence`` (class :data:`FILLED_EXACT_GIVEN_DEPTH`),
+   else the warp map's nearby rays (approximated) or no value.
 
 How well the depth can be found is the light field's own parallax: a depth error ``dz`` at depth
 ``z`` moves the ray through aperture point ``a`` by ``f_px |a| dz / z^2`` output pixels. Between
@@ -52,6 +52,7 @@ better for the image, since a depth error costs it that same shift averaged over
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -72,7 +73,7 @@ from lfrefract.synthesis.warp_map import (
     WarpMap,
     build_warp_map,
 )
-from lfrefract.validate import non_negative_float, positive_float, positive_int
+from lfrefract.validate import bounded_float, non_negative_float, positive_float, positive_int
 
 __all__ = [
     "FILLED_EXACT_GIVEN_DEPTH",
@@ -92,8 +93,12 @@ __all__ = [
 #: see the pixel's scene point at its estimated depth.
 FILLED_EXACT_GIVEN_DEPTH = 3
 
-#: Planes between the winning depth and the rival that :attr:`DepthEstimate.confidence` compares it with.
-CONFIDENCE_GAP = 3
+#: How far from the winning depth the rival that :attr:`DepthEstimate.confidence` compares it with
+#: lies: this parallax (output pixels) between the lens centre and the usable aperture's rim. In
+#: planes it is camera-dependent: 3 on the Illum, 8 on tiny-2x. A fixed 3 planes gave the tiny-2x
+#: chessboards' correct depths a median confidence of 0.3-0.4 (their costs 3 planes away hardly
+#: differ), 1 px gives 0.8-0.9.
+CONFIDENCE_GAP_PX = 1.0
 
 #: Most blocks of rays the render accumulates apart (one per thread up to this; each block holds
 #: ``4 (7 + 3 C)`` float64 per output pixel: 0.4 GB at Illum size with RGB).
@@ -122,6 +127,16 @@ class DepthAwareOptions:
         spreads a depth edge further (about r pixels at an occlusion).
     min_rays : int
         Fewest rays a pixel's subset needs, at a depth plane and in the render.
+    min_confidence : float
+        Least :attr:`DepthEstimate.confidence` of a pixel rendered as exact given depth, in [0, 1];
+        below it the warp map's value stands (approximated). Where rays are few, at the edge of
+        what the camera sees in the water, the depth can be wrong and the value with it: on the
+        Illum behind the reference port (a closed-form plane at 0.5 m) the RMS error of those
+        pixels was 0.103 (values 0.1-0.9) with 0, 0.056 with 0.5 and 0.004 with 0.9, every pixel
+        of the field's interior kept; on tiny-2x chessboards, whose corners' confidence is lower
+        (less parallax), 0.7 already handed corner pixels back to the warp map (corners 0.142 ->
+        0.196 px RMS) and 0.5 changed nothing. Textureless pixels have a low confidence whatever
+        their depth; the warp map's nearby rays render them about as well.
     occlusion_aware : bool
         Score and render with the most consistent of the whole aperture and its halves (True; a half
         must do markedly better, :data:`~lfrefract.synthesis._depth_kernels.HALF_RATIO`) or the
@@ -142,6 +157,7 @@ class DepthAwareOptions:
     depth_steps: int = 48
     aggregation_radius_px: int = 6
     min_rays: int = 4
+    min_confidence: float = 0.5
     occlusion_aware: bool = False
     rim_margin_px: float = 0.71
     compensate_port: bool = True
@@ -165,6 +181,7 @@ class DepthAwareOptions:
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"{name} must be True or False, got {getattr(self, name)!r}")
         non_negative_float("rim_margin_px", self.rim_margin_px)
+        bounded_float("min_confidence", self.min_confidence, 0.0, 1.0)
 
     def to_dict(self) -> dict:
         """Plain data for sidecars."""
@@ -203,6 +220,8 @@ class SceneRays:
         ``(height, width)`` of the raw images.
     refracted : bool
         Whether the rays were traced through a port.
+    aperture_radius_m : float
+        The usable main-lens radius the rays were chosen within, metres.
     """
 
     origins_cam: np.ndarray
@@ -212,6 +231,7 @@ class SceneRays:
     gain: np.ndarray
     raw_shape: tuple[int, int]
     refracted: bool
+    aperture_radius_m: float
 
     def values(self, raw: np.ndarray, *, recorded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rays' values in ``raw`` and which rays hold one.
@@ -319,6 +339,7 @@ def trace_scene_rays(
         gain=gain.astype(np.float32),
         raw_shape=(height, width),
         refracted=port is not None,
+        aperture_radius_m=radius,
     )
 
 
@@ -333,7 +354,8 @@ class DepthEstimate:
         had ``min_rays`` rays.
     confidence : ndarray, float32, shape (H, W)
         ``1 - c_min / c_rival`` of the pixel's aggregated costs, in [0, 1], where ``c_rival`` is the
-        least cost at least :data:`CONFIDENCE_GAP` planes from the winner: near 0 where another
+        least cost at planes a parallax of at least :data:`CONFIDENCE_GAP_PX` (across the aperture's
+        radius) from the winner: near 0 where another
         depth fits about as well (no texture, repeated texture), near 1 where one depth stands out;
         NaN where no depth.
     plane_index : ndarray, int64, shape (H, W)
@@ -429,9 +451,11 @@ def estimate_depth(
         step = np.where(inner & (curvature > 0), 0.5 * (below - above) / curvature, 0.0)
     step = np.clip(np.nan_to_num(step), -0.5, 0.5)
     inverse = np.interp(best + step, np.arange(len(depths)), 1.0 / depths)
-    # Confidence: how far the winner stands below the best rival at least CONFIDENCE_GAP planes away.
+    # Confidence: how far the winner stands below the best rival, a parallax of at least
+    # CONFIDENCE_GAP_PX away across the aperture's radius.
+    gap = math.ceil(CONFIDENCE_GAP_PX / (fx * rays.aperture_radius_m * abs(1 / depths[0] - 1 / depths[1])))
     planes = np.arange(len(depths))[:, None, None]
-    rival = np.min(np.where(np.abs(planes - best[None]) >= CONFIDENCE_GAP, filled, np.inf), axis=0)
+    rival = np.min(np.where(np.abs(planes - best[None]) >= gap, filled, np.inf), axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         confidence = np.where(np.isfinite(rival) & (rival > 0), 1.0 - c0 / rival, 0.0)
     confidence = np.clip(confidence, 0.0, 1.0)
@@ -585,7 +609,7 @@ class DepthAwareSynthesis:
         synthesis : SynthesisOptions, optional
             The warp map's options (when it is built here).
         warp : WarpMap, optional
-            A prebuilt warp map of this camera and port.
+            A prebuilt warp map of this camera and port (refused if its metadata names others).
         progress : bool
             Show the warp map build's progress.
         """
@@ -602,8 +626,12 @@ class DepthAwareSynthesis:
                 options=synthesis,
                 progress=progress,
             )
-        elif output is not None and output != warp.output:
-            raise ParameterError(f"output {output!r} differs from the warp map's {warp.output!r}")
+        else:
+            if output is not None and output != warp.output:
+                raise ParameterError(f"output {output!r} differs from the warp map's {warp.output!r}")
+            for what, given in (("camera", camera.to_dict()), ("port", port.to_dict())):
+                if json.dumps(warp.meta.get(what), sort_keys=True) != json.dumps(given, sort_keys=True):
+                    raise ParameterError(f"the warp map was built for another {what} than the one given")
         rays = trace_scene_rays(
             camera, port, rim_margin_px=options.rim_margin_px, compensate_port=options.compensate_port
         )
@@ -637,7 +665,11 @@ class DepthAwareSynthesis:
         grey = np.ndim(raw) == 2
         image = classic if grey else classic.copy()
         classes = self.warp.filled_classes.astype(np.uint8)
-        given = (classes != FILLED_EXACT) & (used >= self.options.min_rays)
+        given = (
+            (classes != FILLED_EXACT)
+            & (used >= self.options.min_rays)
+            & (depth.confidence >= self.options.min_confidence)
+        )
         image = np.where(given if grey else given[..., None], rendered[..., 0] if grey else rendered, image)
         classes[given] = FILLED_EXACT_GIVEN_DEPTH
         image = image.astype(np.float32)

@@ -13,9 +13,11 @@ pose and warp map, and the calibration chessboards) and returns either
 Built in, in table order (:data:`BUILTIN_METHODS`): ``approx far`` and ``approx near`` (the
 approximation baseline calibrated per camera on the chessboards at the far / near depth),
 ``proposed`` (the refraction-free synthesis), ``proposed+distortion`` (with a residual distortion
-fitted on the far boards) and ``ideal`` (the simulator's ground-truth refraction-free images: the
-floor). Others are added with :func:`register_method` or, from an installed package, through the
-entry-point group ``lfrefract.methods`` (:data:`ENTRY_POINT_GROUP`), whose entries name a factory::
+fitted on the far boards), ``depth-aware`` (the synthesis with the pixels outside its exact coverage
+rendered at a depth found in each capture's light field, :mod:`lfrefract.synthesis.depth_aware`)
+and ``ideal`` (the simulator's ground-truth refraction-free images: the floor). Others are added
+with :func:`register_method` or, from an installed package, through the entry-point group
+``lfrefract.methods`` (:data:`ENTRY_POINT_GROUP`), whose entries name a factory::
 
     [project.entry-points."lfrefract.methods"]
     "my method" = "mypackage.methods:my_factory"
@@ -220,6 +222,11 @@ def _proposed_distortion(rig: MethodRig) -> CentralImages:
     )
 
 
+def _depth_aware(rig: MethodRig) -> CentralImages:
+    """The depth-aware synthesis (the warp map of the true port, the camera's rays traced through it)."""
+    return _projectors(rig, lambda c: build_projector("depth-aware", c.camera, c.port, warp=c.warp))
+
+
 def _ideal(rig: MethodRig) -> CentralImages:
     """The simulator's ground-truth refraction-free images (the floor every method is held to)."""
     return CentralImages(
@@ -233,6 +240,7 @@ BUILTIN_METHODS: dict[str, MethodFactory] = {
     "approx near": _approx("near"),
     "proposed": _proposed,
     "proposed+distortion": _proposed_distortion,
+    "depth-aware": _depth_aware,
     "ideal": _ideal,
 }
 

@@ -14,10 +14,11 @@ import pytest
 from lfrefract.cli import SYNTH_DEPTH_ROLE, build_parser, main, synth_outputs
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import write_json
-from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareOptions
+from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareOptions, trace_scene_rays
 from lfrefract.synthesis.warp_map import FILLED_APPROXIMATED, FILLED_EMPTY, FILLED_EXACT
-from tests.lfrefract.test_cli import PORT, TINY, commands, holed_raw, make_capture, refused
+from tests.lfrefract.test_cli import PORT, TINY, commands, make_capture, refused
 from tests.lfrefract.test_cli_outputs import snapshot
+from tests.lfrefract.test_depth_aware import crossing, raw_of, texture
 
 DEPTH_AWARE = ["--method", "depth-aware"]
 CLASSES = {
@@ -26,6 +27,15 @@ CLASSES = {
     "exact": FILLED_EXACT,
     "exact_given_depth": FILLED_EXACT_GIVEN_DEPTH,
 }
+
+
+def plane_capture_raw() -> np.ndarray:
+    """RGB raw of the tiny camera behind PORT looking at a textured plane at 0.5 m (each usable ray
+    holds the texture where it crosses the plane; a scene with a depth to find, unlike noise)."""
+    rays = trace_scene_rays(TINY, PORT)
+    x = crossing(rays, 0.5)
+    grey = raw_of(rays, texture(x[:, 0], x[:, 1]))
+    return np.stack([grey, 0.8 * grey, 0.6 * grey + 0.1], axis=2).astype(np.float32)
 
 
 def run(argv: list[str]) -> str:
@@ -41,7 +51,7 @@ def synthesized(tmp_path_factory) -> dict:
     """One capture of the tiny camera behind the 20 deg port, synthesized by both methods (one map
     cache: the depth-aware run loads the proposed run's map)."""
     root = tmp_path_factory.mktemp("depth-aware")
-    raw = make_capture(root / "R")
+    raw = make_capture(root / "R", plane_capture_raw())
     cache = ["--map-cache", str(root / "maps")]
     proposed = run([*commands(raw, root / "p")["synth"], *cache])
     depth_aware = run([*commands(raw, root / "d")["synth"], *cache, *DEPTH_AWARE])
@@ -230,7 +240,10 @@ def test_depth_aware_refuses_colour_by_cfa_on_a_lytro_capture_and_takes_the_demo
 
 
 def test_depth_aware_gives_masked_raw_pixels_no_weight(tmp_path, capsys):
-    holed, n_nan = holed_raw(0.03)
+    holed = plane_capture_raw()
+    holes = np.random.default_rng(1).random(holed.shape[:2]) < 0.03
+    holed[holes, 0] = np.nan
+    n_nan = int(holes.sum())
     raw = make_capture(tmp_path / "R", raw=holed)
     argv = [*commands(raw, tmp_path / "out")["synth"], *DEPTH_AWARE]
     assert "pass --nonfinite mask" in refused(capsys, argv)

@@ -279,6 +279,7 @@ def test_values_leave_out_unrecorded_pixels_and_refuse_bad_input():
         ({"occlusion_aware": 1}, "occlusion_aware"),
         ({"compensate_port": "yes"}, "compensate_port"),
         ({"rim_margin_px": -0.5}, "rim_margin_px"),
+        ({"min_confidence": 1.5}, "min_confidence"),
     ],
 )
 def test_options_refuse_bad_values(options, name):
@@ -295,6 +296,12 @@ def test_depth_planes_are_uniform_in_inverse_depth():
 
 def test_build_refuses_a_warp_map_of_another_camera():
     synthesis = setup()
+    camera = camera_preset(CAMERA)
+    other_port = FlatPort.from_degrees(**{**PORT, "tilt_x_deg": 5.0})
+    with pytest.raises(ParameterError, match="another port"):
+        DepthAwareSynthesis.build(camera, other_port, warp=synthesis.warp)
+    with pytest.raises(ParameterError, match="another camera"):
+        DepthAwareSynthesis.build(camera_preset("tiny"), FlatPort.from_degrees(**PORT), warp=synthesis.warp)
     other = camera_preset("tiny")
     with pytest.raises(ParameterError, match="raw images"):
         DepthAwareSynthesis(warp=synthesis.warp, rays=trace_scene_rays(other, FlatPort.from_degrees(**PORT)))

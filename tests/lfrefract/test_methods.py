@@ -91,7 +91,7 @@ def test_conventional_view_checks_the_raw_shape(camera, raw):
 
 
 def test_registry_names_every_method():
-    assert set(METHODS) == {"naive", "approx", "proposed", "proposed+distortion"}
+    assert set(METHODS) == {"naive", "approx", "proposed", "proposed+distortion", "depth-aware"}
 
 
 def test_proposed_is_the_warp_map_with_nan_where_unfilled(camera, port, raw, warp):

@@ -18,7 +18,7 @@ def test_demo_writes_a_report_with_every_method(tmp_path, capsys):
     assert "holds the 2 x bound" in printed
     assert "holds the paper's claim" in printed
     report = (out / "report.md").read_text()
-    for name in ("approx far", "approx near", "proposed", "proposed+distortion", "ideal"):
+    for name in ("approx far", "approx near", "proposed", "proposed+distortion", "depth-aware", "ideal"):
         assert f"| {name} |" in report
     for figure in ("planes_disparity_zncc.png", "planes_disparity_sgbm.png", "planes_errors.png"):
         assert f"]({figure})" in report

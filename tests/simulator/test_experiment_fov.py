@@ -312,12 +312,13 @@ def test_given_depth_share_holds_the_exact_pixels(tiny_run):
 @pytest.mark.parametrize("tilt_x_deg", [0.0, 30.0])
 def test_given_depth_share_is_what_the_depth_aware_synthesis_renders(tilt_x_deg):
     """On a closed-form plane at GIVEN_DEPTH_M the depth-aware synthesis fills the pixels counted as recorded."""
-    from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareSynthesis
+    from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareOptions, DepthAwareSynthesis
     from simulator.experiments.fov import GIVEN_DEPTH_M, seen_share
 
     setup = setup_for("tiny")
     port = setup.port(tilt_x_deg)
-    synthesis = DepthAwareSynthesis.build(setup.camera, port)
+    # Every pixel its rays render, whatever the depth's confidence: the geometric question.
+    synthesis = DepthAwareSynthesis.build(setup.camera, port, options=DepthAwareOptions(min_confidence=0.0))
     rays = synthesis.rays
     o, d = rays.origins_cam.astype(np.float64), rays.directions_cam.astype(np.float64)
     x = o + ((GIVEN_DEPTH_M - o[:, 2]) / d[:, 2])[:, None] * d

@@ -35,8 +35,8 @@ def test_files_and_figures(planes):
     names = ("table.csv", "table.md", "meta.json", "planes_disparity_zncc.png", "planes_disparity_sgbm.png")
     for name in (*names, "planes_errors.png"):
         assert (out / name).is_file(), name
-    assert len(rows) == 15
-    assert len(every) == 30  # and as many with SGBM
+    assert len(rows) == 18  # six methods, three depths
+    assert len(every) == 36  # and as many with SGBM
     assert all(row["boards"] >= 10 for row in rows.values())  # the rig calibrated on most boards
 
 
