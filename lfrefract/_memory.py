@@ -100,7 +100,7 @@ def depth_aware_bytes(
 
     * the traced rays, 37 bytes per usable raw pixel (float32 origin and direction, int64 raw index,
       int8 quadrant, float32 gain), taken here as every raw pixel, plus the trace's float64
-      temporaries, about 500 bytes per raw pixel of one block of 2^20;
+      temporaries, about 200 bytes per raw pixel of one block (at most 2^20 pixels);
     * per frame the rays' values and the kept rays' copies, ``4 channels + 28`` bytes per ray, twice;
     * the plane sweep: the cost volume, ``depth_steps`` float32 per output pixel, about five times
       over while it is aggregated, and per thread one plane's accumulators (``7 + 3 channels``
@@ -110,7 +110,7 @@ def depth_aware_bytes(
 
     The sweep and the render do not overlap.
     """
-    rays = 37 * raw_pixels + 500 * (1 << 20)
+    rays = 37 * raw_pixels + 200 * min(raw_pixels, 1 << 20)
     per_frame = 2 * (4 * channels + 28) * raw_pixels
     sweep = 5 * 4 * depth_steps * output_pixels + threads * (8 * (8 + 4 * channels) + 64) * output_pixels
     render = render_chunks * 32 * (7 + 3 * channels) * output_pixels + 8 * channels * output_pixels

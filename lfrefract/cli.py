@@ -351,10 +351,7 @@ def synth(args: argparse.Namespace) -> int:
         for colour_map in maps.values():  # a pixel some colour has no ray for has no value
             classes[~colour_map.filled] = FILLED_EMPTY
     else:
-        start = time.perf_counter()
-        warp, how = _synth_map(args, camera, port, output, options, capture.channels)
-        map_seconds = time.perf_counter() - start
-        if depth_options is not None:
+        if depth_options is not None:  # before the map is built
             require_memory(
                 f"synth --method depth-aware: {depth_options.depth_steps} depth planes of a {output.width_px} x "
                 f"{output.height_px} px image from {camera.sensor.width_px} x {camera.sensor.height_px} raw pixels",
@@ -367,6 +364,10 @@ def synth(args: argparse.Namespace) -> int:
                     render_chunks=render_chunks(),
                 ),
             )
+        start = time.perf_counter()
+        warp, how = _synth_map(args, camera, port, output, options, capture.channels)
+        map_seconds = time.perf_counter() - start
+        if depth_options is not None:
             start = time.perf_counter()
             rays = trace_scene_rays(
                 camera, port, rim_margin_px=depth_options.rim_margin_px, compensate_port=depth_options.compensate_port

@@ -546,22 +546,12 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
     ax = fig.add_subplot()
     for colour, n in zip(colours, setup.f_numbers, strict=True):
         sel = [r for r in tilt_rows if r["f_number"] == n]
-        ax.plot(
-            [r["tilt_deg"] for r in sel],
-            [100 * r["exact_share"] for r in sel],
-            "o-",
-            ms=3,
-            color=colour,
-            label=f"f/{n:g}, exact",
-        )
-        ax.plot(
-            [r["tilt_deg"] for r in sel],
-            [100 * r["given_depth_share"] for r in sel],
-            "x--",
-            ms=3,
-            color=colour,
-            label=f"f/{n:g}, exact given depth ({GIVEN_DEPTH_M:g} m)",
-        )
+        for column, style, what in (
+            ("exact_share", "o-", "exact"),
+            ("given_depth_share", "x--", f"exact given depth ({GIVEN_DEPTH_M:g} m)"),
+        ):
+            tilts = [r["tilt_deg"] for r in sel]
+            ax.plot(tilts, [100 * r[column] for r in sel], style, ms=3, color=colour, label=f"f/{n:g}, {what}")
     ax.set_xlabel("port tilt about x [deg]")
     ax.set_ylabel("pixels [% of the refraction-free image]")
     ax.set_title(f"exact share (paper's method) and recorded share (depth-aware): {setup.title}", fontsize=8)

@@ -109,3 +109,37 @@ def test_the_view_stack_estimate_is_within_a_factor_of_two_of_the_measured_peak(
     measured = _peak_bytes(lambda: subaperture_stack(TINY, raw, grid=grid, output=output))
     estimate = view_stack_bytes(TINY, output, grid=grid, channels=3)
     assert MEMORY_ESTIMATE_RATIO_MIN <= measured / estimate <= MEMORY_ESTIMATE_RATIO_MAX, (measured, estimate)
+
+
+_DEPTH_AWARE_PEAK = """
+import resource, numpy as np
+from lfrefract import FlatPort, camera_preset
+from lfrefract._memory import available_cpus, depth_aware_bytes
+from lfrefract.synthesis.depth_aware import DepthAwareSynthesis, render_chunks, trace_scene_rays
+from lfrefract.synthesis.warp_map import build_warp_map
+port = FlatPort.from_degrees(tilt_x_deg=25.0, tilt_y_deg=10.0, distance_m=0.04, thickness_m=0.004)
+tiny = camera_preset("tiny")  # compiles (or loads) the kernels first
+DepthAwareSynthesis(warp=build_warp_map(tiny, port), rays=trace_scene_rays(tiny, port)).apply(
+    np.ones((tiny.sensor.height_px, tiny.sensor.width_px, 3), np.float32))
+camera = camera_preset("tiny-2x")
+warp = build_warp_map(camera, port)
+raw = np.random.default_rng(0).random((camera.sensor.height_px, camera.sensor.width_px, 3), dtype=np.float32)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+DepthAwareSynthesis(warp=warp, rays=trace_scene_rays(camera, port)).apply(raw)
+grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024
+o = warp.output
+print(grown / depth_aware_bytes(raw_pixels=raw.shape[0] * raw.shape[1], output_pixels=o.width_px * o.height_px,
+      channels=3, depth_steps=48, threads=available_cpus(), render_chunks=render_chunks()))
+"""
+
+
+def test_the_depth_aware_estimate_errs_high_by_at_most_the_bound():
+    """Numba allocates the sweep's and the render's accumulators, which tracemalloc does not see: the
+    peak resident memory's growth in a fresh process stands in (measured 0.57 on tiny-2x)."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _DEPTH_AWARE_PEAK], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    ratio = float(done.stdout.strip().splitlines()[-1])
+    assert MEMORY_ESTIMATE_RATIO_MIN <= ratio <= MEMORY_ESTIMATE_RATIO_MAX, ratio
