@@ -3,8 +3,8 @@
 Renders the default stereo rig (two tiny-2x light-field cameras behind one glass wall tilted
 20 deg, ``scenes/rigs/default.toml``) in front of chessboards and a textured plane, turns the raw
 images into central projections by every method (the approximation calibrated near and far, the
-refraction-free synthesis with and without a residual distortion, and the simulator's ideal
-images), runs stereo for each and writes a report: the ``planes`` experiment at the tiny scale
+refraction-free synthesis with and without a residual distortion, the depth-aware synthesis, and
+the simulator's ideal images), runs stereo for each and writes a report: the ``planes`` experiment at the tiny scale
 (:mod:`simulator.experiments.planes`) plus point clouds and ``report.md``.
 """
 
