@@ -747,7 +747,7 @@ OVERSIZE_REFUSAL_SECONDS = 1.0
 # most 25 %). Measured: warp maps 0.49-0.83 (analytic search) and 0.96-1.12 (k-d tree), naive views
 # 0.75-0.88, view stacks 0.80-0.91. tracemalloc counts numpy's allocations, not numba's or qhull's
 # small internal ones. The depth-aware synthesis (whose accumulators numba allocates) is measured by
-# the growth of the peak resident memory instead: 0.57 on tiny-2x.
+# the growth of the peak resident memory (VmHWM, reset before the work) instead: 0.59-0.70 on tiny-2x.
 MEMORY_ESTIMATE_RATIO_MIN = 0.4
 MEMORY_ESTIMATE_RATIO_MAX = 1.25
 
