@@ -44,9 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfrefract.errors import FileFormatError
 from simulator.dataset import parse_spec, run_dataset
-from simulator.dataset.manifest import read_dataset
 
 #: Every optional output that is a label (``--labels``).
 LABEL_OUTPUTS = ["refraction_free", "views", "labels", "raw_truth"]
@@ -96,17 +94,10 @@ def _bytes_per_sample(root: Path) -> dict[str, float]:
 
 
 def _fresh(out: Path) -> None:
-    """Clear ``out`` for a run: absent, empty, or a dataset this benchmark wrote (``bench``); anything
-    else under ``--out`` is the user's and is refused, not removed."""
-    if not out.exists() or (out.is_dir() and not any(out.iterdir())):
-        return
-    try:
-        ours = read_dataset(out).get("name") == "bench"
-    except (FileFormatError, OSError):
-        ours = False
-    if not ours:
-        raise SystemExit(f"{str(out)!r} exists and is not a dataset of this benchmark: refusing to remove it")
-    shutil.rmtree(out)
+    """Refuse a run folder that holds anything: nothing under ``--out`` is removed, not even an earlier
+    run of this benchmark (the user may have put files into it); name a new ``--out`` to run again."""
+    if out.exists() and not (out.is_dir() and not any(out.iterdir())):
+        raise SystemExit(f"{str(out)!r} exists and is not empty: name a new --out (nothing is removed)")
 
 
 def _labels(args, seed: int, base: Path) -> None:

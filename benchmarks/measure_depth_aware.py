@@ -180,10 +180,11 @@ def corners(args: argparse.Namespace) -> None:
                 true_image = np.where((result.classes == 3)[..., None], true_image, result.image)
                 values_air, keep_air = straight.values(raw)
                 air = estimate_depth(straight, values_air, output, synthesis.options, keep=keep_air)
+                classic = warp.apply(raw)
                 found = {
                     name: boards.find_corners(np.nan_to_num(image))
                     for name, image in (
-                        ("classic", warp.apply(raw)),
+                        ("classic", classic),
                         ("depth_aware", result.image),
                         ("true_depth", true_image),
                     )
@@ -216,7 +217,7 @@ def corners(args: argparse.Namespace) -> None:
                 rows.append(row)
                 print({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
                 if out is not None:
-                    _board_figure(out, row, result, truth, mask, warp.apply(raw))
+                    _board_figure(out, row, result, truth, mask, classic)
     _corner_summary(rows)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -52,6 +52,7 @@ better for the image, since a depth error costs it that same shift averaged over
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -232,6 +233,19 @@ class SceneRays:
     raw_shape: tuple[int, int]
     refracted: bool
     aperture_radius_m: float
+
+    def kept(self, keep: np.ndarray | None) -> SceneRays:
+        """These rays where ``keep`` (bool, shape (N,)) holds; themselves if it holds everywhere or is None."""
+        if keep is None or bool(np.all(keep)):
+            return self
+        return dataclasses.replace(
+            self,
+            origins_cam=self.origins_cam[keep],
+            directions_cam=self.directions_cam[keep],
+            raw_index=self.raw_index[keep],
+            quadrant=self.quadrant[keep],
+            gain=self.gain[keep],
+        )
 
     def values(self, raw: np.ndarray, *, recorded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rays' values in ``raw`` and which rays hold one.
@@ -470,9 +484,8 @@ def estimate_depth(
 def _kept(rays: SceneRays, keep: np.ndarray | None, values: np.ndarray) -> tuple[np.ndarray, ...]:
     if not isinstance(rays, SceneRays):
         raise ParameterError(f"rays must be SceneRays, got {rays!r}")
+    rays = rays.kept(keep)
     origins, directions, quadrant = rays.origins_cam, rays.directions_cam, rays.quadrant
-    if keep is not None:
-        origins, directions, quadrant = origins[keep], directions[keep], quadrant[keep]
     if values.ndim != 2 or values.shape[0] != origins.shape[0]:
         raise ParameterError(f"values must have shape ({origins.shape[0]}, C), got {values.shape}")
     return origins, directions, quadrant
@@ -659,19 +672,19 @@ class DepthAwareSynthesis:
         DepthAwareResult
         """
         values, keep = self.rays.values(raw, recorded=recorded)
-        depth = estimate_depth(self.rays, values, self.output, self.options, keep=keep)
-        rendered, used = render_given_depth(self.rays, values, self.output, depth.depth_m, self.options, keep=keep)
+        rays = self.rays.kept(keep)  # once for the sweep and the render
+        depth = estimate_depth(rays, values, self.output, self.options)
+        rendered, used = render_given_depth(rays, values, self.output, depth.depth_m, self.options)
         classic = self.warp.apply(raw)
         grey = np.ndim(raw) == 2
-        image = classic if grey else classic.copy()
         classes = self.warp.filled_classes.astype(np.uint8)
         given = (
             (classes != FILLED_EXACT)
             & (used >= self.options.min_rays)
             & (depth.confidence >= self.options.min_confidence)
         )
-        image = np.where(given if grey else given[..., None], rendered[..., 0] if grey else rendered, image)
+        image = np.where(given if grey else given[..., None], rendered[..., 0] if grey else rendered, classic)
         classes[given] = FILLED_EXACT_GIVEN_DEPTH
-        image = image.astype(np.float32)
+        image = image.astype(np.float32, copy=False)
         image[classes == FILLED_EMPTY] = math.nan
         return DepthAwareResult(image=image, depth=depth, classes=classes, rays_used=used)

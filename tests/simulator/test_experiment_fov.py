@@ -314,18 +314,15 @@ def test_given_depth_share_is_what_the_depth_aware_synthesis_renders(tilt_x_deg)
     """On a closed-form plane at GIVEN_DEPTH_M the depth-aware synthesis fills the pixels counted as recorded."""
     from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareOptions, DepthAwareSynthesis
     from simulator.experiments.fov import GIVEN_DEPTH_M, seen_share
+    from tests.lfrefract.test_depth_aware import crossing, raw_of
 
     setup = setup_for("tiny")
     port = setup.port(tilt_x_deg)
     # Every pixel its rays render, whatever the depth's confidence: the geometric question.
     synthesis = DepthAwareSynthesis.build(setup.camera, port, options=DepthAwareOptions(min_confidence=0.0))
-    rays = synthesis.rays
-    o, d = rays.origins_cam.astype(np.float64), rays.directions_cam.astype(np.float64)
-    x = o + ((GIVEN_DEPTH_M - o[:, 2]) / d[:, 2])[:, None] * d
+    x = crossing(synthesis.rays, GIVEN_DEPTH_M)
     texture = 0.5 + 0.4 * np.sin(2 * np.pi * x[:, 0] / 0.05) * np.cos(2 * np.pi * x[:, 1] / 0.07)
-    raw = np.zeros(rays.raw_shape[0] * rays.raw_shape[1], dtype=np.float32)
-    raw[rays.raw_index] = texture / rays.gain
-    result = synthesis.apply(raw.reshape(rays.raw_shape))
+    result = synthesis.apply(raw_of(synthesis.rays, texture))
     rendered = float(np.mean(np.isin(result.classes, (FILLED_EXACT_GIVEN_DEPTH, 2))))
     share = seen_share(setup.camera, port, synthesis.output)
     assert share == pytest.approx(rendered, abs=FOV_SEEN_SHARE_RENDERED)
