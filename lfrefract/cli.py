@@ -83,10 +83,16 @@ from lfrefract import (
     virtual_camera_for,
 )
 from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory, warp_map_bytes
-from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port
+from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
-from lfrefract.calibration.port import CORNER_METHODS, BoardView, board_view_from_light_field
+from lfrefract.calibration.joint import JointCalibration
+from lfrefract.calibration.port import (
+    CORNER_METHODS,
+    PORT_CALIBRATION_KIND,
+    BoardView,
+    board_view_from_light_field,
+)
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
@@ -96,6 +102,8 @@ from lfrefract.formats.capture import (
     CaptureParameters,
     camera_from_option,
     capture_parameters,
+    check_port_ray_model,
+    correction_estimate_from_option,
     mask_warp_map,
     mla_from_file,
     port_from_file,
@@ -105,13 +113,14 @@ from lfrefract.formats.capture import (
 )
 from lfrefract.formats.exr import write_exr
 from lfrefract.formats.flatport import write_flat_port
-from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
+from lfrefract.formats.jsonio import SCHEMA_VERSION, read_json, write_json
 from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
 from lfrefract.formats.paramfile import read_camera_file
 from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
+from lfrefract.optics.ray_correction import PARAMETERS, RayCorrection
 from lfrefract.synthesis.depth_aware import (
     FILLED_EXACT_GIVEN_DEPTH,
     DepthAwareOptions,
@@ -163,7 +172,7 @@ SYNTH_CONFIDENCE_ROLE = "confidence"
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"
 MLA_KIND = "lfrefract.calibrate.mla"
-PORT_KIND = "lfrefract.calibrate.port"
+PORT_KIND = PORT_CALIBRATION_KIND
 
 __all__ = [
     "CALIBRATE_COMMANDS",
@@ -315,6 +324,8 @@ def synth(args: argparse.Namespace) -> int:
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     by_cfa = _colour_by_cfa(args, capture)
     ray_correction = ray_correction_from_option(args.camera)
+    if args.port is not None:
+        check_port_ray_model(args.port, ray_correction, camera=args.camera)
     if depth_options is not None:
         _depth_aware_takes(args, by_cfa, ray_correction is not None)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
@@ -716,11 +727,17 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
     flat_port = out.with_suffix(".txt")
     first = _board_parameters(args)
-    prepare_output_files(
-        {out: ExpectedKind(json_kind=PORT_KIND), flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_KIND)},
-        inputs=_board_inputs(args),
-        overwrite=args.overwrite,
-    )
+    outputs = {out: ExpectedKind(json_kind=PORT_KIND), flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_KIND)}
+    prior = None
+    if args.refine_camera is not None:
+        refined_out = Path(args.refine_camera)
+        if refined_out.suffix.lower() != ".json":
+            raise ParameterError(f"--refine-camera must name a .json file, got {args.refine_camera!r}")
+        if args.camera is None:
+            raise ParameterError("--refine-camera needs --camera: the camera calibration to refine")
+        prior = correction_estimate_from_option(args.camera)
+        outputs[refined_out] = ExpectedKind(json_kind=CAMERA_CALIBRATION_KIND)
+    prepare_output_files(outputs, inputs=_board_inputs(args), overwrite=args.overwrite)
     camera = _known(first.camera, first.raw_path)
     known = first.port  # the first capture's port, if its meta.json has one
     view = virtual_camera_for(camera)
@@ -744,26 +761,65 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
     views = _board_views(args, camera, view, pattern, command="port", method=args.corners, offsets_px=offsets)
-    correction = ray_correction_from_option(args.camera)
-    if correction is not None:  # a calibrated camera: its rays, not the thin lens's
-        views = [corrected_view(v, correction, view) for v in views]
-    result = calibrate_port(view, views, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
-    write_json(
-        out,
-        {
-            "kind": PORT_KIND,
-            "sources": [str(p) for p in args.boards],
-            "files": {"flat_port": flat_port.name},
-            **result.to_dict(),
-        },
-    )
+    glass = {"thickness_m": thickness, "n_air": n_air, "n_glass": n_glass, "n_water": n_water}
+    joint = None
+    correction: RayCorrection | None
+    if prior is not None:  # the port and the camera's ray model together
+        joint = calibrate_port_and_camera(view, views, prior=prior, **glass)
+        result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
+    else:
+        correction, model_file = ray_correction_from_option(args.camera), args.camera
+        if correction is not None:  # a calibrated camera: its rays, not the thin lens's
+            views = [corrected_view(v, correction, view) for v in views]
+        result = calibrate_port(view, views, **glass)
+    data = {
+        "kind": PORT_KIND,
+        "sources": [str(p) for p in args.boards],
+        "files": {"flat_port": flat_port.name},
+        "ray_model": {"camera": model_file, "correction": None if correction is None else correction.to_dict()},
+        **result.to_dict(),
+    }
+    if joint is not None:
+        data["joint_refinement"] = joint.to_dict()
+        write_json(Path(args.refine_camera), _refined_camera(args, joint, out))
+    write_json(out, data)
     write_flat_port(flat_port, result.port)
+    refined = (
+        ""
+        if joint is None
+        else f"; camera refined with it (moved {math.sqrt(joint.prior_chi2):.1f} sigma of its in-air estimate; "
+        f"the port on the in-air model alone: distance {joint.sequential.port.distance_m * 1e3:.2f} mm), "
+        f"wrote {args.refine_camera}"
+    )
     print(
         f"port normal {np.round(result.port.normal, 5).tolist()} (+- {result.normal_std_deg:.3f} deg), distance "
         f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}), "
-        f"residual {result.rms_px:.3f} px RMS; wrote {out} and {out.with_suffix('.txt')}"
+        f"residual {result.rms_px:.3f} px RMS{refined}; wrote {out} and {out.with_suffix('.txt')}"
     )
     return 0
+
+
+def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out: Path) -> dict:
+    """The camera calibration of ``--camera`` with the ray model ``calibrate port --refine-camera``
+    refined: the same file's data, its correction and covariance replaced, the in-air ones kept
+    under ``refinement``."""
+    data = read_json(Path(args.camera))
+    data.pop("schema_version", None)  # write_json stamps its own
+    refined = joint.correction
+    data["correction"] = refined.correction.to_dict()
+    data["correction_std"] = dict(zip(PARAMETERS, refined.std.tolist(), strict=True))
+    data["correction_covariance"] = refined.covariance_to_dict()
+    data["refinement"] = {
+        "by": "lfrefract calibrate port --refine-camera",
+        "camera": str(args.camera),
+        "port": str(port_out),
+        "sources": [str(p) for p in args.boards],
+        "prior_chi2": joint.prior_chi2,
+        "in_air_correction": joint.prior.correction.to_dict(),
+        "in_air_correction_covariance": joint.prior.covariance_to_dict(),
+        "note": "ray_rms_m, initial_ray_rms_m, per_view_rms_m and poses are the in-air fit's, with in_air_correction",
+    }
+    return data
 
 
 def calibrate_approx_command(args: argparse.Namespace) -> int:
@@ -1102,6 +1158,12 @@ def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         help="with --corners views: also the four sub-aperture views this far from the micro-image centres "
         "(0: the central view only)",
+    )
+    parser.add_argument(
+        "--refine-camera",
+        metavar="CAMERA_OUT.json",
+        help="refine the ray model of --camera (a camera calibration) together with the port, within its in-air "
+        "uncertainty, and write the refined camera calibration here; synthesize with it and the port",
     )
 
 

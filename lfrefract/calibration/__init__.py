@@ -4,6 +4,7 @@ approximation baseline)."""
 from lfrefract.calibration.approx import ApproxCalibration, calibrate_approx, detect_chessboard
 from lfrefract.calibration.camera import CameraCalibration, RayCorrection, calibrate_camera
 from lfrefract.calibration.corners import CornerTracks, light_field_corners
+from lfrefract.calibration.joint import JointCalibration, calibrate_port_and_camera
 from lfrefract.calibration.mla import LATTICE_MODELS, LENS_STATUS, MlaCalibration, calibrate_mla
 from lfrefract.calibration.port import (
     BoardView,
@@ -22,6 +23,7 @@ __all__ = [
     "CalibrationError",
     "CameraCalibration",
     "CornerTracks",
+    "JointCalibration",
     "MlaCalibration",
     "PortCalibration",
     "RayCorrection",
@@ -30,6 +32,7 @@ __all__ = [
     "calibrate_camera",
     "calibrate_mla",
     "calibrate_port",
+    "calibrate_port_and_camera",
     "detect_chessboard",
     "light_field_corners",
     "project_through_port",

@@ -40,9 +40,16 @@ from lfrefract.calibration.port import BoardView
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
-from lfrefract.optics.ray_correction import PARAMETERS, RayCorrection, apply_correction
+from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection, apply_correction
 
-__all__ = ["CAMERA_CALIBRATION_KIND", "CameraCalibration", "RayCorrection", "calibrate_camera", "corrected_view"]
+__all__ = [
+    "CAMERA_CALIBRATION_KIND",
+    "CameraCalibration",
+    "RayCorrection",
+    "calibrate_camera",
+    "corrected_view",
+    "observed_rays",
+]
 
 #: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
 CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
@@ -72,6 +79,10 @@ class CameraCalibration:
     correction_std : tuple of float
         Standard deviations of the correction's :data:`~lfrefract.optics.ray_correction.PARAMETERS`
         from the fit's Jacobian.
+    correction_covariance : ndarray, shape (5, 5)
+        Their covariance (marginal over the board poses), scaled by the residual variance: what a
+        joint refinement with the port (:func:`lfrefract.calibration.joint.refine_camera_and_port`)
+        takes as the in-air captures' say.
     poses : tuple of tuple of float
         Each capture's board pose: rotation vector (rad) and translation (m), board to camera frame.
     """
@@ -82,7 +93,13 @@ class CameraCalibration:
     initial_ray_rms_m: float
     per_view_rms_m: tuple[float, ...]
     correction_std: tuple[float, ...]
+    correction_covariance: np.ndarray
     poses: tuple[tuple[float, ...], ...]
+
+    @property
+    def estimate(self) -> CorrectionEstimate:
+        """The correction with its covariance."""
+        return CorrectionEstimate(correction=self.correction, covariance=self.correction_covariance)
 
     def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
         """The calibrated ray of each raw pixel (``uv`` (N, 2) or every pixel, as
@@ -99,6 +116,7 @@ class CameraCalibration:
             "initial_ray_rms_m": self.initial_ray_rms_m,
             "per_view_rms_m": list(self.per_view_rms_m),
             "correction_std": dict(zip(PARAMETERS, self.correction_std, strict=True)),
+            "correction_covariance": self.estimate.covariance_to_dict(),
             "poses": [list(p) for p in self.poses],
             "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * a, "
             "pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); lfrefract.optics.ray_correction",
@@ -109,8 +127,9 @@ def _board_points(view: BoardView) -> np.ndarray:
     return np.column_stack([view.board_points_m, np.zeros(len(view.board_points_m))])
 
 
-def _observed_rays(view: BoardView, k_inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Aperture points (N, 2) and thin-lens slopes (N, 2) of a view's corner observations."""
+def observed_rays(view: BoardView, k_inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Aperture points (N, 2, metres on z = 0) and thin-lens slopes (N, 2) of a view's corner
+    observations, for the inverse ``k_inverse`` (3, 3) of the views' ``K``."""
     x = np.column_stack([view.corners_px, np.ones(len(view.corners_px))]) @ k_inverse.T
     return view.centres[:, :2], x[:, :2] / x[:, 2:3]
 
@@ -152,7 +171,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
     if len(views) < MIN_VIEWS:
         raise CalibrationError(f"a camera calibration needs at least {MIN_VIEWS} board captures, got {len(views)}")
     k_matrix = view.K
-    observed = [(_board_points(v), *_observed_rays(v, np.linalg.inv(k_matrix))) for v in views]
+    observed = [(_board_points(v), *observed_rays(v, np.linalg.inv(k_matrix))) for v in views]
     poses = []
     for k, v in enumerate(views):
         central = v.central if v.central.sum() >= 4 else np.ones(len(v.corners_px), dtype=bool)
@@ -183,6 +202,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
     try:
         covariance = np.linalg.pinv(solution.jac.T @ solution.jac) * sigma2
         std = np.sqrt(np.clip(np.diag(covariance)[:npar], 0.0, None))
+        correction_covariance = (covariance[:npar, :npar] + covariance[:npar, :npar].T) / 2.0
     except np.linalg.LinAlgError:
         raise CalibrationError("the board captures do not determine the camera's ray model") from None
     if not (std[0] <= MAX_SCALE_STD and std[1] <= MAX_SCALE_STD):
@@ -201,6 +221,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         initial_ray_rms_m=initial_rms,
         per_view_rms_m=tuple(per_view),
         correction_std=tuple(float(s) for s in std),
+        correction_covariance=correction_covariance,
         poses=tuple(tuple(float(x) for x in solution.x[npar + 6 * k : npar + 6 + 6 * k]) for k in range(n)),
     )
 
@@ -213,7 +234,7 @@ def corrected_view(view: BoardView, correction: RayCorrection, pinhole: PinholeC
     """
     if not isinstance(view, BoardView):
         raise ParameterError(f"view must be a BoardView, got {type(view).__name__}")
-    a, t = _observed_rays(view, np.linalg.inv(pinhole.K))
+    a, t = observed_rays(view, np.linalg.inv(pinhole.K))
     origins, directions = correction.apply(a, t)
     pixels = (directions / directions[:, 2:3]) @ pinhole.K.T
     return BoardView(

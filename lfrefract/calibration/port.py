@@ -51,6 +51,7 @@ from lfrefract.validate import as_points, finite_vector, one_of, positive_float,
 
 __all__ = [
     "CORNER_METHODS",
+    "PORT_CALIBRATION_KIND",
     "BoardView",
     "CalibrationError",
     "PortCalibration",
@@ -177,6 +178,8 @@ class PortCalibration:
         }
 
 
+#: ``kind`` of the JSON file ``lfrefract calibrate port`` writes.
+PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
 #: How :func:`board_view_from_light_field` locates corners.
 CORNER_METHODS = ("light-field", "views")
 
@@ -406,7 +409,8 @@ def estimate_normal(camera: PinholeCamera, views: list[BoardView]) -> np.ndarray
     return n
 
 
-def _port_from_params(params: np.ndarray, template: FlatPort) -> FlatPort:
+def port_from_parameters(params: np.ndarray, template: FlatPort) -> FlatPort:
+    """The port of fit parameters ``(tilt_x_rad, tilt_y_rad, distance_m)`` with ``template``'s glass."""
     return FlatPort(
         distance_m=float(params[2]),
         thickness_m=template.thickness_m,
@@ -416,6 +420,40 @@ def _port_from_params(params: np.ndarray, template: FlatPort) -> FlatPort:
         n_glass=template.n_glass,
         n_water=template.n_water,
     )
+
+
+def board_residuals_px(
+    port: FlatPort,
+    origins_cam: np.ndarray,
+    directions_cam: np.ndarray,
+    board_points_m: np.ndarray,
+    pose6: np.ndarray,
+    focal_px: float,
+) -> np.ndarray:
+    """The port calibration's geometric residuals of one board view, pixels.
+
+    Each line of sight (in air, from ``origins_cam`` (N, 3) along ``directions_cam`` (N, 3), camera
+    frame) is refracted by ``port`` and meets the board of pose ``pose6`` (rotation vector, rad, and
+    translation, m: board to camera frame); its miss of the corner ``board_points_m`` (N, 2, board
+    frame) is scaled by ``focal_px`` / depth.
+
+    Returns
+    -------
+    ndarray, shape (2 N,)
+        (x, y) misses per corner; 1000 px where a line of sight misses the board (or cannot enter the water).
+    """
+    origin, d = _water_rays(port, origins_cam, directions_cam)
+    rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
+    t = pose6[3:]
+    normal_b = rot[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = ((t - origin) @ normal_b) / (d @ normal_b)
+    hit = origin + s[:, None] * d
+    local = (hit - t) @ rot  # board frame
+    miss = local[:, :2] - board_points_m
+    scale = focal_px / np.maximum(hit[:, 2], 1e-6)
+    res = (miss * scale[:, None]).ravel()
+    return np.where(np.isfinite(res), res, 1e3)  # a ray that misses the board costs a lot
 
 
 class _Problem:
@@ -429,23 +467,12 @@ class _Problem:
         self.sizes = [len(v.corners_px) for v in views]
 
     def view_residuals(self, port: FlatPort, view: int, pose6: np.ndarray) -> np.ndarray:
-        """Residuals (2N,) of one view, pixels: board-plane miss of the refracted line of sight,
-        scaled by focal / depth."""
-        origin, d = _water_rays(port, self.views[view].centres, self.directions[view])
-        rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
-        t = pose6[3:]
-        normal_b = rot[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = ((t - origin) @ normal_b) / (d @ normal_b)
-        hit = origin + s[:, None] * d
-        local = (hit - t) @ rot  # board frame
-        miss = local[:, :2] - self.views[view].board_points_m
-        scale = self.camera.focal_px / np.maximum(hit[:, 2], 1e-6)
-        res = (miss * scale[:, None]).ravel()
-        return np.where(np.isfinite(res), res, 1e3)  # a ray that misses the board costs a lot
+        """Residuals (2N,) of one view, pixels (:func:`board_residuals_px`)."""
+        v = self.views[view]
+        return board_residuals_px(port, v.centres, self.directions[view], v.board_points_m, pose6, self.camera.focal_px)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        port = _port_from_params(x[:3], self.template)
+        port = port_from_parameters(x[:3], self.template)
         return np.concatenate([self.view_residuals(port, i, x[3 + 6 * i : 9 + 6 * i]) for i in range(len(self.views))])
 
     def sparsity(self) -> lil_matrix:
@@ -584,7 +611,7 @@ def calibrate_port(
     starts = []
     for tilt_x, tilt_y in _candidate_tilts(estimate_normal(camera, views)):
         for distance in np.geomspace(lo, hi, 8):
-            trial = _port_from_params(np.array([tilt_x, tilt_y, distance]), template)
+            trial = port_from_parameters(np.array([tilt_x, tilt_y, distance]), template)
             linear: list[np.ndarray] = []
             for i in range(len(views)):
                 pose = _linear_pose(problem, trial, i)
@@ -598,7 +625,7 @@ def calibrate_port(
     starts.sort(key=lambda item: item[0])
     refined = []
     for cost, params, linear in starts[:4]:
-        trial = _port_from_params(np.array(params), template)
+        trial = port_from_parameters(np.array(params), template)
         refined.append((cost, params, [_fit_pose(problem, trial, i, p)[0] for i, p in enumerate(linear)]))
     starts = refined
 
@@ -619,7 +646,7 @@ def calibrate_port(
     # A few steps from each start, then the best to convergence.
     trials = [refine(np.concatenate([params, *poses]), 20) for _, params, poses in starts]
     fit = refine(min(trials, key=lambda t: t.cost).x, 200)
-    port = _port_from_params(fit.x[:3], template)
+    port = port_from_parameters(fit.x[:3], template)
     residuals = fit.fun
     dof = max(len(residuals) - len(fit.x), 1)
     sigma2 = float(np.sum(residuals**2)) / dof
@@ -628,15 +655,56 @@ def calibrate_port(
         cov_all = np.linalg.inv(jac.T @ jac) * sigma2
     except np.linalg.LinAlgError:
         raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
-    covariance = cov_all[:3, :3]
-    if not np.all(np.isfinite(covariance)):
-        raise CalibrationError("the views do not determine the port: its covariance is not finite")
     at_bound = np.isclose(fit.x[2], [lo, hi], rtol=1e-6, atol=1e-9)
     if np.any(at_bound):
         raise CalibrationError(
             f"the port distance ended at {fit.x[2] * 1e3:.4g} mm, the end of distance_range_m={distance_range_m!r}: "
             "widen the range (or the views do not determine the distance)"
         )
+    return port_result(
+        port,
+        fit.x[3:].reshape(-1, 6),
+        residuals,
+        problem.sizes,
+        cov_all[:3, :3],
+        max_normal_std_deg=max_normal_std_deg,
+        max_distance_std_m=max_distance_std_m,
+    )
+
+
+def port_result(
+    port: FlatPort,
+    poses6: np.ndarray,
+    residuals_px: np.ndarray,
+    sizes: list[int],
+    covariance: np.ndarray,
+    *,
+    max_normal_std_deg: float,
+    max_distance_std_m: float,
+) -> PortCalibration:
+    """A fitted port as a :class:`PortCalibration`, after its uncertainty is checked.
+
+    Parameters
+    ----------
+    port : FlatPort
+    poses6 : ndarray, shape (V, 6)
+        Each view's board pose: rotation vector (rad) and translation (m), board to camera frame.
+    residuals_px : ndarray, shape (2 sum(sizes),)
+        The geometric residuals of every view in turn (:func:`board_residuals_px`), pixels.
+    sizes : list of int
+        Corners per view.
+    covariance : ndarray, shape (3, 3)
+        Covariance of ``(tilt_x_rad, tilt_y_rad, distance_m)``.
+    max_normal_std_deg, max_distance_std_m : float
+        As :func:`calibrate_port`.
+
+    Raises
+    ------
+    CalibrationError
+        If the covariance is not finite or a standard deviation exceeds its limit.
+    """
+    if not np.all(np.isfinite(covariance)):
+        raise CalibrationError("the views do not determine the port: its covariance is not finite")
     # Direction of the normal: its covariance through d n / d (tilt_x, tilt_y).
     tx, ty = port.tilt_x_rad, port.tilt_y_rad
     dn = np.array(
@@ -655,14 +723,13 @@ def calibrate_port(
             f"(limit {max_normal_std_deg:g}), distance std {distance_std_m * 1e3:.3g} mm "
             f"(limit {max_distance_std_m * 1e3:g}); use more views, tilted towards and away from the camera"
         )
-    sizes = np.cumsum([0, *[2 * s for s in problem.sizes]])
-    view_rms = np.array([math.sqrt(np.mean(residuals[a:b] ** 2)) for a, b in itertools.pairwise(sizes)])
-    pose6 = fit.x[3:].reshape(-1, 6)
-    board_poses = tuple(Pose(rotation=Rotation.from_rotvec(p[:3]).as_matrix(), position_m=p[3:]) for p in pose6)
+    bounds = np.cumsum([0, *[2 * s for s in sizes]])
+    view_rms = np.array([math.sqrt(np.mean(residuals_px[a:b] ** 2)) for a, b in itertools.pairwise(bounds)])
+    board_poses = tuple(Pose(rotation=Rotation.from_rotvec(p[:3]).as_matrix(), position_m=p[3:]) for p in poses6)
     return PortCalibration(
         port=port,
         board_poses=board_poses,
-        rms_px=float(math.sqrt(np.mean(residuals**2))),
+        rms_px=float(math.sqrt(np.mean(residuals_px**2))),
         view_rms_px=view_rms,
         covariance=covariance,
         normal_std_deg=normal_std_deg,

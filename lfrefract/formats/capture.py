@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
+from lfrefract.calibration.port import PORT_CALIBRATION_KIND
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
@@ -65,7 +66,7 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection
 from lfrefract.validate import one_of
 
 __all__ = [
@@ -83,6 +84,8 @@ __all__ = [
     "UnrecordedValues",
     "camera_from_option",
     "capture_parameters",
+    "check_port_ray_model",
+    "correction_estimate_from_option",
     "mask_warp_map",
     "mla_from_file",
     "port_from_file",
@@ -701,6 +704,91 @@ def ray_correction_from_option(value: str | os.PathLike | None) -> RayCorrection
         return RayCorrection.from_dict(_json_key(path, "correction", "--camera"), where=f"{str(path)!r}: correction")
     except ParameterError as exc:
         raise FileFormatError(str(exc)) from None
+
+
+def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstimate:
+    """The calibrated ray correction of a ``--camera`` camera calibration with its covariance: what
+    ``lfrefract calibrate port --refine-camera`` refines.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a camera calibration (a preset, another camera file).
+    FileFormatError
+        If it is one but has no valid ``correction_covariance`` (a file written before the
+        calibration recorded it: calibrate the camera again).
+    """
+    correction = ray_correction_from_option(value)
+    if correction is None:
+        raise ParameterError(
+            f"--camera {str(value)!r} is not a camera calibration (lfrefract calibrate camera output): "
+            "a refinement needs the calibrated ray model and its covariance"
+        )
+    path = Path(value)
+    data = read_json(path)
+    if "correction_covariance" not in data:
+        raise FileFormatError(
+            f"{str(path)!r} has no correction_covariance (written by an earlier lfrefract): run "
+            "lfrefract calibrate camera again to refine it"
+        )
+    try:
+        covariance = CorrectionEstimate.covariance_from_dict(
+            data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
+        )
+        return CorrectionEstimate(correction=correction, covariance=covariance)
+    except ParameterError as exc:
+        raise FileFormatError(str(exc)) from None
+
+
+def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection | None, *, camera: object) -> None:
+    """Refuse a calibrated port with another ray model than the one it was calibrated on.
+
+    A port is calibrated on one ray model of the camera (``lfrefract calibrate port`` records it in
+    its JSON as ``ray_model``); with another, its normal and distance are wrong for the rays. Port
+    files that record none (a flat-port ``.txt``, TOML, a render's ``meta.json``) pass.
+
+    Parameters
+    ----------
+    port_path : path-like
+        The ``--port`` file.
+    correction : RayCorrection or None
+        The ray correction of ``--camera`` (None: the thin-lens model).
+    camera : object
+        What ``--camera`` was, for the message.
+
+    Raises
+    ------
+    ParameterError
+        If the port records a different ray model.
+    FileFormatError
+        If its ``ray_model`` is not valid.
+    """
+    path = Path(port_path)
+    if path.suffix.lower() != ".json":
+        return
+    data = read_json(path)
+    if data.get("kind") != PORT_CALIBRATION_KIND or "ray_model" not in data:
+        return
+    model = data["ray_model"]
+    if not isinstance(model, dict) or "correction" not in model:
+        raise FileFormatError(f"{str(path)!r}: ray_model must be a table with a correction (or null), got {model!r}")
+    try:
+        recorded = None if model["correction"] is None else RayCorrection.from_dict(model["correction"])
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r}: ray_model: {exc}") from None
+    same = (recorded is None and correction is None) or (
+        recorded is not None
+        and correction is not None
+        and np.allclose(recorded.vector(), correction.vector(), rtol=0.0, atol=1e-12)
+    )
+    if not same:
+        calibrated_on = model.get("camera", "a camera file")
+        raise ParameterError(
+            f"--port {str(path)!r} was calibrated on the ray model of {calibrated_on!r} "
+            f"({'the thin lens' if recorded is None else 'a calibrated correction'}), not on that of --camera "
+            f"{str(camera)!r} ({'the thin lens' if correction is None else 'another correction'}): give the camera "
+            "file the port was calibrated with (after --refine-camera: the refined one)"
+        )
 
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:

@@ -28,10 +28,11 @@ from typing import Any
 
 import numpy as np
 
+from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import CapturedRays
 from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
 
-__all__ = ["PARAMETERS", "RayCorrection", "apply_correction", "corrected_slopes"]
+__all__ = ["PARAMETERS", "CorrectionEstimate", "RayCorrection", "apply_correction", "corrected_slopes"]
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
 PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
@@ -118,6 +119,61 @@ class RayCorrection:
         reject_unknown_keys(where, dict(data), set(PARAMETERS))
         require_keys(where, dict(data), set(PARAMETERS) - optional)
         return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in PARAMETERS if k in data})
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class CorrectionEstimate:
+    """A calibrated :class:`RayCorrection` with its uncertainty: what a later fit may refine.
+
+    Attributes
+    ----------
+    correction : RayCorrection
+    covariance : ndarray, shape (5, 5)
+        Covariance of :data:`PARAMETERS` (in that order; the drift's entries in metres), marginal over
+        everything else the calibration fitted (the board poses). Symmetric positive definite.
+    """
+
+    correction: RayCorrection
+    covariance: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.correction, RayCorrection):
+            raise ParameterError(f"correction must be a RayCorrection, got {type(self.correction).__name__}")
+        cov = np.asarray(self.covariance, dtype=np.float64)
+        n = len(PARAMETERS)
+        if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
+            raise ParameterError(f"covariance must be a finite {n} x {n} matrix, got shape {cov.shape}")
+        if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0):
+            raise ParameterError("covariance must be symmetric")
+        if np.linalg.eigvalsh(cov)[0] <= 0.0:
+            raise ParameterError("covariance must be positive definite (every parameter determined)")
+        cov = cov.copy()
+        cov.setflags(write=False)
+        object.__setattr__(self, "covariance", cov)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations of :data:`PARAMETERS`, shape (5,)."""
+        return np.sqrt(np.diag(self.covariance))
+
+    def covariance_to_dict(self) -> dict:
+        """The covariance as plain data: its parameter order and its rows."""
+        return {"parameters": list(PARAMETERS), "matrix": self.covariance.tolist()}
+
+    @staticmethod
+    def covariance_from_dict(data: Mapping[str, Any], *, where: str = "correction_covariance") -> np.ndarray:
+        """The matrix of :meth:`covariance_to_dict`'s data (its parameter order checked)."""
+        reject_unknown_keys(where, dict(data), {"parameters", "matrix"})
+        require_keys(where, dict(data), {"parameters", "matrix"})
+        if list(data["parameters"]) != list(PARAMETERS):
+            raise ParameterError(f"{where}.parameters must be {list(PARAMETERS)}, got {data['parameters']!r}")
+        rows = data["matrix"]
+        n = len(PARAMETERS)
+        if not isinstance(rows, list) or len(rows) != n or not all(isinstance(r, list) and len(r) == n for r in rows):
+            raise ParameterError(f"{where}.matrix must be {n} rows of {n} numbers")
+        return np.array(
+            [[finite_float(f"{where}.matrix[{i}][{j}]", v) for j, v in enumerate(r)] for i, r in enumerate(rows)]
+        )
 
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

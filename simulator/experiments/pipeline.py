@@ -21,12 +21,14 @@ input folder, ``delivered/``; it holds no ``meta.json``, no ``lenses.npz``, no t
 the core runs). The core then runs the documented commands on them, in process
 (:func:`lfrefract.cli.main`), per camera: ``calibrate mla`` on the white (the camera's nominal
 preset, as a user knows their camera's model), ``calibrate camera`` on the in-air boards,
-``calibrate port`` on the wall's boards and ``synth`` of every capture. The rows of ``table.csv``,
+``calibrate port`` on the wall's boards (the data-only chain with ``--refine-camera``: the ray model
+refined together with the port) and ``synth`` of every capture. The rows of ``table.csv``,
 one per ``method``:
 
 - ``oracle``: today's pipeline. The same scenes rendered through the thin lens the core models,
   noiseless RGB raw images (``raw.exr``) with their ``meta.json``: the true camera and port;
-- ``data-only``: everything calibrated from the delivered files (MLA, camera ray model, port);
+- ``data-only``: everything calibrated from the delivered files (MLA, camera ray model, port; the
+  ray model and the port refined together on the underwater boards);
 - ``thin-lens-assumed``: the old core on the real-lens files: the MLA from the white, the port
   calibrated on the thin-lens model (no camera calibration).
 
@@ -49,7 +51,8 @@ triangulated, as in ``planes``. Columns (units in the names):
 - ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``.
 
 The output directory keeps what the core wrote that a user would keep (``calibration/<camera>/``:
-``mla.json``, ``camera.json``, ``port.json``, ``port-thin-lens.json``) and ``commands.txt``, every
+``mla.json``, ``camera.json``, ``camera-refined.json``, ``port.json``, ``port-thin-lens.json``) and
+``commands.txt``, every
 core command in order (paths relative to the run's work folder).
 """
 
@@ -161,6 +164,8 @@ TEST_BOARD_OFFSETS = ((0.03, -0.02), (-0.03, 0.02))
 TEST_BOARD_ROTATION_XYZ_DEG = board_scenes.SLANT_XYZ_DEG
 #: Every how many raw pixels (along each axis) the ray models are compared with the true rays.
 RAY_PIXEL_STEP = {"tiny": 2, "illum": 8}
+#: The data-only chain's camera calibration refined with its port (``calibrate port --refine-camera``).
+REFINED_CAMERA_NAME = "camera-refined.json"
 #: File suffixes a Lytro camera gives (captures and its white images); nothing else is delivered.
 LYTRO_SUFFIXES = (".lfr", ".raw", ".txt")
 
@@ -613,6 +618,8 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                 port = out / ("port.json" if method == "data-only" else "port-thin-lens.json")
                 boards = _numbered(delivered / "port" / camera)
                 sizes = [str(s) for s in run["port_squares"]]
+                # data-only: the ray model refined with the port (what the underwater boards say of it)
+                refine = ["--refine-camera", out / REFINED_CAMERA_NAME] if method == "data-only" else []
                 core(
                     "calibrate",
                     "port",
@@ -625,9 +632,11 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                     "--square-size-m",
                     *sizes,
                     *run["glass"],
+                    *refine,
                     "--out",
                     port,
                 )
+                model = out / REFINED_CAMERA_NAME if refine else model
                 captures = {p.stem: p for p in sorted(rig.glob("*.lfr"))}
                 args = ["--white", whites, "--camera", model, "--port", port]
                 _synth_all(core, captures, args, products / "synth" / method / camera, products / "maps")

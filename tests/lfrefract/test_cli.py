@@ -437,6 +437,69 @@ def test_calibrate_port_checks_the_port_options_before_detecting_corners(tmp_pat
     assert_says(err, "--thickness-m / --n-glass / --n-water: port.")
 
 
+def _camera_calibration(path: Path, *, covariance: bool = True) -> Path:
+    """A camera calibration file of the tiny camera (a small correction), with or without the
+    covariance that ``--refine-camera`` needs (files of earlier versions have none)."""
+    from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection
+
+    estimate = CorrectionEstimate(correction=RayCorrection(pupil_scale=0.99), covariance=np.eye(5) * 1e-6)
+    data = {
+        "kind": "lfrefract.calibrate.camera",
+        "camera": TINY.to_dict(),
+        "correction": estimate.correction.to_dict(),
+    }
+    if covariance:
+        data["correction_covariance"] = estimate.covariance_to_dict()
+    write_json(path, data)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("camera", "refined", "says"),
+    [
+        (None, "r.json", "--refine-camera needs --camera"),
+        ("tiny", "r.json", "is not a camera calibration"),
+        ("old.json", "r.json", "has no correction_covariance"),
+        ("camera.json", "r.txt", "--refine-camera must name a .json file"),
+        ("camera.json", "camera.json", "is the command's own input"),
+    ],
+)
+def test_refine_camera_is_refused_before_detecting_corners(tmp_path, capsys, camera, refined, says):
+    raw = make_capture(tmp_path / "cap")
+    _camera_calibration(tmp_path / "camera.json")
+    _camera_calibration(tmp_path / "old.json", covariance=False)
+    argv = [*commands(raw, tmp_path / "out")["calibrate-port"], "--refine-camera", str(tmp_path / refined)]
+    if camera is not None:
+        argv += ["--camera", camera if camera == "tiny" else str(tmp_path / camera)]
+    assert_says(refused(capsys, argv), says)
+    assert not (tmp_path / "out").exists()
+
+
+def test_synth_refuses_a_port_calibrated_on_another_ray_model(tmp_path, capsys):
+    raw = make_capture(tmp_path / "cap")
+    camera = _camera_calibration(tmp_path / "camera.json")
+    port = {"kind": "lfrefract.calibrate.port", "port": FlatPort(distance_m=0.02).to_dict()}
+    write_json(tmp_path / "thin-port.json", {**port, "ray_model": {"camera": "tiny", "correction": None}})
+    synth = commands(raw, tmp_path / "out")["synth"]
+    err = refused(capsys, [*synth, "--camera", str(camera), "--port", str(tmp_path / "thin-port.json")])
+    assert_says(err, "was calibrated on the ray model of 'tiny' (the thin lens)", "not on that of --camera")
+    other = {"camera": "c.json", "correction": {"pupil_scale": 0.98, "slope_scale": 1.0, "k1": 0.0, "k2": 0.0}}
+    write_json(tmp_path / "other-port.json", {**port, "ray_model": other})
+    err = refused(capsys, [*synth, "--camera", str(camera), "--port", str(tmp_path / "other-port.json")])
+    assert_says(err, "'c.json' (a calibrated correction)", "(another correction)")
+    assert not (tmp_path / "out").exists()
+    # The ray model it was calibrated on, and a port file that records none, pass.
+    same = {"camera": str(camera), "correction": {"pupil_scale": 0.99, "slope_scale": 1.0, "k1": 0.0, "k2": 0.0}}
+    write_json(tmp_path / "port.json", {**port, "ray_model": same})
+    assert main([*synth, "--camera", str(camera), "--port", str(tmp_path / "port.json")]) == 0
+    write_json(tmp_path / "plain.json", port)
+    assert main([*synth, "--camera", str(camera), "--port", str(tmp_path / "plain.json"), "--overwrite"]) == 0
+    bad = {**port, "ray_model": {"camera": "c.json"}}
+    write_json(tmp_path / "bad.json", bad)
+    err = refused(capsys, [*synth, "--camera", str(camera), "--port", str(tmp_path / "bad.json"), "--overwrite"])
+    assert_says(err, "ray_model must be a table with a correction")
+
+
 def test_a_masked_synthesis_caches_the_full_map(tmp_path, capsys):
     from lfrefract.synthesis.warp_map import WarpMap
 

@@ -85,6 +85,10 @@ def test_the_thin_lens_calibrates_to_itself_by_the_command_line(mi, tmp_path, ca
     assert abs(c["slope_scale"] - 1.0) < CAMERA_CAL_THIN_SCALE
     assert abs(c["k1"]) < CAMERA_CAL_THIN_K1
     assert written["ray_rms_m"] == pytest.approx(written["initial_ray_rms_m"], rel=0.05)
+    # The covariance a refinement with the port takes: its diagonal is the standard deviations'.
+    covariance = written["correction_covariance"]
+    assert covariance["parameters"] == list(written["correction_std"])
+    np.testing.assert_allclose(np.sqrt(np.diag(covariance["matrix"])), list(written["correction_std"].values()))
     assert core_cli.main([*argv[:-2], "--square-size-m", "0.01", "0.02", "--out", str(tmp_path / "x.json")]) == 2
     assert "one per capture (5), got 2" in capsys.readouterr().err
     with pytest.raises(CalibrationError, match="at least 3"):

@@ -12,6 +12,7 @@ import shlex
 
 import pytest
 
+from lfrefract.formats.jsonio import read_json
 from simulator.experiments import ExperimentOptions
 from simulator.experiments.pipeline import LYTRO_SUFFIXES, MEASURES, METHODS, run_pipeline
 from tests.tolerances import (
@@ -74,8 +75,13 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     for name in ("planes.csv", "pipeline_summary.png", "commands.txt"):
         assert (out / name).is_file()
     for camera in ("left", "right"):
-        for name in ("mla.json", "camera.json", "port.json", "port-thin-lens.json"):
+        for name in ("mla.json", "camera.json", "camera-refined.json", "port.json", "port-thin-lens.json"):
             assert (out / "calibration" / camera / name).is_file()
+        # The data-only port was fitted with the refined ray model, which started from the in-air one.
+        files = {name: read_json(out / "calibration" / camera / f"{name}.json") for name in ("camera", "port")}
+        refined = read_json(out / "calibration" / camera / "camera-refined.json")
+        assert refined["refinement"]["in_air_correction"] == files["camera"]["correction"]
+        assert files["port"]["ray_model"]["correction"] == refined["correction"] != files["camera"]["correction"]
 
 
 @pytest.mark.render
