@@ -14,8 +14,9 @@ Then, for each real lens, the corner test of ``benchmarks/measure_real_lens_gap.
 refraction-free image's corners against the true corners' projection (px RMS), synthesized with
 the thin-lens warp map and with the calibrated one (``SynthesisOptions(ray_correction=...)``); and
 the port calibrated from the ten underwater boards of ``simulator.boards.port_boards`` on each model
-(``corrected_view``), its normal and distance against the true port, and the corner test again with
-each chain's own port.
+(``corrected_view``) and with the ray model refined together with it
+(:func:`lfrefract.calibration.calibrate_port_and_camera`), its normal and distance against the true
+port, and the corner test again with each chain's own port and rays.
 
 ``--outer-ring`` adds the outer ring of ten in-air and ten port boards (``outer_ring=True`` of
 ``simulator.boards.in_air_boards`` and ``port_boards``: 1.6 times farther into the field).
@@ -32,8 +33,12 @@ import time
 import numpy as np
 
 from lfrefract import camera_preset, virtual_camera_for
-from lfrefract.calibration import board_view_from_light_field, calibrate_camera, calibrate_port
-from lfrefract.calibration.camera import corrected_view
+from lfrefract.calibration import (
+    board_view_from_light_field,
+    calibrate_camera,
+    calibrate_port,
+    calibrate_port_and_camera,
+)
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, build_warp_map
@@ -161,11 +166,13 @@ def _port_chain(mi, lens: str, calibration, view, camera, *, outer_ring: bool) -
             if found is not None:
                 views.append(found)
         known = {"thickness_m": truth.thickness_m, "n_glass": truth.n_glass, "n_water": truth.n_water}
-        for model, correction, observed in (
-            ("thin-lens", None, views),
-            ("calibrated", calibration.correction, [corrected_view(v, calibration.correction, view) for v in views]),
-        ):
-            port = calibrate_port(view, observed, **known).port
+        joint = calibrate_port_and_camera(view, views, prior=calibration.estimate, **known)
+        chains = (
+            ("thin-lens", None, calibrate_port(view, views, **known).port),
+            ("calibrated", calibration.correction, joint.sequential.port),
+            ("refined with the port", joint.correction.correction, joint.port.port),
+        )
+        for model, correction, port in chains:
             error = np.degrees(np.arccos(np.clip(port.normal @ truth.normal, -1.0, 1.0)))
             warp = build_warp_map(camera, port, options=SynthesisOptions(k=PAPER_K, ray_correction=correction))
             reference = build_warp_map(camera, truth, options=SynthesisOptions(k=PAPER_K))

@@ -48,9 +48,10 @@ from lfrefract.calibration.port import (
 )
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.pinhole import PinholeCamera
+from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection, apply_correction
 
-__all__ = ["JointCalibration", "calibrate_port_and_camera"]
+__all__ = ["INVALID_PORT_RESIDUAL_PX", "TILT_LIMIT_RAD", "JointCalibration", "calibrate_port_and_camera"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,6 +91,42 @@ class JointCalibration:
             "sequential_port": self.sequential.port.to_dict(),
             "sequential_rms_px": self.sequential.rms_px,
         }
+
+
+#: Largest tilt the fit may take (radians), as :func:`~lfrefract.calibration.port.calibrate_port`'s.
+TILT_LIMIT_RAD = math.radians(80.0)
+#: Residual per component (pixels) of a parameter vector with no valid port (distance <= 0, a tilt
+#: beyond :data:`TILT_LIMIT_RAD`): what a line of sight that misses its board costs, so that the
+#: solver turns back from such a step instead of failing.
+INVALID_PORT_RESIDUAL_PX = 1e3
+
+
+class _JointProblem:
+    """The underwater views' residuals for a parameter vector ``(correction (5), tilt_x_rad,
+    tilt_y_rad, distance_m, one pose (6) per view)``."""
+
+    def __init__(self, camera: PinholeCamera, views: list[BoardView], template: FlatPort):
+        self.focal_px = camera.focal_px
+        self.views = views
+        self.template = template
+        k_inverse = np.linalg.inv(camera.K)
+        self.observed = [observed_rays(v, k_inverse) for v in views]
+        self.sizes = [len(v.corners_px) for v in views]
+
+    def residuals_px(self, x: np.ndarray) -> np.ndarray:
+        """Every view's residuals (:func:`~lfrefract.calibration.port.board_residuals_px`) in turn,
+        pixels; :data:`INVALID_PORT_RESIDUAL_PX` everywhere when ``x`` holds no valid port."""
+        npar = len(PARAMETERS)
+        tilts, distance_m = x[npar : npar + 2], x[npar + 2]
+        if not (distance_m > 0.0 and np.all(np.abs(tilts) < TILT_LIMIT_RAD)):
+            return np.full(2 * sum(self.sizes), INVALID_PORT_RESIDUAL_PX)
+        port = port_from_parameters(x[npar : npar + 3], self.template)
+        parts = []
+        for i, ((a, t), view) in enumerate(zip(self.observed, self.views, strict=True)):
+            origins, directions = apply_correction(x[:npar], a, t)
+            pose6 = x[npar + 3 + 6 * i : npar + 9 + 6 * i]
+            parts.append(board_residuals_px(port, origins, directions, view.board_points_m, pose6, self.focal_px))
+        return np.concatenate(parts)
 
 
 def calibrate_port_and_camera(
@@ -154,22 +191,10 @@ def calibrate_port_and_camera(
     p0 = prior.correction.vector()
     # |W (p - p0)|^2 = (p - p0)^T C^-1 (p - p0) for W = L^-1, C = L L^T.
     whiten = scipy.linalg.solve_triangular(np.linalg.cholesky(prior.covariance), np.eye(npar), lower=True)
-    k_inverse = np.linalg.inv(camera.K)
-    observed = [observed_rays(v, k_inverse) for v in views]
-    sizes = [len(v.corners_px) for v in views]
-
-    def water_residuals(x: np.ndarray) -> np.ndarray:
-        """Every view's residuals in pixels, for parameters ``x`` (correction, port, poses)."""
-        p, port = x[:npar], port_from_parameters(x[npar : npar + 3], template)
-        parts = []
-        for i, ((a, t), view) in enumerate(zip(observed, views, strict=True)):
-            origins, directions = apply_correction(p, a, t)
-            pose6 = x[npar + 3 + 6 * i : npar + 9 + 6 * i]
-            parts.append(board_residuals_px(port, origins, directions, view.board_points_m, pose6, camera.focal_px))
-        return np.concatenate(parts)
+    problem = _JointProblem(camera, views, template)
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([whiten @ (x[:npar] - p0), water_residuals(x) / sigma_px])
+        return np.concatenate([whiten @ (x[:npar] - p0), problem.residuals_px(x) / sigma_px])
 
     poses = [
         np.concatenate([Rotation.from_matrix(p.rotation).as_rotvec(), p.position_m]) for p in sequential.board_poses
@@ -179,10 +204,10 @@ def calibrate_port_and_camera(
     # and a bounded trust region crawls along it (200 steps 4 units of cost short of the minimum
     # that this reaches in five). The port's range is checked after.
     fit = least_squares(residuals, x0, x_scale="jac", method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
-    tilt_limit = math.radians(80.0)
     distance_m = float(fit.x[npar + 2])
     if not (
-        distance_range_m[0] < distance_m < distance_range_m[1] and np.all(np.abs(fit.x[npar : npar + 2]) < tilt_limit)
+        distance_range_m[0] < distance_m < distance_range_m[1]
+        and np.all(np.abs(fit.x[npar : npar + 2]) < TILT_LIMIT_RAD)
     ):
         raise CalibrationError(
             f"the joint fit left the port's range: distance {distance_m * 1e3:.4g} mm (range "
@@ -201,8 +226,8 @@ def calibrate_port_and_camera(
     port = port_result(
         port_from_parameters(fit.x[npar : npar + 3], template),
         fit.x[npar + 3 :].reshape(-1, 6),
-        water_residuals(fit.x),
-        sizes,
+        problem.residuals_px(fit.x),
+        problem.sizes,
         covariance[npar : npar + 3, npar : npar + 3],
         **limits,
     )

@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, PinholeCamera, Pose
-from lfrefract.calibration.joint import calibrate_port_and_camera
+from lfrefract.calibration.joint import (
+    INVALID_PORT_RESIDUAL_PX,
+    TILT_LIMIT_RAD,
+    _JointProblem,
+    calibrate_port_and_camera,
+)
 from lfrefract.calibration.port import BoardView
 from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection, apply_correction
 from tests.tolerances import JOINT_DISTANCE_M, JOINT_NORMAL_DEG
@@ -78,6 +83,22 @@ def test_the_refinement_finds_the_port_that_the_in_air_model_misses():
     data = result.to_dict()
     assert data["in_air_correction"] == PRIOR.correction.to_dict()
     assert data["correction"] == result.correction.correction.to_dict()
+
+
+def test_a_step_to_no_port_costs_much_and_does_not_fail():
+    # The solver (unbounded Levenberg-Marquardt) tried a negative distance on a benchmark's straight port:
+    # building that port raised ParameterError out of the fit. Such a step must cost a lot instead.
+    views = _views(2, 0.0, seed=3)
+    problem = _JointProblem(CAMERA, views, PORT)
+    x = np.concatenate([TRUE.vector(), [PORT.tilt_x_rad, PORT.tilt_y_rad, PORT.distance_m], np.zeros(12)])
+    assert np.all(np.isfinite(problem.residuals_px(x)))
+    for bad in ({7: -0.02}, {7: 0.0}, {5: TILT_LIMIT_RAD}, {6: -1.2 * TILT_LIMIT_RAD}):
+        y = x.copy()
+        for index, value in bad.items():
+            y[index] = value
+        residuals = problem.residuals_px(y)
+        assert residuals.shape == (2 * sum(len(v.corners_px) for v in views),)
+        assert np.all(residuals == INVALID_PORT_RESIDUAL_PX)
 
 
 def test_bad_input_is_refused():
