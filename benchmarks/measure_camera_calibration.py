@@ -39,6 +39,8 @@ from lfrefract.calibration import (
     calibrate_port,
     calibrate_port_and_camera,
 )
+from lfrefract.calibration.camera import corrected_view
+from lfrefract.errors import CalibrationError
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, build_warp_map
@@ -166,13 +168,12 @@ def _port_chain(mi, lens: str, calibration, view, camera, *, outer_ring: bool) -
             if found is not None:
                 views.append(found)
         known = {"thickness_m": truth.thickness_m, "n_glass": truth.n_glass, "n_water": truth.n_water}
-        joint = calibrate_port_and_camera(view, views, prior=calibration.estimate, **known)
-        chains = (
-            ("thin-lens", None, calibrate_port(view, views, **known).port),
-            ("calibrated", calibration.correction, joint.sequential.port),
-            ("refined with the port", joint.correction.correction, joint.port.port),
-        )
-        for model, correction, port in chains:
+        for model in CHAINS:
+            try:
+                correction, port = _chain_port(model, view, views, calibration, known)
+            except CalibrationError as exc:  # the views do not determine this port: a row, not a crash
+                print(f"  | {tilt[0]:g}, {tilt[1]:g} | {model} | not determined: {exc} | | |", flush=True)
+                continue
             error = np.degrees(np.arccos(np.clip(port.normal @ truth.normal, -1.0, 1.0)))
             warp = build_warp_map(camera, port, options=SynthesisOptions(k=PAPER_K, ray_correction=correction))
             reference = build_warp_map(camera, truth, options=SynthesisOptions(k=PAPER_K))
@@ -188,6 +189,21 @@ def _port_chain(mi, lens: str, calibration, view, camera, *, outer_ring: bool) -
                 f"({truth.distance_m * 1e3:.1f}) | {cells[0]} / {cells[1]} |",
                 flush=True,
             )
+
+
+#: The port chains compared: the port on each ray model.
+CHAINS = ("thin-lens", "calibrated", "refined with the port")
+
+
+def _chain_port(model: str, view, views, calibration, known: dict) -> tuple:
+    """(ray correction or None, port) of one of :data:`CHAINS` on the located underwater ``views``."""
+    if model == "thin-lens":
+        return None, calibrate_port(view, views, **known).port
+    if model == "calibrated":
+        corrected = [corrected_view(v, calibration.correction, view) for v in views]
+        return calibration.correction, calibrate_port(view, corrected, **known).port
+    joint = calibrate_port_and_camera(view, views, prior=calibration.estimate, **known)
+    return joint.correction.correction, joint.port.port
 
 
 if __name__ == "__main__":

@@ -211,7 +211,9 @@ def calibrate_port_and_camera(
     ):
         raise CalibrationError(
             f"the joint fit left the port's range: distance {distance_m * 1e3:.4g} mm (range "
-            f"{distance_range_m!r} m), tilts {np.degrees(fit.x[npar : npar + 2]).round(2).tolist()} deg (limit 80)"
+            f"{distance_range_m!r} m), tilts {np.degrees(fit.x[npar : npar + 2]).round(2).tolist()} deg (limit 80): "
+            "these views do not determine the port's distance together with the ray model (as behind a port "
+            "square to the optical axis); calibrate the port on the in-air model alone"
         )
     try:
         correction = RayCorrection.from_vector(fit.x[:npar])

@@ -51,6 +51,7 @@ from lfrefract.validate import as_points, finite_vector, one_of, positive_float,
 
 __all__ = [
     "CORNER_METHODS",
+    "DISTANCE_AT_BOUND_M",
     "PORT_CALIBRATION_KIND",
     "BoardView",
     "CalibrationError",
@@ -178,6 +179,9 @@ class PortCalibration:
         }
 
 
+#: How near an end of ``distance_range_m`` a fitted port distance counts as at that end (metres): far
+#: above the margin the bounded solver keeps inside a bound, far below any port distance's precision.
+DISTANCE_AT_BOUND_M = 1e-6
 #: ``kind`` of the JSON file ``lfrefract calibrate port`` writes.
 PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
 #: How :func:`board_view_from_light_field` locates corners.
@@ -655,8 +659,10 @@ def calibrate_port(
         cov_all = np.linalg.inv(jac.T @ jac) * sigma2
     except np.linalg.LinAlgError:
         raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
-    at_bound = np.isclose(fit.x[2], [lo, hi], rtol=1e-6, atol=1e-9)
-    if np.any(at_bound):
+    # The bounded solver stays a little inside a bound it presses against (1e-8 m was seen): a
+    # distance within DISTANCE_AT_BOUND_M of either end is the end of the range, not an answer.
+    at_bound = fit.active_mask[2] != 0 or min(abs(fit.x[2] - lo), abs(hi - fit.x[2])) <= DISTANCE_AT_BOUND_M
+    if at_bound:
         raise CalibrationError(
             f"the port distance ended at {fit.x[2] * 1e3:.4g} mm, the end of distance_range_m={distance_range_m!r}: "
             "widen the range (or the views do not determine the distance)"
