@@ -172,7 +172,6 @@ SYNTH_CONFIDENCE_ROLE = "confidence"
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"
 MLA_KIND = "lfrefract.calibrate.mla"
-PORT_KIND = PORT_CALIBRATION_KIND
 
 __all__ = [
     "CALIBRATE_COMMANDS",
@@ -727,7 +726,10 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
     flat_port = out.with_suffix(".txt")
     first = _board_parameters(args)
-    outputs = {out: ExpectedKind(json_kind=PORT_KIND), flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_KIND)}
+    outputs = {
+        out: ExpectedKind(json_kind=PORT_CALIBRATION_KIND),
+        flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_CALIBRATION_KIND),
+    }
     prior = None
     if args.refine_camera is not None:
         refined_out = Path(args.refine_camera)
@@ -773,7 +775,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
             views = [corrected_view(v, correction, view) for v in views]
         result = calibrate_port(view, views, **glass)
     data = {
-        "kind": PORT_KIND,
+        "kind": PORT_CALIBRATION_KIND,
         "sources": [str(p) for p in args.boards],
         "files": {"flat_port": flat_port.name},
         "ray_model": {"camera": model_file, "correction": None if correction is None else correction.to_dict()},

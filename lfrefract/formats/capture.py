@@ -648,9 +648,10 @@ def read_lytro_capture(
     )
 
 
-def _json_key(path: Path, key: str, what: str) -> dict:
-    """The table ``key`` of the lfrefract JSON file ``path`` (``what`` names the option)."""
-    data = read_json(path)
+def _json_key(path: Path, key: str, what: str, data: dict | None = None) -> dict:
+    """The table ``key`` of the lfrefract JSON file ``path`` (``what`` names the option); ``data``:
+    the file's content, if it was read already."""
+    data = read_json(path) if data is None else data
     if key not in data:
         raise FileFormatError(f"{str(path)!r} has no key {key!r}: it is not {what}")
     value = data[key]
@@ -692,16 +693,27 @@ def ray_correction_from_option(value: str | os.PathLike | None) -> RayCorrection
     FileFormatError
         If a camera calibration's ``correction`` is missing or invalid.
     """
+    found = _camera_calibration(value)
+    return None if found is None else _correction(*found)
+
+
+def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | None:
+    """The path and content of a ``--camera`` camera calibration (read once), or None for any other camera."""
     if value is None:
         return None
     path = Path(value)
     if not path.is_file() or path.suffix.lower() != ".json":
         return None
     data = read_json(path)
-    if data.get("kind") != CAMERA_CALIBRATION_KIND:
-        return None
+    return (path, data) if data.get("kind") == CAMERA_CALIBRATION_KIND else None
+
+
+def _correction(path: Path, data: dict) -> RayCorrection:
+    """The ``correction`` of a camera calibration's content ``data`` (read from ``path``)."""
     try:
-        return RayCorrection.from_dict(_json_key(path, "correction", "--camera"), where=f"{str(path)!r}: correction")
+        return RayCorrection.from_dict(
+            _json_key(path, "correction", "--camera", data), where=f"{str(path)!r}: correction"
+        )
     except ParameterError as exc:
         raise FileFormatError(str(exc)) from None
 
@@ -718,14 +730,14 @@ def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstim
         If it is one but has no valid ``correction_covariance`` (a file written before the
         calibration recorded it: calibrate the camera again).
     """
-    correction = ray_correction_from_option(value)
-    if correction is None:
+    found = _camera_calibration(value)
+    if found is None:
         raise ParameterError(
             f"--camera {str(value)!r} is not a camera calibration (lfrefract calibrate camera output): "
             "a refinement needs the calibrated ray model and its covariance"
         )
-    path = Path(value)
-    data = read_json(path)
+    path, data = found
+    correction = _correction(path, data)
     if "correction_covariance" not in data:
         raise FileFormatError(
             f"{str(path)!r} has no correction_covariance (written by an earlier lfrefract): run "
