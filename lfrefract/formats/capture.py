@@ -612,18 +612,16 @@ def read_lytro_capture(
     lens = lytro.metadata.get("devices", {}).get("lens", {})
     steps = {key: lens.get(key) for key in ("zoomStep", "focusStep")}
     chosen = None
-    white_mosaic = None
+    flat = None
     if white is not None:
         known_steps = all(isinstance(v, int) and not isinstance(v, bool) for v in steps.values())
         if not known_steps and not isinstance(white, WhiteImage) and Path(white).is_dir():
             raise FileFormatError(f"{str(path)!r} has no lens steps (devices.lens): name the white image itself")
         chosen = white_for(white, zoom_step=steps["zoomStep"] or 0, focus_step=steps["focusStep"] or 0, capture=path)
-        white_mosaic = chosen.read().mosaic
+        flat = chosen.flat_field()
     matrix, gains = _lytro_colour(lytro.metadata)
     try:
-        developed = develop(
-            lytro.mosaic, white_mosaic, white_image=chosen, color_matrix=matrix, white_balance_gain=gains
-        )
+        developed = develop(lytro.mosaic, flat, white_image=chosen, color_matrix=matrix, white_balance_gain=gains)
     except ParameterError as exc:
         raise FileFormatError(f"{str(path)!r}: {exc}") from None
     summary = {

@@ -29,6 +29,7 @@ the metadata's ``devices.lens.zoomStep`` / ``focusStep`` (integers).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass
@@ -47,10 +48,12 @@ __all__ = [
     "LYTRO_SUFFIXES",
     "MIN_WHITE_FRACTION",
     "DevelopedCapture",
+    "FlatField",
     "WhiteImage",
     "bad_pixels",
     "develop",
     "find_white_images",
+    "flat_field",
     "is_lytro_file",
     "read_lytro_file",
     "select_white_image",
@@ -161,6 +164,18 @@ class WhiteImage:
         """The white image's mosaic and metadata (:func:`read_lytro_file`)."""
         return read_lytro_file(self.path)
 
+    def flat_field(self) -> FlatField:
+        """The white's :func:`flat_field`, prepared once for all the captures it develops (read again
+        only when the file changes: its size or modification time)."""
+        stat = self.path.stat()
+        return _flat_field_of_file(str(self.path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=2)  # a stereo rig's two whites; an Illum's flat field is about 0.25 GB
+def _flat_field_of_file(path: str, mtime_ns: int, size: int) -> FlatField:
+    """:func:`flat_field` of the white image file ``path``; ``mtime_ns`` and ``size`` key the cache."""
+    return flat_field(read_lytro_file(path).mosaic)
+
 
 def find_white_images(folder: str | os.PathLike) -> list[WhiteImage]:
     """Every white image in ``folder`` (not its sub-folders): ``.raw`` files with metadata beside them
@@ -199,6 +214,50 @@ def _bright_levels(values: np.ndarray, channels: np.ndarray) -> np.ndarray:
         sites = values[channels == c]
         levels[c] = float(np.percentile(sites, _BRIGHT_PERCENTILE)) if sites.size else 0.0
     return levels[channels]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class FlatField:
+    """A white image prepared to devignette captures (:func:`flat_field`); :func:`develop` takes it
+    in place of the white's mosaic, which spares a command the white's work for every capture.
+
+    Attributes
+    ----------
+    lit_dn : ndarray of float32, shape (H, W)
+        The white's black-subtracted counts (digital numbers): what a capture is divided by.
+    usable : ndarray of bool, shape (H, W)
+        Pixels the white lights enough to devignette: at least :data:`MIN_WHITE_FRACTION` of their
+        colour's bright level.
+    bad : ndarray of bool, shape (H, W)
+        The white's :func:`bad_pixels`.
+    cfa_pattern : str
+        The white's mosaic pattern.
+    """
+
+    lit_dn: np.ndarray
+    usable: np.ndarray
+    bad: np.ndarray
+    cfa_pattern: str
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)``, pixels."""
+        return self.lit_dn.shape
+
+
+def flat_field(white: RawMosaic) -> FlatField:
+    """What a white image gives every capture it develops (steps 1-3 of the module docstring on the
+    white's side): its black-subtracted counts, the pixels it lights and its bad pixels."""
+    if not isinstance(white, RawMosaic):
+        raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
+    lit = np.maximum(white.counts.astype(np.float64) - white.black_level_dn, 0.0)
+    usable = lit >= MIN_WHITE_FRACTION * _bright_levels(lit, white.channel_index())
+    field = FlatField(
+        lit_dn=lit.astype(np.float32), usable=usable, bad=bad_pixels(white), cfa_pattern=white.cfa_pattern
+    )
+    for array in (field.lit_dn, field.usable, field.bad):
+        array.flags.writeable = False  # shared between the captures a white develops
+    return field
 
 
 def bad_pixels(white: RawMosaic, *, ratio: float = BAD_PIXEL_RATIO) -> np.ndarray:
@@ -297,7 +356,7 @@ class DevelopedCapture:
 
 def develop(
     mosaic: RawMosaic,
-    white: RawMosaic | None = None,
+    white: RawMosaic | FlatField | None = None,
     *,
     white_image: WhiteImage | None = None,
     color_matrix: np.ndarray | None = None,
@@ -310,8 +369,9 @@ def develop(
     ----------
     mosaic : RawMosaic
         The capture.
-    white : RawMosaic, optional
-        The white image of the same lens setting and sensor (same shape and pattern). Without one
+    white : RawMosaic or FlatField, optional
+        The white image of the same lens setting and sensor (same shape and pattern), or its
+        :func:`flat_field` (prepared once for many captures: :meth:`WhiteImage.flat_field`). Without one
         the capture is only black-subtracted, scaled to its white level and white-balanced by
         ``white_balance_gain`` (not devignetted).
     white_image : WhiteImage, optional
@@ -349,17 +409,16 @@ def develop(
         bad = np.zeros(mosaic.shape, dtype=bool)
         usable = np.ones(mosaic.shape, dtype=bool)
     else:
-        if not isinstance(white, RawMosaic):
-            raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
+        if not isinstance(white, (RawMosaic, FlatField)):
+            raise ParameterError(f"white must be a RawMosaic or a FlatField, got {type(white).__name__}")
         if white.shape != mosaic.shape or white.cfa_pattern != mosaic.cfa_pattern:
             raise ParameterError(
                 f"the white image ({white.shape[1]} x {white.shape[0]} px, {white.cfa_pattern}) does not match the "
                 f"capture ({mosaic.shape[1]} x {mosaic.shape[0]} px, {mosaic.cfa_pattern})"
             )
-        lit = np.maximum(white.counts.astype(np.float64) - white.black_level_dn, 0.0)
-        usable = lit >= MIN_WHITE_FRACTION * _bright_levels(lit, white.channel_index())
-        values = np.divide(counts, lit, out=np.zeros_like(counts), where=usable)
-        bad = bad_pixels(white)
+        field = white if isinstance(white, FlatField) else flat_field(white)
+        usable, bad = field.usable, field.bad
+        values = np.divide(counts, field.lit_dn, out=np.zeros_like(counts), where=usable)
     flagged = saturated | bad
     kept = np.where(flagged, 0.0, values)
     # The colour matrix has negative entries: in dark pixels noise can take a colour below 0, which is

@@ -15,10 +15,12 @@ from lfrefract.formats.capture import read_capture
 from lfrefract.formats.lytro import LytroSettings, write_f01_raw, write_illum_raw, write_lfr
 from lfrefract.formats.mosaic import RawMosaic
 from lfrefract.formats.whites import (
+    FlatField,
     WhiteImage,
     bad_pixels,
     develop,
     find_white_images,
+    flat_field,
     read_lytro_file,
     select_white_image,
 )
@@ -124,6 +126,45 @@ def test_develop_devignettes_by_the_white_and_marks_what_it_cannot_trust():
     assert np.nanstd(plain.image[bright]) > 10 * np.nanstd(developed.image[bright])
     with pytest.raises(ParameterError, match="does not match the capture"):
         develop(capture, white_mosaic(pattern="RGGB"))
+
+
+def test_a_flat_field_develops_as_its_white_does():
+    white_counts = white_mosaic().counts.copy()
+    white_counts[40, 60] = WHITE_LEVEL  # a hot pixel of the white
+    white = RawMosaic(
+        counts=white_counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    counts = np.rint(BLACK + 0.3 * (white_counts.astype(np.float64) - BLACK)).astype(np.uint16)
+    capture = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    field = flat_field(white)
+    assert isinstance(field, FlatField)
+    assert field.shape == (150, 200)
+    assert field.bad[40, 60]
+    assert not field.lit_dn.flags.writeable  # shared by every capture it develops
+    by_white, by_field = develop(capture, white), develop(capture, field)
+    for name in ("image", "values", "bad", "lit", "unrecorded"):
+        np.testing.assert_array_equal(getattr(by_field, name), getattr(by_white, name), err_msg=name)
+    other = RawMosaic(counts=counts, cfa_pattern="RGGB", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10)
+    with pytest.raises(ParameterError, match="does not match the capture"):
+        develop(other, field)
+    with pytest.raises(ParameterError, match="white must be a RawMosaic or a FlatField"):
+        develop(capture, white.counts)
+
+
+def test_a_white_file_is_prepared_once_and_again_when_it_changes(tmp_path):
+    path = write_white(tmp_path, "white", white_mosaic(), zoom=1, focus=2)
+    white = WhiteImage.from_file(path)
+    first = white.flat_field()
+    assert white.flat_field() is first  # the next capture of a command reuses it
+    np.testing.assert_array_equal(first.lit_dn, white_mosaic().counts.astype(np.float32) - BLACK)
+    # Another white written to the same path (other size: a cache keyed on the path alone would keep the old one).
+    write_white(tmp_path, "white", white_mosaic(scale=350.0, bits=12, pattern="BGGR"), zoom=1, focus=2)
+    again = WhiteImage.from_file(path).flat_field()
+    assert again is not first
+    assert again.cfa_pattern == "BGGR"
+    np.testing.assert_array_equal(again.lit_dn, white_mosaic(scale=350.0).counts.astype(np.float32) - BLACK)
 
 
 def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
