@@ -189,8 +189,8 @@ def light_field_corners(
         for row, found in enumerate(neighbours):  # one row per corner, not per pixel
             index[row, : len(found)] = found
             present[row, : len(found)] = True
-        samples = (x_all[index], a_all[index], i_all[index], present)
-        fit = _fit_chunk(*samples, start[sl], radius[sl], passes=passes, iterations=iterations)
+        gathered = (x_all[index], a_all[index], i_all[index], present)
+        fit = _fit_chunk(*gathered, start[sl], radius[sl], passes=passes, iterations=iterations)
         result[sl], std[sl], counts[sl] = fit
 
     moved = np.linalg.norm(result[:, 0:2] - corners, axis=1)

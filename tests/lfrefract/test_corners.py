@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lfrefract import FlatPort, ParameterError, Pose, camera_preset, virtual_camera_for
+from lfrefract.calibration import corners as corners_module
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.port import project_through_port
 from tests.tolerances import LF_CORNER_ANALYTIC_PX
@@ -75,6 +76,32 @@ def test_corner_tracks_follow_the_exact_refracted_projection(port, depth_m, rota
         error = np.sqrt(np.mean(np.sum((tracks.at(a) - seen) ** 2, axis=1)))
         assert error < 2 * LF_CORNER_ANALYTIC_PX, (a, error)
     assert np.all(tracks.centre_std_px < LF_CORNER_ANALYTIC_PX)
+
+
+def test_corners_are_fitted_alike_in_chunks_and_unrecorded_pixels_are_no_samples(monkeypatch):
+    # A board of more corners than a chunk (an Illum board of 9 x 7 inner corners has 63, a larger one more)
+    # is fitted chunk by chunk on the samples and k-d tree shared by every capture of the camera.
+    pose, square = _board(PORT, 0.3, (10.0, -5.0, 0.0), px_per_square=12.0)
+    expected = project_through_port(VIEW, PORT, _corners_world(pose, square))
+    raw = _raw(PORT, pose, square)
+    whole = light_field_corners(CAMERA, raw, expected, pattern=PATTERN, square_size_m=square, view=VIEW)
+    monkeypatch.setattr(corners_module, "_CHUNK", 5)
+    chunked = light_field_corners(CAMERA, raw, expected, pattern=PATTERN, square_size_m=square, view=VIEW)
+    np.testing.assert_allclose(chunked.centre_px, whole.centre_px, atol=1e-9)
+    assert chunked.ok.all()
+    # A NaN pixel (unrecorded) inside a corner's window is left out of that corner's samples.
+    rays = CAMERA.captured_rays()
+    seen = VIEW.project(rays.directions_cam)
+    near = np.flatnonzero(rays.in_aperture & (np.linalg.norm(seen - expected[7], axis=1) < 1.5))
+    holed = raw.copy().ravel()
+    holed[near[::2]] = np.nan
+    with_holes = light_field_corners(
+        CAMERA, holed.reshape(raw.shape), expected, pattern=PATTERN, square_size_m=square, view=VIEW
+    )
+    assert with_holes.ok.all()
+    assert with_holes.samples[7] < whole.samples[7]
+    np.testing.assert_array_equal(np.delete(with_holes.samples, 7), np.delete(whole.samples, 7))
+    assert np.linalg.norm(with_holes.centre_px[7] - whole.centre_px[7]) < LF_CORNER_ANALYTIC_PX
 
 
 def test_corners_without_contrast_are_flagged():
