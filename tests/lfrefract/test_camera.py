@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lfrefract import LightFieldCamera, MicrolensArray, ParameterError, SensorGeometry, camera_preset
+from lfrefract.optics import camera as camera_module
 from lfrefract.optics.presets import PRESETS
 from tests.tolerances import (
     CELL_INNER_FRACTION,
@@ -160,6 +161,16 @@ def test_nearest_indices_agrees_with_brute_force(p):
     np.testing.assert_array_equal(mla.nearest_indices(centres), idx)
     jitter = rng.uniform(-0.2 * pitch, 0.2 * pitch, size=(100, 2))
     np.testing.assert_array_equal(mla.nearest_indices(centres + jitter), idx)
+
+
+def test_nearest_indices_in_blocks_as_in_one(monkeypatch):
+    # A full sensor is handled in blocks of points; a block boundary must not change any answer.
+    mla = camera_preset("illum").mla
+    points = np.random.default_rng(3).uniform(-40 * mla.pitch_m, 40 * mla.pitch_m, size=(1000, 2))
+    whole = mla.nearest_indices(points)
+    monkeypatch.setattr(camera_module, "_NEAREST_CHUNK", 7)
+    np.testing.assert_array_equal(mla.nearest_indices(points), whole)
+    assert mla.nearest_indices(np.zeros((0, 2))).shape == (0, 2)
 
 
 def midpoint_grid(n: int) -> np.ndarray:
