@@ -189,7 +189,8 @@ def light_field_corners(
         for row, found in enumerate(neighbours):  # one row per corner, not per pixel
             index[row, : len(found)] = found
             present[row, : len(found)] = True
-        gathered = (x_all[index], a_all[index], i_all[index], present)
+        # Padding must hold a finite value too: the fit multiplies it by a zero weight.
+        gathered = (x_all[index], a_all[index], np.where(present, i_all[index], 0.0), present)
         fit = _fit_chunk(*gathered, start[sl], radius[sl], passes=passes, iterations=iterations)
         result[sl], std[sl], counts[sl] = fit
 
