@@ -275,3 +275,24 @@ def test_detector_reports_no_board_as_none(images):
     found = detect_chessboard(np.where(np.arange(SIZE[0]) < 5, np.nan, images[0]), PATTERN)
     assert found is not None
     assert found.shape == (35, 2)
+
+
+def test_a_board_covering_under_one_percent_of_the_image_is_found():
+    # A blurred board of 12 px squares in an Illum-sized view (1078 x 748 px), its white 0.7 % of the
+    # image: scaled to the 99th percentile (0.29 of its white) the black squares shrink to dots and the
+    # detector finds nothing, as it did on a far in-air board of the pipeline experiment at `illum`.
+    v, u = np.mgrid[0:748, 0:1078].astype(np.float64)
+    y = (v - 430.0) / 12.0
+    x = (u - 620.0) / 12.0 - 0.15 * y  # sheared, as a slanted board
+    board = (np.abs(x) < 4.5) & (np.abs(y) < 3.5)
+    black = (np.abs(x) < 3.5) & (np.abs(y) < 2.5) & ((np.floor(x + 3.5) + np.floor(y + 2.5)) % 2 == 0)
+    image = ndimage.gaussian_filter(np.where(board & ~black, 0.7, 0.0), 2.5)
+    assert np.percentile(image, 99) < 0.35 * image.max()
+    found = detect_chessboard(image, (6, 4))  # 7 x 5 squares
+    assert found is not None
+    # The true inner corners: x, y in -2.5 .. 2.5 and -1.5 .. 1.5 squares.
+    jj, ii = np.mgrid[-1.5:2.0:1.0, -2.5:3.0:1.0]
+    true = np.stack([620.0 + 12.0 * (ii + 0.15 * jj), 430.0 + 12.0 * jj], axis=-1).reshape(-1, 2)
+    distance = np.linalg.norm(found[:, None] - true[None], axis=2)
+    assert sorted(distance.argmin(axis=1)) == list(range(24))  # each true corner found once
+    assert distance.min(axis=1).max() < 2.0  # a start for the light-field fit, which refines it
