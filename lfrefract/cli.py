@@ -86,6 +86,7 @@ from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory,
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
+from lfrefract.calibration.camera import MIN_VIEWS as CAMERA_MIN_VIEWS
 from lfrefract.calibration.joint import JointCalibration
 from lfrefract.calibration.port import (
     CORNER_METHODS,
@@ -93,7 +94,8 @@ from lfrefract.calibration.port import (
     BoardView,
     board_view_from_light_field,
 )
-from lfrefract.errors import FileFormatError
+from lfrefract.calibration.port import MIN_VIEWS as PORT_MIN_VIEWS
+from lfrefract.errors import CalibrationError, FileFormatError
 from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
     RAW_NAME,
@@ -762,7 +764,10 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     if step != 0 and args.corners != "views":
         raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
-    views = _board_views(args, camera, view, pattern, command="port", method=args.corners, offsets_px=offsets)
+    boards = _board_views(
+        args, camera, view, pattern, command="port", minimum=PORT_MIN_VIEWS, method=args.corners, offsets_px=offsets
+    )
+    views = boards.views
     glass = {"thickness_m": thickness, "n_air": n_air, "n_glass": n_glass, "n_water": n_water}
     joint = None
     correction: RayCorrection | None
@@ -776,14 +781,14 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         result = calibrate_port(view, views, **glass)
     data = {
         "kind": PORT_CALIBRATION_KIND,
-        "sources": [str(p) for p in args.boards],
+        **boards.to_dict(),
         "files": {"flat_port": flat_port.name},
         "ray_model": {"camera": model_file, "correction": None if correction is None else correction.to_dict()},
         **result.to_dict(),
     }
     if joint is not None:
         data["joint_refinement"] = joint.to_dict()
-        write_json(Path(args.refine_camera), _refined_camera(args, joint, out))
+        write_json(Path(args.refine_camera), _refined_camera(args, joint, out, boards))
     write_json(out, data)
     write_flat_port(flat_port, result.port)
     refined = (
@@ -796,12 +801,13 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     print(
         f"port normal {np.round(result.port.normal, 5).tolist()} (+- {result.normal_std_deg:.3f} deg), distance "
         f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}), "
-        f"residual {result.rms_px:.3f} px RMS{refined}; wrote {out} and {out.with_suffix('.txt')}"
+        f"residual {result.rms_px:.3f} px RMS over {len(views)} captures{boards.left_out_note()}{refined}; "
+        f"wrote {out} and {out.with_suffix('.txt')}"
     )
     return 0
 
 
-def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out: Path) -> dict:
+def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out: Path, boards: _BoardViews) -> dict:
     """The camera calibration of ``--camera`` with the ray model ``calibrate port --refine-camera``
     refined: the same file's data, its correction and covariance replaced, the in-air ones kept
     under ``refinement``."""
@@ -815,7 +821,7 @@ def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out:
         "by": "lfrefract calibrate port --refine-camera",
         "camera": str(args.camera),
         "port": str(port_out),
-        "sources": [str(p) for p in args.boards],
+        **boards.to_dict(),
         "prior_chi2": joint.prior_chi2,
         "in_air_correction": joint.prior.correction.to_dict(),
         "in_air_correction_covariance": joint.prior.covariance_to_dict(),
@@ -856,6 +862,25 @@ def _square_sizes(args: argparse.Namespace) -> list[float]:
     return sizes * len(args.boards) if len(sizes) == 1 else sizes
 
 
+#: Why a board capture is left out of a calibration (``left_out`` of its JSON file).
+NOT_LOCATED = "no chessboard with {cols} x {rows} inner corners found in its central view, or under 8 located"
+
+
+@dataclass(frozen=True)
+class _BoardViews:
+    """The board captures of a calibration: those whose board was located, and those left out."""
+
+    views: list[BoardView]
+    sources: list[str]  # the capture of each view
+    left_out: list[dict[str, str]]  # {"source": capture, "reason": why}
+
+    def to_dict(self) -> dict:
+        return {"sources": self.sources, "left_out": self.left_out}
+
+    def left_out_note(self) -> str:
+        return f" ({len(self.left_out)} left out, named above)" if self.left_out else ""
+
+
 def _board_views(
     args: argparse.Namespace,
     camera: LightFieldCamera,
@@ -863,12 +888,15 @@ def _board_views(
     pattern: tuple[int, int],
     *,
     command: str,
+    minimum: int,
     method: str = "light-field",
     offsets_px: tuple[tuple[float, float], ...] = ((0.0, 0.0),),
-) -> list[BoardView]:
+) -> _BoardViews:
     """The corners of every board capture of ``args.boards`` (:func:`board_view_from_light_field`),
-    each with its square size; a capture where the board is not found is an error naming it."""
-    views = []
+    each with its square size. A capture where the board is not located is left out and named on
+    stderr (and in the output's ``left_out``); fewer than ``minimum`` located is an error."""
+    views, sources, left_out = [], [], []
+    reason = NOT_LOCATED.format(cols=pattern[0], rows=pattern[1])
     for path, size in zip(args.boards, _square_sizes(args), strict=True):
         board_view = board_view_from_light_field(
             camera,
@@ -881,12 +909,17 @@ def _board_views(
             name=str(path),
         )
         if board_view is None:
-            raise ParameterError(
-                f"{path!r}: no chessboard with {pattern[0]} x {pattern[1]} inner corners found "
-                "(or under 8 of its corners located)"
-            )
+            print(f"{path}: left out: {reason}", file=sys.stderr)
+            left_out.append({"source": str(path), "reason": reason})
+            continue
         views.append(board_view)
-    return views
+        sources.append(str(path))
+    if len(views) < minimum:
+        raise CalibrationError(
+            f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed "
+            f"(left out: {', '.join(repr(item['source']) for item in left_out)}: {reason})"
+        )
+    return _BoardViews(views=views, sources=sources, left_out=left_out)
 
 
 def calibrate_camera_command(args: argparse.Namespace) -> int:
@@ -901,13 +934,15 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     )
     view = virtual_camera_for(camera)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
-    views = _board_views(args, camera, view, pattern, command="camera")
+    boards = _board_views(args, camera, view, pattern, command="camera", minimum=CAMERA_MIN_VIEWS)
+    views = boards.views
     result = calibrate_camera(camera, views, view=view)
-    write_json(out, result.to_dict())
+    write_json(out, {**result.to_dict(), **boards.to_dict()})
     c = result.correction
     print(
-        f"ray model from {len(views)} captures: pupil scale {c.pupil_scale:.5f}, slope scale {c.slope_scale:.5f}, "
-        f"k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm RMS from their rays (thin lens: "
+        f"ray model from {len(views)} captures{boards.left_out_note()}: pupil scale {c.pupil_scale:.5f}, "
+        f"slope scale {c.slope_scale:.5f}, k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm "
+        "RMS from their rays (thin lens: "
         f"{result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
     )
     return 0

@@ -105,22 +105,32 @@ def _as_image(name: str, image: object) -> np.ndarray:
 #: 99th keeps a few bright outliers (a highlight, a hot pixel) from darkening the board; a board
 #: whose white covers under about 1 % of the image (a small board far off in an Illum's 1078 x 748 px
 #: view: 0.9 %) is clipped there, its blurred black squares shrunk to dots the detector does not
-#: find, and is found at the 99.9th.
+#: find, and is found at the 99.9th. The scale serves only to find the board: the corners are
+#: refined on the unclipped image (clipped, a board's white biased them by 2-3 px at Illum size).
 WHITE_PERCENTILES = (99.0, 99.9)
 
 
-def _gray8(name: str, image: np.ndarray, *, percentile: float = WHITE_PERCENTILES[0]) -> np.ndarray:
-    """8-bit grey image for the detector: channel mean, NaN as black, scaled to ``percentile``."""
+def _grey(name: str, image: np.ndarray) -> np.ndarray:
+    """Channel mean, NaN as black, divided by its maximum: float64 (H, W), at most 1."""
     grey = image.astype(np.float64)
     if grey.ndim == 3:
         grey = grey.mean(axis=2)
     finite = np.isfinite(grey)
     if not finite.any():
         raise ParameterError(f"{name} has no finite pixel")
-    white = float(np.percentile(grey[finite], percentile))
+    grey = np.where(finite, grey, 0.0)
+    top = float(grey.max())
+    if not top > 0.0:
+        raise ParameterError(f"{name} is blank (its largest value is {top!r})")
+    return grey / top
+
+
+def _gray8(name: str, grey: np.ndarray, *, percentile: float) -> np.ndarray:
+    """8-bit image for the detector: ``grey`` (from :func:`_grey`) scaled to ``percentile`` and clipped."""
+    white = float(np.percentile(grey, percentile))
     if not white > 0.0:
         raise ParameterError(f"{name} is blank ({percentile:g}th percentile {white!r})")
-    return (np.clip(np.where(finite, grey, 0.0) / white, 0.0, 1.0) * 255).astype(np.uint8)
+    return (np.clip(grey / white, 0.0, 1.0) * 255).astype(np.uint8)
 
 
 def detect_chessboard(
@@ -130,9 +140,10 @@ def detect_chessboard(
 
     OpenCV's sector-based detector (``findChessboardCornersSB``, exhaustive, accurate) refined on
     the saddle point by ``cornerSubPix``: the detector's own estimate leans towards the board's
-    edge on blurred images (0.2 px RMS on refraction-free images of 9 px squares). The image is
-    scaled to 8 bits at its 99th percentile, and if no board is found there at its 99.9th
-    (:data:`WHITE_PERCENTILES`: a board covering under 1 % of the image).
+    edge on blurred images (0.2 px RMS on refraction-free images of 9 px squares). The detector
+    sees the image scaled to 8 bits at its 99th percentile, and if it finds no board there at its
+    99.9th (:data:`WHITE_PERCENTILES`: a board covering under 1 % of the image); the refinement
+    sees the linear image, unclipped.
 
     Parameters
     ----------
@@ -155,18 +166,20 @@ def detect_chessboard(
     """
     cols, rows = _pattern(pattern)
     half = positive_int("refine_half_window_px", refine_half_window_px)
-    checked = _as_image(name, image)
+    grey = _grey(name, _as_image(name, image))
     for percentile in WHITE_PERCENTILES:
-        gray8 = _gray8(name, checked, percentile=percentile)
         found, corners = cv2.findChessboardCornersSB(
-            gray8, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+            _gray8(name, grey, percentile=percentile),
+            (cols, rows),
+            flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY,
         )
         if found:
             break
     else:
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-    refined = cv2.cornerSubPix(gray8, corners.astype(np.float32), (half, half), (-1, -1), criteria)
+    linear = grey.astype(np.float32)  # unclipped: the saddle of the board's own edges
+    refined = cv2.cornerSubPix(linear, corners.astype(np.float32), (half, half), (-1, -1), criteria)
     return refined.reshape(-1, 2).astype(np.float64)
 
 

@@ -184,6 +184,9 @@ class PortCalibration:
 DISTANCE_AT_BOUND_M = 1e-6
 #: ``kind`` of the JSON file ``lfrefract calibrate port`` writes.
 PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
+#: Fewest board captures :func:`calibrate_port` takes: the port's three parameters and one pose per
+#: board are not separable from a single board.
+MIN_VIEWS = 2
 #: How :func:`board_view_from_light_field` locates corners.
 CORNER_METHODS = ("light-field", "views")
 
@@ -591,8 +594,8 @@ def calibrate_port(
     if not isinstance(camera, PinholeCamera):
         raise ParameterError(f"camera must be a PinholeCamera, got {camera!r}")
     views = list(views)
-    if len(views) < 2 or not all(isinstance(v, BoardView) for v in views):
-        raise ParameterError(f"views must be at least two BoardView objects, got {len(views)}")
+    if len(views) < MIN_VIEWS or not all(isinstance(v, BoardView) for v in views):
+        raise ParameterError(f"views must be at least {MIN_VIEWS} BoardView objects, got {len(views)}")
     lo = positive_float("distance_range_m[0]", distance_range_m[0])
     hi = positive_float("distance_range_m[1]", distance_range_m[1])
     if not lo < hi:

@@ -48,7 +48,10 @@ triangulated, as in ``planes``. Columns (units in the names):
   true rays (every :data:`RAY_PIXEL_STEP` th raw pixel, chief rays through the microlens centres):
   where they cross the true port's air-side face (RMS over both cameras, in the camera frame, no
   alignment) and the angle between them;
-- ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``.
+- ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``;
+- ``test_boards_found``: of the test boards' views, how many the method's images show the board in;
+  ``boards_left_out``: the board captures (relative to ``delivered/``) that the method's camera and
+  port calibrations left out, their board not located (``lfrefract calibrate``'s ``left_out``).
 
 The output directory keeps what the core wrote that a user would keep (``calibration/<camera>/``:
 ``mla.json``, ``camera.json``, ``camera-refined.json``, ``port.json``, ``port-thin-lens.json``) and
@@ -568,6 +571,13 @@ class _Models:
     ports: dict[str, FlatPort] = dataclasses.field(default_factory=dict)
     rays: dict[str, CapturedRays] = dataclasses.field(default_factory=dict)
     error: str | None = None
+    #: Board captures its calibrations left out (board not located), relative to ``delivered/``.
+    left_out: list[str] = dataclasses.field(default_factory=list)
+
+    def note_left_out(self, calibration: Path, delivered: Path) -> None:
+        """Add the captures that the calibration file ``calibration`` lists as left out."""
+        for item in read_json(calibration)["left_out"]:
+            self.left_out.append(Path(item["source"]).relative_to(delivered).as_posix())
 
 
 def _numbered(folder: Path) -> list[Path]:
@@ -615,6 +625,7 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                         "--out",
                         camera_json,
                     )
+                    chain.note_left_out(camera_json, delivered)
                 port = out / ("port.json" if method == "data-only" else "port-thin-lens.json")
                 boards = _numbered(delivered / "port" / camera)
                 sizes = [str(s) for s in run["port_squares"]]
@@ -636,6 +647,7 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                     "--out",
                     port,
                 )
+                chain.note_left_out(port, delivered)
                 model = out / REFINED_CAMERA_NAME if refine else model
                 captures = {p.stem: p for p in sorted(rig.glob("*.lfr"))}
                 args = ["--white", whites, "--camera", model, "--port", port]
@@ -772,6 +784,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     for method in METHODS:
         chain, shots = models[method], oracle if method == "oracle" else captures
         row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan) | {"test_boards_found": ""}
+        row["boards_left_out"] = " ".join(chain.left_out)
         prepared = PreparedMethod(name=method, error=chain.error)
         if chain.error is None:
             images = _images(products / "synth" / method, names, jobs[0][0])

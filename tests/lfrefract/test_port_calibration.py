@@ -122,7 +122,7 @@ def test_points_that_cannot_be_seen_project_to_nan():
 
 def test_bad_input():
     views = _views(FlatPort.from_degrees(distance_m=0.03, tilt_x_deg=10.0), 2, 0.0, seed=4)
-    with pytest.raises(ParameterError, match="at least two BoardView"):
+    with pytest.raises(ParameterError, match="at least 2 BoardView"):
         calibrate_port(CAMERA, views[:1], thickness_m=0.0)
     with pytest.raises(ParameterError, match="does not refract"):
         calibrate_port(CAMERA, views, thickness_m=0.0, n_water=1.0)

@@ -101,3 +101,34 @@ def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
         == 2
     )
     assert "--squares must be at least 2 x 2" in capsys.readouterr().err
+
+
+def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsys):
+    # Five board captures and a sixth of a board with too few squares: the calibration goes on with
+    # the five, names the sixth on stderr and lists it in the output; with too few left it stops.
+    tilt = (25.0, 10.0)
+    view = virtual_camera_for(empty_scene(tilt).camera)
+    boards = calibration_boards(tilt, 0.2, view)[:5]
+    captures = []
+    for i, table in enumerate([*boards, {**boards[0], "squares": [4, 3]}]):
+        out = tmp_path / f"board{i}"
+        render_job(board_scene(tilt, table, spp=16, seed=i), out, progress=False, write_previews=False)
+        captures.append(str(out / "raw.exr"))
+    blank = captures.pop()
+    board_args = ["--squares", *map(str, SQUARES), "--square-size-m", str(boards[0]["square_size_m"])]
+    out = tmp_path / "port.json"
+    assert core_cli.main(["calibrate", "port", captures[0], blank, *captures[1:], *board_args, "--out", str(out)]) == 0
+    assert f"{blank}: left out: no chessboard with 6 x 4 inner corners found" in capsys.readouterr().err
+    written = read_json(out)
+    assert written["sources"] == captures  # in the order of the views' poses and residuals
+    assert [item["source"] for item in written["left_out"]] == [blank]
+    assert len(written["view_rms_px"]) == len(captures)
+    truth = empty_scene(tilt).port
+    assert abs(FlatPort.from_dict(written["port"]).distance_m - truth.distance_m) < 1e-3
+    # One board left: under the two a port calibration needs.
+    out = tmp_path / "one.json"
+    assert core_cli.main(["calibrate", "port", blank, captures[0], *board_args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the board was located in 1 of 2 captures, under the 2 needed" in err
+    assert repr(blank) in err
+    assert not out.exists()

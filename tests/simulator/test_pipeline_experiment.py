@@ -72,6 +72,7 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert data["ray_rms_mm"] < thin["ray_rms_mm"]
     assert oracle["ray_rms_mm"] < 1e-9
     assert oracle["port_normal_err_deg"] < 1e-5
+    assert data["boards_left_out"] == thin["boards_left_out"] == ""  # every tiny board is located
     for name in ("planes.csv", "pipeline_summary.png", "commands.txt"):
         assert (out / name).is_file()
     for camera in ("left", "right"):
