@@ -915,9 +915,9 @@ def _board_views(
         views.append(board_view)
         sources.append(str(path))
     if len(views) < minimum:
+        named = f" (left out: {', '.join(repr(item['source']) for item in left_out)}: {reason})" if left_out else ""
         raise CalibrationError(
-            f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed "
-            f"(left out: {', '.join(repr(item['source']) for item in left_out)}: {reason})"
+            f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed{named}"
         )
     return _BoardViews(views=views, sources=sources, left_out=left_out)
 

@@ -132,3 +132,7 @@ def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsy
     assert "the board was located in 1 of 2 captures, under the 2 needed" in err
     assert repr(blank) in err
     assert not out.exists()
+    assert core_cli.main(["calibrate", "port", captures[0], *board_args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the board was located in 1 of 1 captures, under the 2 needed" in err
+    assert "left out" not in err
