@@ -115,6 +115,12 @@ def test_develop_devignettes_by_the_white_and_marks_what_it_cannot_trust():
     assert developed.saturated.sum() == 1
     assert developed.unrecorded[69:72, 99:102].all()
     assert np.isnan(developed.image[70, 100]).all()
+    # Where the white gives no light (the gaps, and at the field's edge the parts of micro-images the
+    # main lens vignettes) nothing was measured: unrecorded, not black. Read as 0, an Illum in-air board
+    # at the field's edge had 9 of its 24 corners located in the light field; as NaN all 24.
+    assert (~developed.lit).any()
+    assert np.isnan(developed.image[~developed.lit]).all()
+    assert np.array_equal(np.isnan(developed.image).any(axis=2), developed.unrecorded)
     # Inside the micro-images (the 3 x 3 neighbourhood that bilinear demosaicing mixes all lit) every
     # colour reads 0.5, the 1-DN rounding of the counts aside.
     core = ndimage.minimum_filter(lit, size=3) > 0.5 * lit.max()
@@ -181,7 +187,7 @@ def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
     assert capture.raw.shape == (150, 200, 3)
     assert capture.sidecar["lytro"]["white"]["file"] == str(white_path)
     assert capture.sidecar_path is None
-    assert capture.recorded is None
+    assert np.array_equal(capture.recorded, capture.developed.lit)  # nothing saturated or bad: the gaps
     with pytest.raises(ParameterError, match="is a linear raw image already"):
         read_capture(tmp_path / "raw.exr", white=white_path)
 
