@@ -707,8 +707,9 @@ def _board_raw(
     path: str, camera: LightFieldCamera, white: str | None = None, colour: str | None = None, *, command: str
 ) -> np.ndarray:
     """One board capture's raw image, checked (read one at a time: an Illum raw image is 0.5 GB): for
-    a Lytro capture its grey mosaic (``colour`` ``"cfa"``) or its demosaiced image (``"demosaic"``);
-    None: ``command``'s default (:data:`DEFAULT_BOARD_COLOUR`)."""
+    a Lytro capture its grey mosaic (``colour`` ``"cfa"``) or its demosaiced image (``"demosaic"``,
+    :meth:`DevelopedCapture.measured`), NaN where its white gives no light; None: ``command``'s
+    default (:data:`DEFAULT_BOARD_COLOUR`)."""
     capture = read_capture(path, camera=camera, white=white)
     if capture.developed is None:
         if colour is not None:
@@ -717,7 +718,9 @@ def _board_raw(
                 "image already"
             )
         return capture.raw
-    return capture.developed.grey() if (colour or DEFAULT_BOARD_COLOUR[command]) == "cfa" else capture.raw
+    if (colour or DEFAULT_BOARD_COLOUR[command]) == "cfa":
+        return capture.developed.grey()
+    return capture.developed.measured()  # what the white does not light is no black sample of the board
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:

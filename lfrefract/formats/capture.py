@@ -74,7 +74,6 @@ __all__ = [
     "DEPTH_NAME",
     "IDEAL_NAME",
     "LENSES_NAME",
-    "LYTRO_MASK_POLICY",
     "NONFINITE_POLICIES",
     "RAW_NAME",
     "SIDECAR_NAME",
@@ -209,12 +208,6 @@ def read_sidecar(path: str | os.PathLike, *, camera_required: bool = True) -> Ca
         ideal=None if ideal_data is None else _parse(path, "ideal", ideal_data, PinholeCamera.from_dict),
         pose=None if pose_data is None else _parse(path, "pose", pose_data, Pose.from_dict),
     )
-
-
-#: What a developed Lytro capture leaves unrecorded (:func:`lfrefract.formats.whites.develop`).
-LYTRO_MASK_POLICY = (
-    "a Lytro capture's saturated pixels, its white image's bad pixels and the pixels its white does not light"
-)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -400,7 +393,7 @@ class Capture:
         if self.recorded is None:
             return None
         lytro = bool(self.sidecar) and "lytro" in (self.sidecar or {})
-        policy = LYTRO_MASK_POLICY if lytro else "--nonfinite mask"
+        policy = "a Lytro capture's saturated pixels and its white image's bad pixels" if lytro else "--nonfinite mask"
         return {"policy": f"masked as unrecorded ({policy})", **self.unrecorded.to_dict()}
 
 
@@ -600,8 +593,7 @@ def read_lytro_capture(
     and no ``meta.json`` is read. The mosaic is developed (:func:`lfrefract.formats.whites.develop`):
     black subtracted, devignetted by the white image when one is given (a file, or a folder of white
     images from which the one of the nearest zoom and focus steps is taken), demosaiced to camera
-    RGB; its saturated pixels, the white's bad pixels and the pixels the white does not light (the
-    gaps between micro-images, and what the main lens vignettes) are unrecorded (NaN, with
+    RGB; its saturated pixels and the white's bad pixels are unrecorded (NaN, with
     :attr:`Capture.recorded` False: the commands give them no weight and report them).
 
     Returns

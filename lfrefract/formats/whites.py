@@ -12,9 +12,7 @@ capture's mosaic into the linear image the core works on:
 2. each pixel is divided by the white's (devignetting: the main lens's fall-off, each micro-image's
    edge and the colour filters' response all cancel), so 1 is the white image's brightness; where
    the white holds less than :data:`MIN_WHITE_FRACTION` of its bright level (the gaps between
-   micro-images, a vignetted rim, the parts of micro-images the main lens vignettes at the field's
-   edge) there is no light to measure: the value is 0 in the mosaic and unrecorded (NaN) in the
-   developed image;
+   micro-images, a vignetted rim) there is no light to measure and the value is 0;
 3. pixels that cannot be trusted are flagged: saturated in the capture (at the white level, so their
    value is only a lower bound) and bad in the white (:func:`bad_pixels`: saturated there, or far
    darker than their bright neighbours);
@@ -64,9 +62,8 @@ __all__ = [
 #: File suffixes of Lytro captures and white images (case-insensitive).
 LYTRO_SUFFIXES = (".lfr", ".raw")
 #: Below this fraction of the white image's bright level (its 99th percentile, per colour) a pixel
-#: receives too little light to devignet: it is unrecorded (0 in the mosaic). The gaps between
-#: micro-images hold a few percent; a tenth keeps the edge of every micro-image whose light is
-#: measurable.
+#: receives too little light to devignet: its value is set to 0. The gaps between micro-images hold
+#: a few percent; a tenth keeps the edge of every micro-image whose light is measurable.
 MIN_WHITE_FRACTION = 0.1
 #: A white pixel this many times darker than the darkest of its eight nearest neighbours, all
 #: bright, is dead (:func:`bad_pixels`; each colour relative to its bright level). Inside a
@@ -308,8 +305,7 @@ class DevelopedCapture:
         Pixels the white image lights enough to devignet (every pixel without a white); elsewhere
         ``values`` is 0.
     unrecorded : ndarray of bool, shape (H, W)
-        The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach), and
-        the pixels not ``lit``.
+        The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach).
     white : WhiteImage or None
         The white image used.
     color_matrix : ndarray, shape (3, 3)
@@ -327,6 +323,21 @@ class DevelopedCapture:
     unrecorded: np.ndarray
     white: WhiteImage | None
     color_matrix: np.ndarray
+
+    def measured(self) -> np.ndarray:
+        """:attr:`image` with the pixels the white does not light unrecorded (NaN) too.
+
+        In :attr:`image` they are 0, which suits a synthesis (they lie in the gaps between
+        micro-images, outside every micro-image's usable disc) but not a fit on every raw pixel: at
+        the field's edge the main lens vignettes parts of micro-images, and read as 0 those parts
+        are black samples (an Illum in-air board 17.5 deg off the axis had 9 of its 24 corners
+        located in the light field so; 24 with them unrecorded).
+
+        Returns
+        -------
+        ndarray of float32, shape (H, W, 3)
+        """
+        return np.where(self.lit[..., None], self.image, np.float32(np.nan))
 
     def grey(self) -> np.ndarray:
         """The devignetted mosaic as one grey light field at full resolution, nothing interpolated.
@@ -428,9 +439,7 @@ def develop(
     # The colour matrix has negative entries: in dark pixels noise can take a colour below 0, which is
     # no radiance; it is clipped to 0 (a bias of a fraction of the noise there).
     image = np.maximum(demosaic_values(kept, mosaic.cfa_pattern, method=method) @ matrix.T, 0.0).astype(np.float32)
-    # A pixel the white does not light measured nothing: unrecorded, not black (at the field's edge
-    # the main lens vignettes whole parts of micro-images, which read as black squares otherwise).
-    unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool)) | ~usable
+    unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool))
     image[unrecorded] = np.nan
     return DevelopedCapture(
         image=image,
