@@ -945,8 +945,7 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     print(
         f"ray model from {len(views)} captures{boards.left_out_note()}: pupil scale {c.pupil_scale:.5f}, "
         f"slope scale {c.slope_scale:.5f}, k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm "
-        "RMS from their rays (thin lens: "
-        f"{result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
+        f"RMS from their rays (thin lens: {result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
     )
     return 0
 

@@ -783,8 +783,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     rows, by_depth, disparities = [], [], {}
     for method in METHODS:
         chain, shots = models[method], oracle if method == "oracle" else captures
-        row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan) | {"test_boards_found": ""}
-        row["boards_left_out"] = " ".join(chain.left_out)
+        row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan)
+        row |= {"test_boards_found": "", "boards_left_out": " ".join(chain.left_out)}
         prepared = PreparedMethod(name=method, error=chain.error)
         if chain.error is None:
             images = _images(products / "synth" / method, names, jobs[0][0])

@@ -114,23 +114,23 @@ def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsy
         out = tmp_path / f"board{i}"
         render_job(board_scene(tilt, table, spp=16, seed=i), out, progress=False, write_previews=False)
         captures.append(str(out / "raw.exr"))
-    blank = captures.pop()
+    small = captures.pop()
     board_args = ["--squares", *map(str, SQUARES), "--square-size-m", str(boards[0]["square_size_m"])]
     out = tmp_path / "port.json"
-    assert core_cli.main(["calibrate", "port", captures[0], blank, *captures[1:], *board_args, "--out", str(out)]) == 0
-    assert f"{blank}: left out: no chessboard with 6 x 4 inner corners found" in capsys.readouterr().err
+    assert core_cli.main(["calibrate", "port", captures[0], small, *captures[1:], *board_args, "--out", str(out)]) == 0
+    assert f"{small}: left out: no chessboard with 6 x 4 inner corners found" in capsys.readouterr().err
     written = read_json(out)
     assert written["sources"] == captures  # in the order of the views' poses and residuals
-    assert [item["source"] for item in written["left_out"]] == [blank]
+    assert [item["source"] for item in written["left_out"]] == [small]
     assert len(written["view_rms_px"]) == len(captures)
     truth = empty_scene(tilt).port
     assert abs(FlatPort.from_dict(written["port"]).distance_m - truth.distance_m) < 1e-3
     # One board left: under the two a port calibration needs.
     out = tmp_path / "one.json"
-    assert core_cli.main(["calibrate", "port", blank, captures[0], *board_args, "--out", str(out)]) == 2
+    assert core_cli.main(["calibrate", "port", small, captures[0], *board_args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "the board was located in 1 of 2 captures, under the 2 needed" in err
-    assert repr(blank) in err
+    assert repr(small) in err
     assert not out.exists()
     assert core_cli.main(["calibrate", "port", captures[0], *board_args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
