@@ -19,7 +19,8 @@ The rules (``docs/conventions.md``, "Outputs and --overwrite"):
 * staging directories left by a killed process (no live process holds their lock) are removed
   by the next output into the same parent; an earlier output moved aside for replacement is put
   back if the new one never took its place; SIGTERM is turned into a clean exit by the CLIs
-  (:func:`terminate_cleanly`).
+  (:func:`terminate_cleanly`), which also removes the scratch folders of :func:`scratch_directory`
+  (the temporary working folders of the simulator's experiments).
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ __all__ = [
     "prepare_output_files",
     "refuse_own_inputs",
     "remove_stale_staging",
+    "scratch_directory",
     "staged_directory",
     "terminate_cleanly",
 ]
@@ -127,6 +129,37 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
         raise
     finally:
         _PENDING.pop(tmp, None)
+
+
+@contextlib.contextmanager
+def scratch_directory(*, prefix: str) -> Iterator[Path]:
+    """A temporary working folder that SIGTERM removes too (unlike ``tempfile.TemporaryDirectory``).
+
+    Makes a fresh folder ``<prefix><random>`` in the system's temporary directory (``TMPDIR``
+    honoured) and yields it; when the block ends, normally or by any exception, it is removed with
+    everything in it. While the block runs it is registered as unfinished, so
+    :func:`terminate_cleanly` removes it if the process is sent SIGTERM.
+
+    Parameters
+    ----------
+    prefix : str
+        Start of the folder's name (``"lfsim-planes-"``, say).
+
+    Yields
+    ------
+    Path
+        The new, empty folder.
+    """
+    path = Path(tempfile.mkdtemp(prefix=prefix))
+    _PENDING[path] = True
+    try:
+        yield path
+    finally:
+        try:
+            with contextlib.suppress(FileNotFoundError):
+                shutil.rmtree(path)
+        finally:
+            _PENDING.pop(path, None)
 
 
 # =============================================================================== inputs

@@ -37,12 +37,12 @@ maps by matcher and method (``objects_depth_error.png``).
 from __future__ import annotations
 
 import math
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lfrefract.formats.outputs import scratch_directory
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import depth_errors, disparity_errors
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -148,8 +148,7 @@ def run_objects(
     nearest, farthest = 0.25 * objects_setup.size, 0.8 * objects_setup.size  # disparity search range
     check_file_stems(options.methods if options.methods is not None else method_names())
     first = base.cameras[0].name
-    with tempfile.TemporaryDirectory(prefix="lfsim-objects-") as tmp:
-        work = Path(tmp)
+    with scratch_directory(prefix="lfsim-objects-") as work:
         jobs = [(f"board-{d}-{i}", [b]) for d in depths for i, b in enumerate(chessboards(base, setup, d))]
         jobs.append(("objects", scene_objects(base, objects_setup.size)))
         captures = render_captures(base, jobs, work, progress=progress)

@@ -68,7 +68,6 @@ import json
 import math
 import shlex
 import shutil
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -82,6 +81,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import RAW_NAME, camera_from_option, port_from_file, ray_correction_from_option
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json, write_json, write_text_atomically
+from lfrefract.formats.outputs import scratch_directory
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -364,8 +364,8 @@ def run_pipeline(
     # The core's input folder and its products live in a fresh temporary folder of every run: nothing
     # in renders_dir (the caller's) is ever deleted, and no earlier run's copy can reach the core.
     with (
-        tempfile.TemporaryDirectory(prefix="lfsim-pipeline-") as tmp,
-        tempfile.TemporaryDirectory(prefix="lfsim-pipeline-core-") as scratch,
+        scratch_directory(prefix="lfsim-pipeline-") as tmp,
+        scratch_directory(prefix="lfsim-pipeline-core-") as scratch,
     ):
         work = Path(tmp) if renders_dir is None else Path(renders_dir)
         return _run(Path(out_dir), options, work, Path(scratch), progress=progress)

@@ -37,12 +37,12 @@ depth:
 from __future__ import annotations
 
 import math
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from lfrefract.formats.outputs import scratch_directory
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import fit_plane_ransac
 from lfrefract.stereo.geometry import disparity_to_depth, disparity_to_points
@@ -127,8 +127,8 @@ def run_planes(
     options = options if options is not None else ExperimentOptions(scale=scale)
     setup = setup_for(options.scale)
     base = experiment_rig(setup, options)
-    with tempfile.TemporaryDirectory(prefix="lfsim-planes-") as tmp:
-        work = Path(tmp) if renders_dir is None else Path(renders_dir)
+    with scratch_directory(prefix="lfsim-planes-") as tmp:
+        work = tmp if renders_dir is None else Path(renders_dir)
         return _run(out_dir, setup, options, base, work, progress=progress, write_clouds=write_clouds)
 
 

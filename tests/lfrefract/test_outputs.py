@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import threading
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from lfrefract.formats.outputs import (
     prepare_output_files,
     refuse_own_inputs,
     remove_stale_staging,
+    scratch_directory,
     staged_directory,
 )
 
@@ -294,6 +296,35 @@ def test_atomic_file_names_are_unique_and_cleaned_up(tmp_path):
         half_write()
     assert entries(tmp_path) == ["map.npz"]
     assert target.read_text() == "1"
+
+
+def test_scratch_directory_is_removed_on_exit_and_on_an_exception(tmp_path, monkeypatch):
+    """The experiments' working folders: in TMPDIR, known to the SIGTERM handler while in use, gone after."""
+    from lfrefract.formats import outputs
+
+    monkeypatch.setattr(tempfile, "tempdir", None)  # tempfile caches the directory it chose
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    with scratch_directory(prefix="lfsim-test-") as work:
+        assert work.parent == tmp_path
+        assert work.name.startswith("lfsim-test-")
+        assert outputs._PENDING[work] is True  # terminate_cleanly removes it
+        (work / "sub").mkdir()
+        (work / "sub" / "render.exr").write_text("x")
+    assert entries(tmp_path) == []
+    assert work not in outputs._PENDING
+
+    def fail() -> None:
+        with scratch_directory(prefix="lfsim-test-") as work:
+            (work / "half.exr").write_text("x")
+            raise RuntimeError("interrupted")
+
+    with pytest.raises(RuntimeError, match="interrupted"):
+        fail()
+    assert entries(tmp_path) == []
+    with scratch_directory(prefix="lfsim-test-") as work:
+        work.rmdir()  # already gone: not an error
+    assert entries(tmp_path) == []
+    assert work not in outputs._PENDING
 
 
 def test_atomic_file_refuses_a_directory_and_leaves_nothing(tmp_path):
