@@ -125,11 +125,16 @@ def _grey(name: str, image: np.ndarray) -> np.ndarray:
     return grey / top
 
 
-def _gray8(name: str, grey: np.ndarray, *, percentile: float) -> np.ndarray:
-    """8-bit image for the detector: ``grey`` (from :func:`_grey`) scaled to ``percentile`` and clipped."""
+def _gray8(grey: np.ndarray, *, percentile: float) -> np.ndarray | None:
+    """8-bit image for the detector: ``grey`` (from :func:`_grey`) scaled to ``percentile`` and clipped.
+
+    None if that percentile is 0: not a blank image (:func:`_grey` refuses those) but a board on an
+    exactly black background (NaN, no data) covering less of the image than the percentile leaves,
+    which the next, higher percentile scales.
+    """
     white = float(np.percentile(grey, percentile))
     if not white > 0.0:
-        raise ParameterError(f"{name} is blank ({percentile:g}th percentile {white!r})")
+        return None
     return (np.clip(grey / white, 0.0, 1.0) * 255).astype(np.uint8)
 
 
@@ -142,8 +147,9 @@ def detect_chessboard(
     the saddle point by ``cornerSubPix``: the detector's own estimate leans towards the board's
     edge on blurred images (0.2 px RMS on refraction-free images of 9 px squares). The detector
     sees the image scaled to 8 bits at its 99th percentile, and if it finds no board there at its
-    99.9th (:data:`WHITE_PERCENTILES`: a board covering under 1 % of the image); the refinement
-    sees the linear image, unclipped.
+    99.9th (:data:`WHITE_PERCENTILES`: a board covering under 1 % of the image; a percentile that
+    is 0, a small board on an exactly black background, is skipped); the refinement sees the linear
+    image, unclipped.
 
     Parameters
     ----------
@@ -163,15 +169,21 @@ def detect_chessboard(
         Corner pixels ``(u, v)`` (OpenCV convention: pixel centres at integers), row by row with
         u fastest in the detector's order (which may be the reverse of the board's own order on a
         board that looks the same after a half turn); None if no board was found.
+
+    Raises
+    ------
+    ParameterError
+        If the image has no finite pixel or is blank (its largest value is 0), or an argument is invalid.
     """
     cols, rows = _pattern(pattern)
     half = positive_int("refine_half_window_px", refine_half_window_px)
     grey = _grey(name, _as_image(name, image))
     for percentile in WHITE_PERCENTILES:
+        gray8 = _gray8(grey, percentile=percentile)
+        if gray8 is None:
+            continue  # black at this percentile: the board is small on a black background
         found, corners = cv2.findChessboardCornersSB(
-            _gray8(name, grey, percentile=percentile),
-            (cols, rows),
-            flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY,
+            gray8, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
         )
         if found:
             break

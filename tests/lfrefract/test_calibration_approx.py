@@ -278,16 +278,17 @@ def test_detector_reports_no_board_as_none(images):
     assert found.shape == (35, 2)
 
 
-def _small_board(blur_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """A sheared board of 7 x 5 squares of 12 px in an Illum-sized view (748 x 1078 px), white 0.7 on
-    0.02, area-sampled (4 x 4 per pixel) and blurred; and its 24 true inner corners (u, v)."""
+def _small_board(blur_px: float, *, background: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """A sheared board of 7 x 5 squares of 12 px in an Illum-sized view (748 x 1078 px), white 0.7 and
+    black 0.02 on ``background``, area-sampled (4 x 4 per pixel) and blurred; and its 24 true inner
+    corners (u, v)."""
     ss, shear, side_px, centre = 4, 0.15, 12.0, (620.0, 430.0)
     v, u = (np.mgrid[0 : 748 * ss, 0 : 1078 * ss] + 0.5) / ss - 0.5
     y = (v - centre[1]) / side_px
     x = (u - centre[0]) / side_px - shear * y
     board = (np.abs(x) < 4.5) & (np.abs(y) < 3.5)
     black = (np.abs(x) < 3.5) & (np.abs(y) < 2.5) & ((np.floor(x + 3.5) + np.floor(y + 2.5)) % 2 == 0)
-    image = np.where(board & ~black, 0.7, 0.02).reshape(748, ss, 1078, ss).mean(axis=(1, 3))
+    image = np.where(board, np.where(black, 0.02, 0.7), background).reshape(748, ss, 1078, ss).mean(axis=(1, 3))
     jj, ii = np.mgrid[-1.5:2.0:1.0, -2.5:3.0:1.0]
     true = np.stack([centre[0] + side_px * (ii + shear * jj), centre[1] + side_px * jj], axis=-1)
     return ndimage.gaussian_filter(image, blur_px), true.reshape(-1, 2)
@@ -309,6 +310,20 @@ def test_a_board_covering_under_one_percent_of_the_image_is_found():
     found = detect_chessboard(image, (6, 4))
     assert found is not None
     assert _distance_to_truth(found, true).max() < 2.0  # a start for the light-field fit, which refines it
+
+
+def test_a_small_board_on_an_exactly_black_background_is_found():
+    # A noiseless render reads NaN (no data) as black: with under 1 % of the pixels nonzero the 99th
+    # percentile is 0, and the detector refused the image as blank before trying the 99.9th.
+    image, true = _small_board(1.5, background=0.0)
+    image = np.pad(image, ((0, 748), (0, 0)))  # twice the height: the board and its blur 0.7 % of it
+    assert np.percentile(image, 99) == 0.0
+    assert np.percentile(image, 99.9) > 0.0
+    found = detect_chessboard(image, (6, 4))
+    assert found is not None
+    assert np.sqrt(np.mean(_distance_to_truth(found, true) ** 2)) < SMALL_BOARD_CORNER_RMS_PX
+    with pytest.raises(ParameterError, match=r"image is blank \(its largest value is 0\.0\)"):
+        detect_chessboard(np.zeros_like(image), (6, 4))  # the blank check is the largest value's
 
 
 def test_corners_are_refined_on_the_unclipped_image():
