@@ -942,9 +942,10 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     result = calibrate_camera(camera, views, view=view)
     write_json(out, {**result.to_dict(), **boards.to_dict()})
     c = result.correction
+    slope = "held at 1 (the captures do not determine it)" if "slope_scale" in result.held else f"{c.slope_scale:.5f}"
     print(
         f"ray model from {len(views)} captures{boards.left_out_note()}: pupil scale {c.pupil_scale:.5f}, "
-        f"slope scale {c.slope_scale:.5f}, k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm "
+        f"slope scale {slope}, k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm "
         f"RMS from their rays (thin lens: {result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
     )
     return 0
