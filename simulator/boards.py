@@ -49,6 +49,7 @@ from simulator.geometry import check_geometry
 from simulator.job import render_raw
 
 __all__ = [
+    "BOARD_MIN_VIEW_FRACTION",
     "CALIBRATION_PX_PER_SQUARE",
     "CALIBRATION_ROTATIONS_DEG",
     "CALIBRATION_TARGETS",
@@ -70,6 +71,7 @@ __all__ = [
     "PortFromRenders",
     "aligned_errors_px",
     "board_points_world",
+    "board_px_per_square",
     "board_scene",
     "board_table",
     "boards_at_targets",
@@ -142,8 +144,14 @@ PORT_TARGETS = (
     (0.08, 0.08),
 )
 #: Pixels per square of the port calibration boards in the conventional view: large squares (the
-#: board spans two thirds of the view) put more raw pixels around every corner.
+#: board spans half of the tiny-2x view, all of the tiny one) put more raw pixels around every corner.
 PORT_PX_PER_SQUARE = 14.0
+#: The least part of the view's width a port or in-air calibration board's squares span
+#: (:func:`board_px_per_square`). The tiny cameras' views are small enough that
+#: :data:`PORT_PX_PER_SQUARE` gives more; on an Illum-sized view (1078 px) 14 px squares made a board
+#: 9 % of the view's width, a few degrees across, whose perspective cannot tell the focal length
+#: from the board's distance (docs/calibration.md, "What the boards determine").
+BOARD_MIN_VIEW_FRACTION = 0.4
 #: Depths (camera-frame z, metres) of the port calibration boards' centres, from 0.15 to 0.35 m.
 PORT_DEPTHS_M = (0.15, 0.35, 0.25, 0.2, 0.3, 0.18, 0.28, 0.22, 0.33, 0.16)
 #: The port calibration boards' rotations (x, y, z Euler angles, degrees): turned 15-30 deg about
@@ -320,14 +328,21 @@ def port_boards(
     """The ten port calibration boards behind the port of ``tilt_deg`` (degrees), or behind a port.
 
     Boards at :data:`PORT_TARGETS` and :data:`PORT_DEPTHS_M`, turned by :data:`PORT_ROTATIONS_DEG`,
-    with :data:`PORT_PX_PER_SQUARE` pixels per square (:func:`boards_at_targets`); ``view`` as in
+    with :func:`board_px_per_square` pixels per square (:func:`boards_at_targets`); ``view`` as in
     :func:`calibration_boards`. ``tilt_deg`` may be the port itself (a rig camera's wall, in its
     frame); the tables are then in that camera's frame. ``outer_ring``: ten more after them, the
     outer ring of :data:`OUTER_RING_SCALE`.
     """
     port = tilt_deg if isinstance(tilt_deg, FlatPort) else empty_scene(tilt_deg).port
     targets, depths, rotations = _ring_layout(outer_ring)
-    return boards_at_targets(port, view, targets, depths, rotations, px_per_square=PORT_PX_PER_SQUARE)
+    return boards_at_targets(port, view, targets, depths, rotations, px_per_square=board_px_per_square(view))
+
+
+def board_px_per_square(view: PinholeCamera) -> float:
+    """Pixels per square of the port and in-air calibration boards in ``view``: :data:`PORT_PX_PER_SQUARE`,
+    or more where that would make a board (:data:`SQUARES` wide) span less than
+    :data:`BOARD_MIN_VIEW_FRACTION` of the view's width."""
+    return max(PORT_PX_PER_SQUARE, BOARD_MIN_VIEW_FRACTION * view.width_px / SQUARES[0])
 
 
 def _ring_layout(outer_ring: bool) -> tuple[list, list, list]:
@@ -640,14 +655,15 @@ def in_air_board_scene(
 
 def in_air_boards(view: PinholeCamera, *, outer_ring: bool = False) -> list[dict]:
     """The camera calibration's ten boards in air: :data:`PORT_TARGETS` at :data:`PORT_DEPTHS_M`,
-    turned by :data:`PORT_ROTATIONS_DEG`, :data:`PORT_PX_PER_SQUARE` pixels per square in ``view``
+    turned by :data:`PORT_ROTATIONS_DEG`, :func:`board_px_per_square` pixels per square in ``view``
     (the refraction-free view of :data:`CAMERA`; so their squares differ, 9-20 mm), each centred on
     its target's line of sight. ``outer_ring``: ten more after them, the outer ring of
     :data:`OUTER_RING_SCALE` (the lens's distortion is calibrated where the port boards see)."""
     k_inverse = np.linalg.inv(view.K)
+    px_per_square = board_px_per_square(view)
     tables = []
     for (fx, fy), depth, rotation in zip(*_ring_layout(outer_ring), strict=True):
         sight = k_inverse @ np.array([view.K[0, 2] + fx * view.width_px, view.K[1, 2] + fy * view.height_px, 1.0])
-        square = PORT_PX_PER_SQUARE * depth / view.K[0, 0]
+        square = px_per_square * depth / view.K[0, 0]
         tables.append(board_table(depth * sight / sight[2], rotation, square))
     return tables
