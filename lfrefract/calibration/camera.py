@@ -31,10 +31,11 @@ observation as independent, overstates what such captures say. The calibration t
 estimates the parameters' spread with each capture as one sample (a covariance clustered by capture,
 the "sandwich" estimate); where the slope scale's spread exceeds :data:`MAX_SCALE_STD`, the slope
 scale is held at 1, the focal length the capture's file records (the nominal camera's), and the other
-four are fitted: :attr:`CameraCalibration.held` says so. Measured on the simulator's Illum-sized
-in-air boards (2-2.5 mm squares at 0.15-0.35 m): slope scale 0.960 with a clustered spread of 0.051
-when fitted (every board then 4 % too far), the true rays' 1.001; held at 1, the boards come out at
-their true distances (0.2 %) and the rays 0.11 mm from the true ones 25 mm out (fitted: 0.52 mm).
+four are fitted: :attr:`CameraCalibration.held` says so. Measured on Illum in-air boards of 14 px
+squares (2.1-4.9 mm at 0.15-0.35 m, each board 3-5 degrees across): slope scale 0.960 with a
+clustered spread of 0.051 when fitted (every board then 4 % too far), the true rays' 1.001; held at
+1, the boards come out at their true distances (0.2 %) and the rays 0.11 mm from the true ones 25 mm
+out (fitted: 0.52 mm).
 
 Frames and units: camera frame (OpenCV axes: x right, y down, z forward), metres; slopes are
 dimensionless; the board's own frame has its corners on z = 0.
@@ -68,7 +69,7 @@ __all__ = [
 
 #: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
 CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
-#: Fewest board captures a calibration takes: one pose per capture and four shared parameters need
+#: Fewest board captures a calibration takes: one pose per capture and five shared parameters need
 #: views at several distances and angles.
 MIN_VIEWS = 3
 #: The largest standard deviation of the pupil and slope scales accepted (relative; the larger of the
@@ -259,10 +260,10 @@ class _Fit:
 
 
 def _fit(observed: list, nominal: np.ndarray, free: np.ndarray, start: np.ndarray) -> _Fit:
-    """Fit the parameters marked ``free`` (the others at ``nominal``) and one pose per capture.
+    """Fit the parameters marked ``free`` (the others held at ``nominal``) and one pose per capture.
 
-    ``start``: the free parameters' start (``nominal``'s values are used) then the poses, or the poses
-    alone. Returns the fit with its covariances (the parameters' block, marginal over the poses).
+    The free parameters start at ``nominal``, the poses at the last ``6 n`` values of ``start`` (``n``
+    captures). Returns the fit with its covariances (the parameters' block, marginal over the poses).
     """
     n_free = int(free.sum())
     n = len(observed)
