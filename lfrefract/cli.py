@@ -828,7 +828,8 @@ def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out:
         "prior_chi2": joint.prior_chi2,
         "in_air_correction": joint.prior.correction.to_dict(),
         "in_air_correction_covariance": joint.prior.covariance_to_dict(),
-        "note": "ray_rms_m, initial_ray_rms_m, per_view_rms_m and poses are the in-air fit's, with in_air_correction",
+        "note": "ray_rms_m, initial_ray_rms_m, per_view_rms_m, poses, correction_std_clustered and held are the "
+        "in-air fit's, with in_air_correction",
     }
     return data
 
