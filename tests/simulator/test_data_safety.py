@@ -7,6 +7,10 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -152,50 +156,43 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, outpu
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "render"]
 
 
-def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
-    """SIGTERM used to end the process without cleanup, leaving a hidden ``.NAME.*.partial``."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
-    out = tmp_path / "render"
+def _terminate_lfsim(args: list[str], ready, *, env: dict | None = None) -> None:
+    """Run ``lfsim ARGS``, send it SIGTERM once ``ready()`` holds (within 60 s), and check that it
+    ended by the signal (status 128 + 15)."""
     code = "import sys; from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
-    argv = [sys.executable, "-c", code, "render", "--out", str(out), "--spp", "64", "--quiet", "--no-previews"]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
+    )
     deadline = time.monotonic() + 60
-    while not any(p.name.endswith(".partial") for p in tmp_path.iterdir()):
+    while not ready():
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.02)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + signal.SIGTERM, err.decode()
+
+
+def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
+    """SIGTERM used to end the process without cleanup, leaving a hidden ``.NAME.*.partial``."""
+    out = tmp_path / "render"
+    _terminate_lfsim(
+        ["render", "--out", str(out), "--spp", "64", "--quiet", "--no-previews"],
+        lambda: any(p.name.endswith(".partial") for p in tmp_path.iterdir()),
+    )
     assert list(tmp_path.iterdir()) == []
 
 
 def test_sigterm_during_an_experiment_removes_its_temporary_folder(tmp_path):
     """The experiments' scratch folders (``tempfile.TemporaryDirectory``) were unknown to the SIGTERM
     handler: a terminated ``lfsim experiment pipeline --scale illum`` left 6 GB in /tmp every time."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
     scratch, out = tmp_path / "tmp", tmp_path / "out"
     scratch.mkdir()
-    code = "import sys; from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
-    argv = [sys.executable, "-c", code, "experiment", "planes", "--scale", "tiny", "--out", str(out), "--quiet"]
-    env = {**os.environ, "TMPDIR": str(scratch)}
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
-    deadline = time.monotonic() + 60
-    while not any(p.name.startswith("lfsim-planes-") for p in scratch.iterdir()):
-        assert proc.poll() is None, proc.communicate()
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
+    _terminate_lfsim(
+        ["experiment", "planes", "--scale", "tiny", "--out", str(out), "--quiet"],
+        lambda: any(p.name.startswith("lfsim-planes-") for p in scratch.iterdir()),
+        env={**os.environ, "TMPDIR": str(scratch)},
+    )
     assert list(scratch.iterdir()) == []
     assert not out.exists() or list(out.iterdir()) == []
     assert sorted(p.name for p in tmp_path.iterdir()) in (["tmp"], ["out", "tmp"])
