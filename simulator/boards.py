@@ -656,7 +656,7 @@ def in_air_board_scene(
 def in_air_boards(view: PinholeCamera, *, outer_ring: bool = False) -> list[dict]:
     """The camera calibration's ten boards in air: :data:`PORT_TARGETS` at :data:`PORT_DEPTHS_M`,
     turned by :data:`PORT_ROTATIONS_DEG`, :func:`board_px_per_square` pixels per square in ``view``
-    (the refraction-free view of :data:`CAMERA`; so their squares differ, 9-20 mm), each centred on
+    (the refraction-free view of :data:`CAMERA`; so their squares differ, 9-20 mm on it), each centred on
     its target's line of sight. ``outer_ring``: ten more after them, the outer ring of
     :data:`OUTER_RING_SCALE` (the lens's distortion is calibrated where the port boards see)."""
     k_inverse = np.linalg.inv(view.K)

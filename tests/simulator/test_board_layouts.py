@@ -13,6 +13,7 @@ import pytest
 
 from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.calibration.port import project_through_port
+from lfrefract.optics.pinhole import PinholeCamera
 from simulator import boards
 from tests.tolerances import BOARD_CORNER_MARGIN_SQUARES
 
@@ -23,7 +24,7 @@ ILLUM_VIEW = virtual_camera_for(camera_preset("illum"))
 TILTS_DEG = ((20.0, -3.0), (25.0, 10.0))
 
 
-def _inside(uv: np.ndarray, view=VIEW) -> bool:
+def _inside(uv: np.ndarray, view: PinholeCamera) -> bool:
     """All pixels (N, 2) at least the margin inside the view."""
     margin = BOARD_CORNER_MARGIN_SQUARES * boards.board_px_per_square(view)
     size = np.array([view.width_px - 1, view.height_px - 1])
