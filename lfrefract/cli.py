@@ -131,7 +131,7 @@ from lfrefract.synthesis.depth_aware import (
     render_chunks,
     trace_scene_rays,
 )
-from lfrefract.synthesis.views import VIEW_KINDS, naive_view, subaperture_stack, view_stack_bytes
+from lfrefract.synthesis.views import VIEW_KINDS, finite_pixels, naive_view, subaperture_stack, view_stack_bytes
 from lfrefract.synthesis.warp_map import (
     BLOCK_PIXELS,
     FILLED_APPROXIMATED,
@@ -845,9 +845,12 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     conventional = ConventionalView(
         camera=camera, view=virtual_camera_for(camera), ray_correction=ray_correction_from_option(args.camera)
     )
-    images = [
-        conventional.apply(_board_raw(path, camera, args.white, args.colour, command="approx")) for path in args.boards
-    ]
+
+    def central_view(path: str) -> np.ndarray:
+        raw = _board_raw(path, camera, args.white, args.colour, command="approx")
+        return conventional.apply(raw, recorded=finite_pixels(raw))  # NaN: unrecorded (see _board_raw)
+
+    images = [central_view(path) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
     result.save(out)

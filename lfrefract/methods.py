@@ -50,6 +50,7 @@ from lfrefract.synthesis.views import (
     micro_image_samples,
     naive_view,
     raw_channels,
+    recorded_mask,
     resampling_matrix,
 )
 from lfrefract.synthesis.warp_map import SynthesisOptions, WarpMap, build_warp_map
@@ -163,11 +164,15 @@ class ConventionalView:
         object.__setattr__(self, "_matrix", matrix)
         object.__setattr__(self, "_inside", inside)
 
-    def apply(self, raw: np.ndarray) -> np.ndarray:
-        """The conventional image of ``raw`` (see :func:`conventional_image`)."""
+    def apply(self, raw: np.ndarray, *, recorded: np.ndarray | None = None) -> np.ndarray:
+        """The conventional image of ``raw`` (see :func:`conventional_image`); ``recorded`` ((H, W)
+        bool, e.g. :func:`~lfrefract.synthesis.views.finite_pixels`): only those raw pixels are used,
+        as in :func:`~lfrefract.synthesis.views.subaperture_view`."""
         image = raw_channels(self.camera, raw)
-        samples = micro_image_samples(self.camera, image, self._idx)
-        return apply_resampling(self._matrix, self._inside, samples, self.view, grey=np.ndim(raw) == 2)
+        recorded = recorded_mask(self.camera, recorded)
+        samples = micro_image_samples(self.camera, image, self._idx, recorded=recorded)
+        grey = np.ndim(raw) == 2
+        return apply_resampling(self._matrix, self._inside, samples, self.view, grey=grey, masked=recorded is not None)
 
 
 @dataclass(frozen=True, eq=False)

@@ -46,7 +46,7 @@ from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
-from lfrefract.synthesis.views import subaperture_centre_m, subaperture_view
+from lfrefract.synthesis.views import finite_pixels, subaperture_centre_m, subaperture_view
 from lfrefract.validate import as_points, finite_vector, one_of, positive_float, positive_int
 
 __all__ = [
@@ -218,7 +218,8 @@ def board_view_from_light_field(
     ----------
     camera : LightFieldCamera
     raw : ndarray, shape (H, W) or (H, W, C)
-        The raw lenslet image.
+        The raw lenslet image; NaN where nothing was recorded (a pixel NaN in any channel is left out
+        of the views and of the light-field fit).
     pattern : (int, int)
         Inner corners per row and column (OpenCV's ``patternSize``).
     square_size_m : float
@@ -258,7 +259,10 @@ def board_view_from_light_field(
     jj, ii = np.mgrid[0:rows, 0:cols]
     board = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
     board = board * positive_float("square_size_m", square_size_m)
-    central = detect_chessboard(subaperture_view(camera, raw, (0.0, 0.0), output=view), pattern, name=name)
+    recorded = finite_pixels(raw)
+    central = detect_chessboard(
+        subaperture_view(camera, raw, (0.0, 0.0), output=view, recorded=recorded), pattern, name=name
+    )
     if central is None:
         return None
     corners, centres = [central], [np.zeros((len(central), 3))]
@@ -272,7 +276,9 @@ def board_view_from_light_field(
         centres = [np.tile([a[0], a[1], 0.0], (int(np.count_nonzero(tracks.ok)), 1)) for a in points]
         board = board[tracks.ok]
     for offset in offsets[1:] if method == "views" else ():
-        found = detect_chessboard(subaperture_view(camera, raw, offset, output=view), pattern, name=name)
+        found = detect_chessboard(
+            subaperture_view(camera, raw, offset, output=view, recorded=recorded), pattern, name=name
+        )
         if found is None:
             continue
         if np.linalg.norm(found[::-1] - corners[0]) < np.linalg.norm(found - corners[0]):

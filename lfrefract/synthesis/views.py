@@ -64,6 +64,7 @@ __all__ = [
     "VIEW_KINDS",
     "ViewStack",
     "apply_resampling",
+    "finite_pixels",
     "micro_image_samples",
     "naive_view",
     "naive_view_bytes",
@@ -265,6 +266,20 @@ def raw_channels(camera: LightFieldCamera, raw: np.ndarray) -> np.ndarray:
     return arr[..., None] if arr.ndim == 2 else arr
 
 
+def finite_pixels(raw: np.ndarray) -> np.ndarray | None:
+    """The pixels of ``raw`` ((H, W) or (H, W, C)) holding a finite value in every channel, as the
+    ``recorded`` mask of the views (bool (H, W)); None where all do.
+
+    A board capture marks what it did not record as NaN (what its white image does not light); given
+    as ``recorded``, the views leave those pixels out rather than letting each spoil the micro-image
+    sample it falls in.
+    """
+    finite = np.isfinite(raw)
+    if finite.ndim == 3:
+        finite = finite.all(axis=2)
+    return None if finite.all() else finite
+
+
 def recorded_mask(camera: LightFieldCamera, recorded: np.ndarray | None) -> np.ndarray | None:
     """``recorded`` as a bool (H, W) array of the camera's sensor size, or None (every pixel recorded).
 
@@ -305,9 +320,7 @@ def _resample(
         _, matrix, inside = resampling_matrix(
             camera, output, slope_shift=slope_shift, lenses=idx, ray_correction=ray_correction
         )
-    if masked:
-        return _apply_resampling_masked(matrix, inside, values, output, grey=grey)
-    return apply_resampling(matrix, inside, values, output, grey=grey)
+    return apply_resampling(matrix, inside, values, output, grey=grey, masked=masked)
 
 
 @functools.lru_cache(maxsize=2)  # an Illum's matrix is about 35 MB
@@ -325,10 +338,20 @@ def _sensor_resampling(
 
 
 def apply_resampling(
-    matrix: sparse.csr_matrix, inside: np.ndarray, values: np.ndarray, output: PinholeCamera, *, grey: bool
+    matrix: sparse.csr_matrix,
+    inside: np.ndarray,
+    values: np.ndarray,
+    output: PinholeCamera,
+    *,
+    grey: bool,
+    masked: bool = False,
 ) -> np.ndarray:
     """Per-lens values (M, C) through a :func:`resampling_matrix` onto the pinhole image, float32,
-    NaN outside the lenses' hull; ``grey`` drops the channel axis."""
+    NaN outside the lenses' hull; ``grey`` drops the channel axis. ``masked``: lenses without a value
+    (NaN in any channel, as :func:`micro_image_samples` gives where no recorded pixel contributes)
+    are skipped, each pixel's weights renormalised over the others."""
+    if masked:
+        return _apply_resampling_masked(matrix, inside, values, output, grey=grey)
     out = np.asarray(matrix @ values.astype(np.float64), dtype=np.float32)
     out[~inside] = np.nan
     out = out.reshape(output.height_px, output.width_px, -1)

@@ -12,7 +12,7 @@ import pytest
 from lfrefract import FlatPort, ParameterError, Pose, camera_preset, virtual_camera_for
 from lfrefract.calibration import corners as corners_module
 from lfrefract.calibration.corners import light_field_corners
-from lfrefract.calibration.port import project_through_port
+from lfrefract.calibration.port import board_view_from_light_field, project_through_port
 from tests.tolerances import LF_CORNER_ANALYTIC_PX
 
 CAMERA = camera_preset("tiny")
@@ -35,10 +35,11 @@ def _corners_world(pose: Pose, square_m: float) -> np.ndarray:
     return pose.to_world(np.c_[local, np.zeros(len(local))])
 
 
-def _raw(port: FlatPort, pose: Pose, square_m: float) -> np.ndarray:
+def _raw(port: FlatPort, pose: Pose, square_m: float, *, bounded: bool = False) -> np.ndarray:
     """Each pixel's chief ray through ``port`` onto the board plane, where the texture
     ``0.5 + 0.4 tanh(3 cos(pi x / s)) tanh(3 cos(pi y / s))`` has its X-junctions at the inner corners
-    (point-symmetric about each, like a blurred chessboard)."""
+    (point-symmetric about each, like a blurred chessboard); ``bounded``: white (0.9) beyond the
+    board's squares (one more than :data:`PATTERN` each way), so that OpenCV finds the board."""
     rays = CAMERA.captured_rays()
     trace = port.trace_from_air(rays.origins_cam, rays.directions_cam)
     rotation, centre = np.asarray(pose.rotation), np.asarray(pose.position_m)
@@ -47,6 +48,8 @@ def _raw(port: FlatPort, pose: Pose, square_m: float) -> np.ndarray:
     local = (trace.exit_points_cam + along[:, None] * trace.directions_cam - centre) @ rotation
     x, y = local[:, 0] / square_m, local[:, 1] / square_m
     value = 0.5 + 0.4 * np.tanh(3.0 * np.cos(math.pi * x)) * np.tanh(3.0 * np.cos(math.pi * y))
+    if bounded:
+        value = np.where((np.abs(x) < (PATTERN[0] + 1) / 2) & (np.abs(y) < (PATTERN[1] + 1) / 2), value, 0.9)
     return np.where(rays.in_aperture, value, 0.0).reshape(CAMERA.sensor.height_px, CAMERA.sensor.width_px)
 
 
@@ -125,3 +128,26 @@ def test_bad_input_is_rejected_with_the_parameter_named():
         light_field_corners(CAMERA, raw, corners, pattern=PATTERN, square_size_m=-1.0, view=VIEW)
     with pytest.raises(ParameterError, match="raw"):
         light_field_corners(CAMERA, raw[:10], corners, pattern=PATTERN, square_size_m=0.01, view=VIEW)
+
+
+def test_a_board_view_leaves_unrecorded_pixels_out_of_the_central_view():
+    """A board capture's NaN (unrecorded: what its white does not light) spoiled every micro-image
+    sample whose bilinear footprint held one: on an Illum in-air board at the field's edge the
+    central view lost the board's white border and the board was not found, though its light-field
+    corners were all located. Here one pixel of every centre's footprint is NaN."""
+    pose, square = _board(PORT, 0.3, (10.0, -5.0, 0.0), px_per_square=10.0)
+    raw = _raw(PORT, pose, square, bounded=True)
+    kwargs = {"pattern": PATTERN, "square_size_m": square, "view": VIEW}
+    whole = board_view_from_light_field(CAMERA, raw, **kwargs)
+    assert whole is not None
+    assert np.count_nonzero(whole.central) == PATTERN[0] * PATTERN[1]
+    centres = CAMERA.micro_image_centres_px(CAMERA.lens_indices_on_sensor())
+    u, v = np.floor(centres).astype(int).T
+    inside = (u >= 0) & (v >= 0) & (u < raw.shape[1]) & (v < raw.shape[0])
+    holed = raw.copy()
+    holed[v[inside], u[inside]] = np.nan
+    found = board_view_from_light_field(CAMERA, holed, **kwargs)
+    assert found is not None
+    assert np.count_nonzero(found.central) == PATTERN[0] * PATTERN[1]
+    moved = np.linalg.norm(found.corners_px[found.central] - whole.corners_px[whole.central], axis=1)
+    assert np.max(moved) < LF_CORNER_ANALYTIC_PX

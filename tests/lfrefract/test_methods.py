@@ -25,7 +25,7 @@ from lfrefract.methods import (
     build_projector,
     conventional_image,
 )
-from lfrefract.synthesis.views import naive_view
+from lfrefract.synthesis.views import finite_pixels, naive_view, subaperture_view
 from lfrefract.synthesis.warp_map import build_warp_map
 from tests.tolerances import FLOAT32_WEIGHT_SUM
 
@@ -83,6 +83,25 @@ def test_conventional_view_is_the_central_naive_view(camera, raw, view):
     grey = conventional.apply(raw[..., 1])
     assert grey.shape == image.shape[:2]
     assert np.allclose(grey, image[..., 1], equal_nan=True)
+
+
+def test_conventional_view_leaves_unrecorded_pixels_out(camera, raw):
+    """A board capture's NaN (unrecorded) pixels: with ``recorded`` each micro-image's sample is weighed
+    over its recorded pixels, as in the sub-aperture views, instead of one NaN spoiling it. Here one
+    pixel of every centre's bilinear footprint is NaN."""
+    conventional = ConventionalView(camera, virtual_camera_for(camera))
+    whole = conventional.apply(raw)
+    u, v = np.floor(camera.micro_image_centres_px(camera.lens_indices_on_sensor())).astype(int).T
+    inside = (u >= 0) & (v >= 0) & (u < raw.shape[1]) & (v < raw.shape[0])
+    holed = raw.copy()
+    holed[v[inside], u[inside], 1] = np.nan
+    assert np.all(np.isnan(conventional.apply(holed)[..., 1]))  # every lens's green sample spoilt
+    recorded = finite_pixels(holed)
+    image = conventional.apply(holed, recorded=recorded)
+    assert np.array_equal(np.isnan(image), np.isnan(whole))
+    expected = subaperture_view(camera, holed, (0.0, 0.0), recorded=recorded)
+    assert np.nanmax(np.abs(image - expected)) < FLOAT32_WEIGHT_SUM
+    assert finite_pixels(raw) is None  # nothing to leave out
 
 
 def test_conventional_view_checks_the_raw_shape(camera, raw):
