@@ -13,6 +13,10 @@ scaled aperture point (the ray is written from where it crosses z = 0: ``(m a - 
 The pupil's position on the axis itself is not a parameter: in-air views fix the camera only up to a
 shift of its frame along z, so the model keeps the thin lens's plane z = 0 for the field's centre.
 
+:meth:`RayCorrection.thin_lens_rays` inverts the map: the thin-lens ray whose corrected ray is a
+given one (the slope equation is radial, solved for ``|t|`` by Newton's method). The synthesis
+uses it to predict, with the thin-lens search's lattice arithmetic, which pixels record a ray.
+
 :func:`lfrefract.calibration.calibrate_camera` estimates it from in-air chessboard
 light fields; the synthesis takes it through
 :attr:`lfrefract.synthesis.warp_map.SynthesisOptions.ray_correction`.
@@ -33,6 +37,13 @@ from lfrefract.optics.camera import CapturedRays
 from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
 
 __all__ = ["PARAMETERS", "CorrectionEstimate", "RayCorrection", "apply_correction", "corrected_slopes"]
+
+#: Newton steps :meth:`RayCorrection.thin_lens_rays` takes at most (it converges in 3-5 on every
+#: calibrated lens: the radial terms are a few per cent of the slope).
+_INVERSE_MAX_STEPS = 50
+
+#: Relative residual of the slope equation below which a root counts as found (a few ulps).
+_INVERSE_TOLERANCE = 1e-14
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
 PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
@@ -96,6 +107,62 @@ class RayCorrection:
     def slopes(self, slopes: np.ndarray) -> np.ndarray:
         """The camera's slopes ``t'`` (N, 2) of thin-lens slopes ``t`` (N, 2): ``s t (1 + k1 |t|^2 + k2 |t|^4)``."""
         return corrected_slopes(self.vector(), np.asarray(slopes, dtype=float))
+
+    def thin_lens_rays(
+        self, points_cam: np.ndarray, directions_cam: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The thin-lens rays that :meth:`apply` maps to the given rays (its inverse).
+
+        Parameters
+        ----------
+        points_cam : ndarray, shape (N, 3)
+            A point on each ray, camera frame, metres.
+        directions_cam : ndarray, shape (N, 3)
+            Their directions (any length, ``z > 0``).
+
+        Returns
+        -------
+        aperture_points_m : ndarray, shape (N, 2)
+            The thin-lens rays' points on the plane z = 0, metres.
+        slopes : ndarray, shape (N, 2)
+            Their slopes ``t``.
+        found : ndarray of bool, shape (N,)
+            The ray has a thin-lens ray: the slope equation ``s rho (1 + k1 rho^2 + k2 rho^4) = |t'|``
+            has a root on the branch through 0 where the map is increasing (always, unless the radial
+            terms fold the field over). Both outputs are NaN where not.
+        """
+        p = np.asarray(points_cam, dtype=np.float64)
+        d = np.asarray(directions_cam, dtype=np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slopes_out = d[:, :2] / d[:, 2:3]
+        rho_out = np.hypot(slopes_out[:, 0], slopes_out[:, 1])
+        s, k1, k2 = self.slope_scale, self.k1, self.k2
+        rho = rho_out / s
+        for _ in range(_INVERSE_MAX_STEPS):
+            r2 = rho * rho
+            residual = s * rho * (1.0 + k1 * r2 + k2 * r2 * r2) - rho_out
+            if not np.any(np.abs(residual) > _INVERSE_TOLERANCE * np.maximum(rho_out, 1e-300)):  # NaN: done
+                break
+            slope = s * (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rho = rho - residual / slope
+        r2 = rho * rho
+        residual = s * rho * (1.0 + k1 * r2 + k2 * r2 * r2) - rho_out
+        # On the branch through 0: rho >= 0 and the map increasing there (k2 >= 0 or below its turn).
+        found = (
+            (np.abs(residual) <= 1e3 * _INVERSE_TOLERANCE * np.maximum(rho_out, 1e-300))
+            & (rho >= 0.0)
+            & (s * (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2) > 0.0)
+            & np.isfinite(rho_out)
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(rho_out > 0.0, rho / np.where(rho_out > 0.0, rho_out, 1.0), 1.0 / s)
+        slopes = np.where(found[:, None], slopes_out * ratio[:, None], np.nan)
+        # The corrected ray crosses z = 0 at o = m a - d |t'|^2 t'.
+        crossing = p[:, :2] - p[:, 2:3] * slopes_out
+        drifted = self.pupil_drift_m * (rho_out * rho_out)[:, None] * slopes_out
+        aperture = np.where(found[:, None], (crossing + drifted) / self.pupil_scale, np.nan)
+        return aperture, slopes, found
 
     def corrected(self, rays: CapturedRays) -> CapturedRays:
         """``rays`` (thin-lens captured rays) with the correction applied; masks and lenses kept."""

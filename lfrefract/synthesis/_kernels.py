@@ -51,6 +51,23 @@ class AirFace(NamedTuple):
     d_m: float
 
 
+class RayModel(NamedTuple):
+    """The camera's departure from its thin-lens rays (:class:`lfrefract.optics.ray_correction.RayCorrection`):
+    a thin-lens ray through aperture point ``a`` with slopes ``t`` is the ray of slopes
+    ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m a - d |t'|^2 t', 0)``. The identity
+    ``(1, 1, 0, 0, 0)`` leaves every ray, to the last bit, as it is."""
+
+    pupil_scale: float  #: m
+    slope_scale: float  #: s
+    k1: float
+    k2: float
+    pupil_drift_m: float  #: d, metres
+
+
+#: The thin-lens camera's own rays.
+THIN_LENS = RayModel(pupil_scale=1.0, slope_scale=1.0, k1=0.0, k2=0.0, pupil_drift_m=0.0)
+
+
 class SearchQuery(NamedTuple):
     """What the analytic search looks for and where."""
 
@@ -65,10 +82,12 @@ class NecessaryRays(NamedTuple):
     """The necessary air rays of one block of samples (camera frame, metres)."""
 
     points: np.ndarray  #: (n, 3) point on the air-side face (D is measured from it)
-    aim_points: np.ndarray  #: (n, 3) point the candidate pixels are predicted from (= points when covered)
+    #: (n, 3) the point at P's depth of the ray's thin-lens twin (or of its parallel through the
+    #: nearest usable aperture point, outside the coverage): candidate pixels are predicted from it
+    aim_points: np.ndarray
     dirs: np.ndarray  #: (n, 3) unit direction, outwards
     usable: np.ndarray  #: (n,) bool: the ray reached the air side and is searched analytically
-    lens0: np.ndarray  #: (n, 2) int64: lattice index of the lens nearest the ray's MLA point
+    lens0: np.ndarray  #: (n, 2) int64: lattice index of the lens nearest the twin's MLA point
 
 
 def angle_from_chord(chord):
@@ -98,6 +117,17 @@ def sensor_to_plane_scale(z_m, f_m, f_prime_m, f_mla_m):
 
 angle_from_chord_jit = numba.njit(cache=True, inline="always")(angle_from_chord)
 sensor_to_plane_scale_jit = numba.njit(cache=True, inline="always")(sensor_to_plane_scale)
+
+
+@numba.njit(cache=True, inline="always")
+def _model_slopes(dx, dy, model):
+    """The camera's slopes of thin-lens slopes ``(dx, dy)`` (:class:`RayModel`), and the shift
+    ``d |t'|^2 t'`` of its ray's crossing of z = 0 from the scaled aperture point."""
+    r2 = dx * dx + dy * dy
+    scale = model.slope_scale * (1.0 + model.k1 * r2 + model.k2 * r2 * r2)
+    mx, my = scale * dx, scale * dy
+    drift = model.pupil_drift_m * (mx * mx + my * my)
+    return mx, my, drift * mx, drift * my
 
 
 @numba.njit(cache=True, inline="always")
@@ -150,7 +180,7 @@ def _sort_row(index, weight, first, stop):
 
 
 @numba.njit(cache=True, nogil=True)
-def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
+def select_candidates(rays, query, camera, lattice, face, model, sel_index, sel_dist):
     """For every necessary ray (sample): the k captured rays of smallest D among the candidates of
     the analytic search, under the total order of :func:`_better`.
 
@@ -162,6 +192,11 @@ def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
     camera : CameraScalars
     lattice : Lattice
     face : AirFace
+    model : RayModel
+        The captured rays are the thin-lens rays of the pixels searched, mapped by it
+        (:data:`THIN_LENS`: as they are). Which pixels are searched is predicted on the thin-lens
+        model, so ``rays`` must hold the thin-lens twins of the necessary rays in ``aim_points``
+        and ``lens0`` (``points`` and ``dirs``, from which D is measured, are the rays themselves).
     sel_index : ndarray of int64, shape (n_samples, k)
         Filled: raw flat indices of the k best, -1 where fewer.
     sel_dist : ndarray of float64, shape (n_samples, k)
@@ -222,16 +257,19 @@ def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
             # necessary ray and 1 / (n . d) for the face intersection.
             dx0 = sin0_x * spread - cx / f
             dy0 = sin0_y * spread - cy / f
+            # With spread == 0 the camera's slopes (a function of the thin-lens slopes) and the
+            # shift of its rays' crossings are the lens's too.
+            mdx0, mdy0, shift_x0, shift_y0 = _model_slopes(dx0, dy0, model)
             lens_angle = 0.0
             lens_inv_denom = 0.0
             if spread == 0.0:
-                denom = nx * dx0 + ny * dy0 + nz
+                denom = nx * mdx0 + ny * mdy0 + nz
                 if denom <= 0.0:
                     continue
                 lens_inv_denom = 1.0 / denom
                 if lam != 0.0:
-                    norm = np.sqrt(dx0 * dx0 + dy0 * dy0 + 1.0)
-                    ex, ey, ez = dx0 / norm - rx, dy0 / norm - ry, 1.0 / norm - rz
+                    norm = np.sqrt(mdx0 * mdx0 + mdy0 * mdy0 + 1.0)
+                    ex, ey, ez = mdx0 / norm - rx, mdy0 / norm - ry, 1.0 / norm - rz
                     lens_angle = angle_from_chord_jit(np.sqrt(ex * ex + ey * ey + ez * ez))
             for dv in range(-window, window + 1):
                 v = v0 + dv
@@ -257,17 +295,22 @@ def select_candidates(rays, query, camera, lattice, face, sel_index, sel_dist):
                     if hx * hx + hy * hy > r_ok2:
                         continue
                     if spread == 0.0:
-                        dx, dy, inv_denom = dx0, dy0, lens_inv_denom
+                        dx, dy, inv_denom = mdx0, mdy0, lens_inv_denom
+                        shift_x, shift_y = shift_x0, shift_y0
                     else:
-                        dx = dx0 + du * slope_step * spread
-                        dy = dy0 + dv * slope_step * spread
+                        dx, dy, shift_x, shift_y = _model_slopes(
+                            dx0 + du * slope_step * spread, dy0 + dv * slope_step * spread, model
+                        )
                         denom = nx * dx + ny * dy + nz
                         if denom <= 0.0:
                             continue
                         inv_denom = 1.0 / denom
-                    t = (plane_d - (nx * hx + ny * hy)) * inv_denom
-                    ex = hx + t * dx - px
-                    ey = hy + t * dy - py
+                    # The camera's ray crosses z = 0 at (ox, oy) and meets the face t later.
+                    ox = model.pupil_scale * hx - shift_x
+                    oy = model.pupil_scale * hy - shift_y
+                    t = (plane_d - (nx * ox + ny * oy)) * inv_denom
+                    ex = ox + t * dx - px
+                    ey = oy + t * dy - py
                     ez = t - pz
                     dist = np.sqrt(ex * ex + ey * ey + ez * ez)
                     if lam != 0.0:

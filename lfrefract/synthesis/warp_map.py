@@ -10,7 +10,9 @@ microlens centre, see :meth:`LightFieldCamera.captured_rays`) those closest to i
     D = |P' - P| + lambda * angle(r', r)        (P' where the captured ray meets the face)
 
 are averaged, the ``k`` nearest with weights ``1 / D``. Candidates come from an analytic search:
-the necessary air ray is followed back through the thin main lens to the MLA; the microlenses
+the necessary air ray is followed back through the thin main lens to the MLA (for a calibrated
+camera, :attr:`SynthesisOptions.ray_correction`, its thin-lens twin: the thin-lens ray the
+correction maps onto it; the candidates' D is measured on the corrected rays); the microlenses
 around that point (``lens_rings`` rings) are candidates, and under each the pixels within
 ``window`` of the pixel whose chief ray passes through ``P``: the k nearest among those, which
 is not always the k nearest of all rays (with ``lambda = 0`` rays of farther lenses can pass
@@ -51,10 +53,12 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis._kernels import (
+    THIN_LENS,
     AirFace,
     CameraScalars,
     Lattice,
     NecessaryRays,
+    RayModel,
     SearchQuery,
     gather,
     merge_rows,
@@ -87,7 +91,7 @@ __all__ = [
 FILLED_EMPTY, FILLED_APPROXIMATED, FILLED_EXACT = 0, 1, 2
 
 #: Version of the warp-map algorithm and file layout; part of every map's key.
-WARP_MAP_VERSION = 3
+WARP_MAP_VERSION = 4
 
 #: Captured rays averaged per necessary ray in the paper (section 4.1); :class:`SynthesisOptions`
 #: defaults to 8, which scored better on every preset measured.
@@ -143,9 +147,11 @@ class SynthesisOptions:
         at a micro-image's edge belong to the dark gap or to the next micro-image.
     ray_correction : RayCorrection or None
         The camera's calibrated departure from its thin-lens rays
-        (:func:`lfrefract.calibration.calibrate_camera`): candidates are then the corrected rays,
-        searched with the k-d tree (the analytic search assumes the thin lens); the exact coverage
-        is still judged on the thin-lens model. Default None: the thin-lens rays.
+        (:func:`lfrefract.calibration.calibrate_camera`): the candidates are then the corrected
+        rays. Both searches apply: the analytic one predicts the pixels from each necessary ray's
+        thin-lens twin (:meth:`RayCorrection.thin_lens_rays`) and measures D on the corrected rays;
+        the exact coverage is judged on the twin, i.e. on the calibrated rays. Default None: the
+        thin-lens rays.
     search : {"auto", "analytic", "kdtree"}
         How candidates are found. ``"analytic"``: the lens and pixel window search above (an
         error where the port's air-side face is conjugate to the MLA, so that every pixel of a
@@ -156,7 +162,10 @@ class SynthesisOptions:
         through ``P`` holds the nearest ones; otherwise the k-d tree (off the focal plane the
         rays of one microlens fan out, the angle term can favour pixels outside the window, and
         near a face conjugate to the MLA the prediction fails: measured on the tiny camera with
-        ``f' = 1.05 f``, the analytic pick was the nearest for 15-67 % of the pixels).
+        ``f' = 1.05 f``, the analytic pick was the nearest for 15-67 % of the pixels). A
+        ``ray_correction`` whose radial terms fold the field over leaves the rays beyond the fold
+        without a thin-lens twin: ``"auto"`` searches those with the k-d tree, ``"analytic"``
+        leaves them without candidates.
     """
 
     k: int = 8
@@ -192,8 +201,6 @@ class SynthesisOptions:
             one_of("cfa_colour", self.cfa_colour, ("R", "G", "B"))
         if self.ray_correction is not None and not isinstance(self.ray_correction, RayCorrection):
             raise ParameterError(f"ray_correction must be a RayCorrection or None, got {self.ray_correction!r}")
-        if self.ray_correction is not None and self.search == "analytic":
-            raise ParameterError("a ray_correction needs search='auto' or 'kdtree': the analytic search is thin-lens")
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             raise ParameterError(
@@ -222,9 +229,9 @@ class SynthesisOptions:
 
 
 def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
-    """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, a
-    ``ray_correction``, or ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``)."""
-    if options.search == "kdtree" or options.ray_correction is not None:
+    """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, or
+    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``)."""
+    if options.search == "kdtree":
         return True
     return options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m
 
@@ -628,6 +635,13 @@ def _air_face(port: FlatPort) -> AirFace:
     return AirFace(nx=float(n[0]), ny=float(n[1]), nz=float(n[2]), d_m=float(port.distance_m))
 
 
+def _ray_model(correction: RayCorrection | None) -> RayModel:
+    """The kernels' form of a ray correction (None: the thin lens)."""
+    if correction is None:
+        return THIN_LENS
+    return RayModel(*(float(v) for v in correction.vector()))
+
+
 @dataclass(frozen=True)
 class _Block:
     """Rows of one block of output pixels."""
@@ -651,6 +665,7 @@ class _Search:
     camera_scalars: CameraScalars
     lattice: Lattice
     face: AirFace
+    model: RayModel
     tree: LazyRayTree
 
 
@@ -665,30 +680,39 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     uv = np.stack(np.broadcast_arrays(sub_u, sub_v), axis=-1).reshape(-1, 2)  # pixel-major, s*s each
     points, dirs, transmittance, valid = necessary_air_rays(port, output.pixel_directions(uv))
 
-    # Follow the necessary air ray back through the thin main lens to the MLA.
+    # The camera model's ray through the necessary air ray is the corrected ray of a thin-lens
+    # ray, its twin: the pixels that record the necessary ray are those that record the twin in the
+    # thin-lens model, so coverage and the candidate search follow the twin (the ray itself where
+    # the model is the thin lens). Follow it back through the thin main lens to the MLA.
     f, f_prime = camera.focal_length_m, camera.lens_to_mla_m
-    hit = lens_plane_hits(points, dirs)
+    if options.ray_correction is None:
+        hit, twin_dirs, has_twin = lens_plane_hits(points, dirs), dirs, valid
+    else:
+        hit, twin_slopes, has_twin = options.ray_correction.thin_lens_rays(points, dirs)
+        twin_dirs = np.column_stack([twin_slopes, np.ones(len(hit))])  # only slopes are used
+        has_twin &= valid
     radius = np.hypot(hit[:, 0], hit[:, 1])
     # The camera records the necessary ray only inside the usable aperture: rays through its rim
     # (rim_margin_px) are vignetted, so their pixels are never used.
     r_ok = camera.usable_aperture_radius_m(options.rim_margin_px)
-    covered = valid & (radius <= r_ok)
+    covered = has_twin & (radius <= r_ok)
     # A necessary ray outside it has no captured twin: aim the search at the parallel ray through
     # the nearest usable point of the aperture instead (paper section 6: nearby rays stand in;
     # these pixels are outside the exact coverage).
     with np.errstate(invalid="ignore", divide="ignore"):
         shrink = np.where(radius > r_ok, r_ok / radius, 1.0)
-    aim_hit = hit * shrink[:, None]
-    mla_point_img = mla_points_img(aim_hit, dirs, f, f_prime)
-    aim_points = np.concatenate([aim_hit + dirs[:, :2] / dirs[:, 2:3] * points[:, 2:3], points[:, 2:3]], axis=1)
-    usable = valid & np.all(np.isfinite(mla_point_img), axis=1)
+        aim_hit = hit * shrink[:, None]
+        twin_slopes = twin_dirs[:, :2] / twin_dirs[:, 2:3]
+    mla_point_img = mla_points_img(aim_hit, twin_dirs, f, f_prime)
+    aim_points = np.concatenate([aim_hit + twin_slopes * points[:, 2:3], points[:, 2:3]], axis=1)
+    usable = has_twin & np.all(np.isfinite(mla_point_img), axis=1)
     lens0 = np.zeros((len(uv), 2), dtype=np.int64)
     lens0[usable] = camera.mla.nearest_indices(mla_point_img[usable])
     # The camera records the necessary ray only if it also lands on the sensor (its MLA point's
     # image through the main-lens centre, i.e. its micro-image position, is on the pixel grid).
     with np.errstate(invalid="ignore"):
         sensor_px = camera.sensor.image_plane_to_pixels(
-            mla_points_img(hit, dirs, f, f_prime) * camera.micro_image_scale
+            mla_points_img(hit, twin_dirs, f, f_prime) * camera.micro_image_scale
         )
     covered &= (
         (sensor_px[:, 0] >= -0.5)
@@ -701,9 +725,14 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     # the air-side face is conjugate to the MLA (beta = 0: all pixels of a lens see one point).
     beta = sensor_to_plane_scale(points[:, 2], f, f_prime, camera.mla.focal_length_m)
     by_tree = usable & (np.abs(beta) < 1e-9 * f_prime / camera.mla.focal_length_m)
+    # A ray without a thin-lens twin (a correction whose radial terms fold the field over) has
+    # no prediction either: only the exact search finds its candidates.
+    no_twin = valid & ~has_twin
     if uses_kdtree(camera, options):
-        by_tree = usable
-    elif options.search == "analytic" and np.any(by_tree):
+        by_tree = usable | no_twin
+    elif options.search == "auto":
+        by_tree |= no_twin
+    elif np.any(by_tree):
         raise ParameterError(
             "the port's air-side face is conjugate to the MLA through the main lens "
             f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there; "
@@ -719,7 +748,9 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
         usable=usable & ~by_tree,
         lens0=lens0,
     )
-    select_candidates(rays, search.query, search.camera_scalars, search.lattice, search.face, sel_index, sel_dist)
+    select_candidates(
+        rays, search.query, search.camera_scalars, search.lattice, search.face, search.model, sel_index, sel_dist
+    )
     if np.any(by_tree):
         sel_index[by_tree], sel_dist[by_tree] = search.tree.get().nearest(points[by_tree], dirs[by_tree], options.k)
     capacity = n * s * s * options.k
@@ -794,6 +825,7 @@ def build_warp_map(
         camera_scalars=_camera_scalars(camera, options.rim_margin_px),
         lattice=_lattice_scalars(camera),
         face=_air_face(port),
+        model=_ray_model(options.ray_correction),
         tree=LazyRayTree(
             camera,
             port,

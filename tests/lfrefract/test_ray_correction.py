@@ -8,6 +8,7 @@ import pytest
 from lfrefract.errors import ParameterError
 from lfrefract.optics.presets import camera_preset
 from lfrefract.optics.ray_correction import PARAMETERS, RayCorrection
+from tests.tolerances import FLOAT64_GEOMETRY_M, FLOAT64_UNIT
 
 
 def _thin_rays():
@@ -60,3 +61,27 @@ def test_it_round_trips_and_an_earlier_file_without_the_drift_reads_as_no_drift(
 def test_a_bad_correction_is_refused_naming_the_key(data, named):
     with pytest.raises(ParameterError, match=named):
         RayCorrection.from_dict(data)
+
+
+def test_thin_lens_rays_inverts_the_correction_from_any_point_on_the_ray():
+    _, a, t = _thin_rays()
+    correction = RayCorrection(pupil_scale=1.02, slope_scale=0.98, k1=0.12, k2=0.08, pupil_drift_m=-0.006)
+    origins, directions = correction.apply(a, t)
+    along_m = np.linspace(0.0, 0.05, len(a))[:, None]  # points up to 50 mm in front of the lens
+    twin_a, twin_t, found = correction.thin_lens_rays(origins + along_m * directions, 3.0 * directions)
+    assert found.all()
+    np.testing.assert_allclose(twin_a, a, rtol=0, atol=FLOAT64_GEOMETRY_M)
+    np.testing.assert_allclose(twin_t, t, rtol=0, atol=FLOAT64_UNIT)
+
+
+def test_a_ray_beyond_the_fold_of_the_radial_terms_has_no_thin_lens_ray():
+    """k1 = -10: s rho (1 + k1 rho^2) peaks at slope 0.122 (rho = 0.183); steeper rays have no twin."""
+    correction = RayCorrection(k1=-10.0)
+    slopes = np.array([[0.05, 0.0], [0.0, -0.1], [0.2, 0.0], [0.08, 0.08]])
+    directions = np.column_stack([slopes, np.ones(4)])
+    twin_a, twin_t, found = correction.thin_lens_rays(np.zeros((4, 3)), directions)
+    np.testing.assert_array_equal(found, [True, True, False, True])
+    assert np.isnan(twin_a[2]).all()
+    assert np.isnan(twin_t[2]).all()
+    back = correction.slopes(twin_t[found])
+    np.testing.assert_allclose(back, slopes[found], rtol=0, atol=FLOAT64_UNIT)

@@ -17,15 +17,17 @@ from hypothesis import strategies as st
 import lfrefract.synthesis.warp_map as synthesis
 from lfrefract import FlatPort, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
 from lfrefract.errors import FileFormatError
+from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis._raytree import RayTree
 from lfrefract.synthesis.warp_map import (
     SynthesisOptions,
     WarpMap,
     build_warp_map,
+    lens_plane_hits,
     necessary_air_rays,
     warp_map_key,
 )
-from tests.tolerances import FLOAT32_WEIGHT_SUM, FLOAT64_UNIT
+from tests.tolerances import FLOAT32_WEIGHT_SUM, FLOAT64_RELATIVE, FLOAT64_UNIT
 
 TINY = camera_preset("tiny")
 PORT = FlatPort.from_degrees(distance_m=0.012, thickness_m=0.004, tilt_x_deg=15.0, tilt_y_deg=-5.0)
@@ -241,6 +243,61 @@ def test_analytic_search_finds_the_global_nearest_ray_inside_the_exact_coverage(
     np.testing.assert_array_equal(analytic.indices[first[exact]], tree.indices[tree.indptr[:-1][exact]])
     # The tree also fills pixels outside the coverage, with the globally nearest rays.
     assert tree.filled.all()
+
+
+#: A calibrated camera's departure from the thin lens, larger than the Illum's fitted one
+#: (pupil 1.0015, slope 1.0011, k1 0.083, k2 0.077, drift -5.5 mm) in every term.
+CALIBRATED = RayCorrection(pupil_scale=1.02, slope_scale=0.98, k1=0.12, k2=0.08, pupil_drift_m=-0.006)
+
+
+@pytest.mark.parametrize("correction", [None, CALIBRATED], ids=["thin-lens", "calibrated"])
+def test_analytic_search_on_a_calibrated_model_finds_the_trees_nearest_ray(correction):
+    """k = 1, on the calibrated rays too: the analytic search predicts the pixels from each
+    necessary ray's thin-lens twin and measures D on the calibrated rays, and inside the exact
+    coverage picks the ray the exact search over all calibrated rays picks."""
+    options = SynthesisOptions(k=1, supersample=1, ray_correction=correction)
+    analytic = build_warp_map(TINY, PORT, options=dataclasses.replace(options, search="analytic"))
+    tree = build_warp_map(TINY, PORT, options=dataclasses.replace(options, search="kdtree"))
+    np.testing.assert_array_equal(analytic.coverage, tree.coverage)
+    exact = analytic.exact.ravel()
+    assert exact.mean() > 0.2
+    np.testing.assert_array_equal(analytic.indices[analytic.indptr[:-1][exact]], tree.indices[tree.indptr[:-1][exact]])
+    assert build_warp_map(TINY, PORT, options=options).key == warp_map_key(TINY, PORT, analytic.output, options)
+
+
+def test_the_exact_coverage_is_judged_on_the_calibrated_rays():
+    """With pupil scale 0.8 the camera's rays cross the lens plane within 0.8 of the usable
+    aperture: the necessary rays of exact pixels do too (judged on the thin lens, they reached
+    the whole aperture), and the coverage shrinks."""
+    options = SynthesisOptions(supersample=1)
+    thin = build_warp_map(TINY, PORT, options=options)
+    narrowed = dataclasses.replace(options, ray_correction=RayCorrection(pupil_scale=0.8))
+    narrow = build_warp_map(TINY, PORT, options=narrowed)
+    v, u = np.divmod(np.arange(thin.exact.size), thin.output.width_px)
+    points, dirs, _, _ = necessary_air_rays(PORT, thin.output.pixel_directions(np.column_stack([u, v]).astype(float)))
+    radius_m = np.hypot(*lens_plane_hits(points, dirs).T)
+    usable_m = TINY.usable_aperture_radius_m(options.rim_margin_px)
+    assert radius_m[thin.exact.ravel()].max() > 0.9 * usable_m
+    assert radius_m[narrow.exact.ravel()].max() <= 0.8 * usable_m * (1 + FLOAT64_RELATIVE)
+    assert 0 < narrow.exact.sum() < thin.exact.sum()
+
+
+def test_rays_a_folding_correction_has_no_twin_for_go_to_the_tree():
+    """k1 = -10 folds the field beyond slope 0.12 (the slope equation has no root there): those
+    samples have no thin-lens twin to predict pixels from, and ``auto`` searches them exactly."""
+    folding = RayCorrection(k1=-10.0)
+    small = PinholeCamera(focal_px=60.0, cx_px=11.5, cy_px=8.5, width_px=24, height_px=18)
+    options = SynthesisOptions(k=2, supersample=1, ray_correction=folding)
+    auto = build_warp_map(TINY, PORT, output=small, options=options)
+    tree = build_warp_map(TINY, PORT, output=small, options=dataclasses.replace(options, search="kdtree"))
+    v, u = np.divmod(np.arange(small.width_px * small.height_px), small.width_px)
+    _, dirs, _, valid = necessary_air_rays(PORT, small.pixel_directions(np.column_stack([u, v]).astype(float)))
+    folded = valid & (np.hypot(dirs[:, 0], dirs[:, 1]) / dirs[:, 2] > 0.13)
+    assert folded.sum() > 10
+    assert auto.filled.ravel()[folded].all()
+    for p in np.flatnonzero(folded):
+        rows = slice(auto.indptr[p], auto.indptr[p + 1])
+        np.testing.assert_array_equal(auto.indices[rows], tree.indices[tree.indptr[p] : tree.indptr[p + 1]])
 
 
 @functools.cache
