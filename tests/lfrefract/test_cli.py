@@ -440,9 +440,9 @@ def test_calibrate_port_checks_the_port_options_before_detecting_corners(tmp_pat
 def _camera_calibration(path: Path, *, covariance: bool = True) -> Path:
     """A camera calibration file of the tiny camera (a small correction), with or without the
     covariance that ``--refine-camera`` needs (files of earlier versions have none)."""
-    from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection
+    from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection
 
-    estimate = CorrectionEstimate(correction=RayCorrection(pupil_scale=0.99), covariance=np.eye(5) * 1e-6)
+    estimate = CorrectionEstimate(correction=RayCorrection(pupil_scale=0.99), covariance=np.eye(len(PARAMETERS)) * 1e-6)
     data = {
         "kind": "lfrefract.calibrate.camera",
         "camera": TINY.to_dict(),
