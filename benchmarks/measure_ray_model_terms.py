@@ -1,17 +1,16 @@
 """Which terms the calibrated ray model lacks: fits to a camera's true rays (an oracle, not a calibration).
 
-The ray correction's first five parameters (``lfrefract.optics.ray_correction``: pupil scale, slope
-scale, k1, k2, pupil drift; the model before its sixth) are fitted by least squares directly to the
-true rays of the pipeline experiment's left camera (``simulator.experiments.pipeline``: its rig at
-``--scale``, the default real lens), with the frame's shift along z free (the model's gauge), and
+The ray correction's five parameters (``lfrefract.optics.ray_correction``: pupil scale, slope
+scale, k1, k2, pupil drift) are fitted by least squares directly to the true rays of the pipeline
+experiment's left camera (``simulator.experiments.pipeline``: its rig at ``--scale``, the default
+real lens), with the frame's shift along z free (the model's gauge), and
 again with candidate terms added one at a time and all together:
 
 * ``defocus``: slopes gain ``c a / R`` (``a`` the thin-lens aperture point, ``R`` 4 mm): the real
   lens's rays of one microlens are not parallel (its focal plane is not the MLA's);
 * ``spherical``: slopes gain ``c a |a|^2 / R^3`` (spherical aberration of the main lens);
 * ``pupil_field``: the pupil scale becomes ``m (1 + q |t|^2)`` (the entrance pupil's size changes
-  with the field: pupil distortion; the model's sixth parameter ``pupil_k1`` since this measurement,
-  there on the corrected slopes ``t'``);
+  with the field: pupil distortion);
 * ``k3``: a third radial term ``k3 t |t|^6`` of the slopes.
 
 For each fit it prints the rays' RMS distance from the true ones where they cross the planes z = 25
@@ -38,13 +37,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from lfrefract.optics.pinhole import virtual_camera_for
-from lfrefract.optics.ray_correction import corrected_slopes
+from lfrefract.optics.ray_correction import PARAMETERS, corrected_slopes
 from lfrefract.optics.real_lens import RealLensCamera
 from simulator.experiments import ExperimentOptions
 from simulator.experiments.pipeline import DEFAULT_LENS, experiment_rig, setup_for_pipeline
 
-#: The model's first five parameters (``PARAMETERS[:5]``), then the z gauge, then one per term.
-FIVE = 5
+#: The model's five parameters (``PARAMETERS``), then the z gauge, then one per term.
+FIVE = len(PARAMETERS)
 #: Planes (camera-frame z, metres) where the fit compares the rays.
 FIT_PLANES_M = (0.025, 0.3)
 #: The aperture radius the aperture terms are scaled by, metres.

@@ -1047,7 +1047,3 @@ CAMERA_CAL_BOARD_DEPTH_RELATIVE = 0.015
 # The slope scale fitted from large synthetic boards against the synthetic camera's (1.0): the field
 # curvature the model lacks biases it a little; 1 % is the spread the calibration accepts (MAX_SCALE_STD).
 CAMERA_CAL_FREE_SLOPE_SCALE = 0.01
-# The pupil's radial term fitted from large synthetic boards of a camera that is the model (true 0.8),
-# corners with 0.02 px of noise: its standard deviation by the fit's Jacobian is 0.0009 (measured 0.8004);
-# ten of those. Without the term in the model the fit cannot represent it at all.
-CAMERA_CAL_PUPIL_K1 = 0.01

@@ -6,18 +6,18 @@ main lens is not thin: its entrance pupil is magnified, and its rays bend more o
 field's edge (distortion). :class:`~lfrefract.optics.ray_correction.RayCorrection` maps the
 thin-lens ray to the camera's:
 
-    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m (1 + q |t'|^2) a, d |t'|^2)``,
+    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m a, d |t'|^2)``,
 
-six parameters: the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms, the
-pupil's drift with the field ``d`` and its radial term ``q``. The pupil's position along the axis is
-not among them: in-air views fix the camera only up to a shift of its frame along z (every board
-pose shifts with it), so the model keeps the thin lens's plane z = 0, and a port calibrated on this
-model measures its distance in the same frame.
+five parameters: the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms and the
+pupil's drift with the field ``d``. The pupil's position along the axis is not among them: in-air
+views fix the camera only up to a shift of its frame along z (every board pose shifts with it), so
+the model keeps the thin lens's plane z = 0, and a port calibrated on this model measures its
+distance in the same frame.
 
 :func:`calibrate_camera` fits the model to chessboard corners located in the light field of in-air
 captures (:func:`lfrefract.calibration.port.board_view_from_light_field`: each corner seen from
 several aperture points, i.e. several thin-lens rays through it): nonlinear least squares (scipy)
-of the six parameters and one board pose per capture, minimising the distance from each corner to
+of the five parameters and one board pose per capture, minimising the distance from each corner to
 each of its rays (the ray reprojection error of Dansereau et al., CVPR 2013), in metres. Board poses
 start from OpenCV's ``solvePnP`` on the central view's corners.
 
@@ -26,12 +26,12 @@ boards' distances only by each board's perspective: a board that spans a few deg
 (small boards, or boards far away) looks nearly the same at distance ``Z`` through slopes ``s t`` as
 at ``Z s' / s`` through ``s' t``, and the light field's parallax cannot tell them apart either, since
 the pupil scale ``m`` rescales it. The corners of one capture share their errors (the lens's departure
-from the model, the board's pose), so the fit's Jacobian, which counts every corner
+from the five-parameter model, the board's pose), so the fit's Jacobian, which counts every corner
 observation as independent, overstates what such captures say. The calibration therefore also
 estimates the parameters' spread with each capture as one sample (a covariance clustered by capture,
 the "sandwich" estimate); where the slope scale's spread exceeds :data:`MAX_SCALE_STD`, the slope
 scale is held at 1, the focal length the capture's file records (the nominal camera's), and the other
-five are fitted: :attr:`CameraCalibration.held` says so. Measured on Illum in-air boards of 14 px
+four are fitted: :attr:`CameraCalibration.held` says so. Measured on Illum in-air boards of 14 px
 squares (2.1-4.9 mm at 0.15-0.35 m, each board 3-5 degrees across): slope scale 0.960 with a
 clustered spread of 0.051 when fitted (every board then 4 % too far), the true rays' 1.001; held at
 1, the boards come out at their true distances (0.2 %) and the rays 0.11 mm from the true ones 25 mm
@@ -69,7 +69,7 @@ __all__ = [
 
 #: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
 CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
-#: Fewest board captures a calibration takes: one pose per capture and six shared parameters need
+#: Fewest board captures a calibration takes: one pose per capture and five shared parameters need
 #: views at several distances and angles.
 MIN_VIEWS = 3
 #: The largest standard deviation of the pupil and slope scales accepted (relative; the larger of the
@@ -100,7 +100,7 @@ class CameraCalibration:
     correction_std : tuple of float
         Standard deviations of the correction's :data:`~lfrefract.optics.ray_correction.PARAMETERS`
         from the fit's Jacobian (a held parameter: :data:`HELD_SLOPE_SCALE_STD`).
-    correction_covariance : ndarray, shape (6, 6)
+    correction_covariance : ndarray, shape (5, 5)
         Their covariance (marginal over the board poses), scaled by the residual variance: what a
         joint refinement with the port (:func:`lfrefract.calibration.joint.calibrate_port_and_camera`)
         takes as the in-air captures' say. A held parameter has no covariance with the others.
@@ -149,9 +149,8 @@ class CameraCalibration:
             "correction_std_clustered": dict(zip(PARAMETERS, self.clustered_std, strict=True)),
             "held": list(self.held),
             "poses": [list(p) for p in self.poses],
-            "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * (1 + "
-            "pupil_k1 |t'|^2) * a, pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); "
-            "lfrefract.optics.ray_correction",
+            "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * a, "
+            "pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); lfrefract.optics.ray_correction",
         }
 
 
@@ -252,12 +251,12 @@ class _Fit:
     """One least-squares fit of :func:`calibrate_camera` (``x``: the free parameters, then the poses)."""
 
     x: np.ndarray
-    correction: np.ndarray  # (6,) every parameter, held ones at their values
+    correction: np.ndarray  # (5,) every parameter, held ones at their values
     poses: np.ndarray  # (n, 6)
     rms_m: float
     per_capture_rms_m: tuple[float, ...]
-    covariance: np.ndarray  # (6, 6) from the Jacobian; a held parameter's variance HELD_SLOPE_SCALE_STD**2
-    clustered: np.ndarray  # (6, 6) clustered by capture; 0 for a held parameter
+    covariance: np.ndarray  # (5, 5) from the Jacobian; a held parameter's variance HELD_SLOPE_SCALE_STD**2
+    clustered: np.ndarray  # (5, 5) clustered by capture; 0 for a held parameter
 
 
 def _fit(observed: list, nominal: np.ndarray, free: np.ndarray, start: np.ndarray) -> _Fit:

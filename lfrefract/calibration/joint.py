@@ -18,8 +18,8 @@ fit of the in-air and the underwater captures together, without the in-air captu
 camera file carries what they said.
 
 The second term at the solution, ``prior_chi2``, says how far the underwater boards moved the model
-in units of its in-air uncertainty (a chi-square with six degrees of freedom if the model were
-exact; it is usually far larger, since a six-parameter model does not fit a real lens exactly and
+in units of its in-air uncertainty (a chi-square with five degrees of freedom if the model were
+exact; it is usually far larger, since a five-parameter model does not fit a real lens exactly and
 its in-air covariance is too small: the move is still what makes the port right, measured in
 docs/calibration.md).
 
@@ -102,7 +102,7 @@ INVALID_PORT_RESIDUAL_PX = 1e3
 
 
 class _JointProblem:
-    """The underwater views' residuals for a parameter vector ``(correction (6), tilt_x_rad,
+    """The underwater views' residuals for a parameter vector ``(correction (5), tilt_x_rad,
     tilt_y_rad, distance_m, one pose (6) per view)``."""
 
     def __init__(self, camera: PinholeCamera, views: list[BoardView], template: FlatPort):

@@ -4,14 +4,12 @@ The thin-lens model (:meth:`lfrefract.optics.camera.LightFieldCamera.captured_ra
 pixel a ray leaving the main-lens plane z = 0 at the aperture point ``a`` with slopes
 ``t = (dx / dz, dy / dz)``. :class:`RayCorrection` maps it to the camera's ray:
 
-    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)``, through the point ``(m (1 + q |t'|^2) a, d |t'|^2)``,
+    slopes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)``, through the point ``(m a, d |t'|^2)``,
 
-the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms (the main lens's distortion),
-the pupil's drift ``d`` and its radial term ``q``: a real lens's entrance pupil moves along the axis
-with the field angle and changes its size (pupil aberration), so the rays of slope ``t'`` cross the
-axis-normal plane ``z = d |t'|^2`` at the aperture point scaled by ``m (1 + q |t'|^2)`` (the ray is
-written from where it crosses z = 0: ``(m (1 + q |t'|^2) a - d |t'|^2 t', 0)``). Fitted to the Illum
-camera's true rays, ``q`` halves what the other five leave at the field's edge (docs/calibration.md).
+the pupil scale ``m``, the slope (focal) scale ``s``, two radial terms (the main lens's distortion)
+and the pupil's drift ``d``: a real lens's entrance pupil moves along the axis with the field angle
+(pupil aberration), so the rays of slope ``t'`` cross the axis-normal plane ``z = d |t'|^2`` at the
+scaled aperture point (the ray is written from where it crosses z = 0: ``(m a - d |t'|^2 t', 0)``).
 The pupil's position on the axis itself is not a parameter: in-air views fix the camera only up to a
 shift of its frame along z, so the model keeps the thin lens's plane z = 0 for the field's centre.
 
@@ -38,15 +36,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import CapturedRays
 from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
 
-__all__ = [
-    "ABSENT_PARAMETER_STD",
-    "OPTIONAL_PARAMETERS",
-    "PARAMETERS",
-    "CorrectionEstimate",
-    "RayCorrection",
-    "apply_correction",
-    "corrected_slopes",
-]
+__all__ = ["PARAMETERS", "CorrectionEstimate", "RayCorrection", "apply_correction", "corrected_slopes"]
 
 #: Newton steps :meth:`RayCorrection.thin_lens_rays` takes at most (3 on the Illum's calibrated
 #: model over slopes up to 0.35: the radial terms are a few per cent of the slope).
@@ -56,15 +46,7 @@ _INVERSE_MAX_STEPS = 50
 _INVERSE_TOLERANCE = 1e-14
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
-PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m", "pupil_k1")
-
-#: The parameters a file may leave out, with the value that gives its earlier model's meaning (each
-#: joined the model later; a file written before holds the model without it).
-OPTIONAL_PARAMETERS = {"pupil_drift_m": 0.0, "pupil_k1": 0.0}
-
-#: The standard deviation given to a parameter that a covariance written before it joined the model
-#: lacks: so small that a refinement with that prior keeps it where the file's model had it.
-ABSENT_PARAMETER_STD = 1e-9
+PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,10 +65,6 @@ class RayCorrection:
         ``d``: where the entrance pupil of the rays of slope ``t'`` lies on the axis, per ``|t'|^2``,
         metres (positive: forward, into the scene), in [-0.5, 0.5]. Absent from a file written
         before it was part of the model: 0 (the pupil does not move), that model's meaning.
-    pupil_k1 : float
-        ``q``: the pupil scale's radial term, per ``|t'|^2`` (aperture points scale by
-        ``m (1 + q |t'|^2)``), in [-10, 10]. Absent from a file written before it was part of the
-        model: 0 (the pupil's size does not change with the field).
     """
 
     pupil_scale: float = 1.0
@@ -94,7 +72,6 @@ class RayCorrection:
     k1: float = 0.0
     k2: float = 0.0
     pupil_drift_m: float = 0.0
-    pupil_k1: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "pupil_scale", bounded_float("pupil_scale", self.pupil_scale, 0.5, 2.0))
@@ -104,16 +81,16 @@ class RayCorrection:
         object.__setattr__(
             self, "pupil_drift_m", bounded_float("pupil_drift_m", self.pupil_drift_m, -0.5, 0.5, unit="m")
         )
-        object.__setattr__(self, "pupil_k1", bounded_float("pupil_k1", self.pupil_k1, -10.0, 10.0))
 
     @classmethod
     def from_vector(cls, values: np.ndarray) -> RayCorrection:
-        """From the values of :data:`PARAMETERS`, in that order."""
-        return cls(**dict(zip(PARAMETERS, (float(v) for v in values), strict=True)))
+        """From ``(pupil_scale, slope_scale, k1, k2, pupil_drift_m)`` (:data:`PARAMETERS`)."""
+        m, s, k1, k2, d = (float(v) for v in values)
+        return cls(pupil_scale=m, slope_scale=s, k1=k1, k2=k2, pupil_drift_m=d)
 
     def vector(self) -> np.ndarray:
-        """The values of :data:`PARAMETERS`, in that order."""
-        return np.array([getattr(self, name) for name in PARAMETERS], dtype=np.float64)
+        """``(pupil_scale, slope_scale, k1, k2, pupil_drift_m)`` (:data:`PARAMETERS`)."""
+        return np.array([self.pupil_scale, self.slope_scale, self.k1, self.k2, self.pupil_drift_m])
 
     def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The camera's rays for thin-lens rays (aperture points (N, 2), slopes (N, 2)).
@@ -152,8 +129,7 @@ class RayCorrection:
         found : ndarray of bool, shape (N,)
             The ray has a thin-lens ray: the slope equation ``s rho (1 + k1 rho^2 + k2 rho^4) = |t'|``
             has a root on the branch through 0 where the map is increasing (always, unless the radial
-            terms fold the field over), and the pupil scale ``m (1 + q |t'|^2)`` is positive there.
-            Both outputs are NaN where not.
+            terms fold the field over). Both outputs are NaN where not.
         """
         p = np.asarray(points_cam, dtype=np.float64)
         d = np.asarray(directions_cam, dtype=np.float64)
@@ -182,15 +158,10 @@ class RayCorrection:
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.where(rho_out > 0.0, rho / np.where(rho_out > 0.0, rho_out, 1.0), 1.0 / s)
         slopes = np.where(found[:, None], slopes_out * ratio[:, None], np.nan)
-        # The corrected ray crosses z = 0 at o = m (1 + q |t'|^2) a - d |t'|^2 t'.
+        # The corrected ray crosses z = 0 at o = m a - d |t'|^2 t'.
         crossing = p[:, :2] - p[:, 2:3] * slopes_out
         drifted = self.pupil_drift_m * (rho_out * rho_out)[:, None] * slopes_out
-        pupil = self.pupil_scale * (1.0 + self.pupil_k1 * rho_out * rho_out)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            aperture = (crossing + drifted) / pupil[:, None]
-        found &= pupil > 0.0
-        aperture = np.where(found[:, None], aperture, np.nan)
-        slopes = np.where(found[:, None], slopes, np.nan)
+        aperture = np.where(found[:, None], (crossing + drifted) / self.pupil_scale, np.nan)
         return aperture, slopes, found
 
     def corrected(self, rays: CapturedRays) -> CapturedRays:
@@ -210,9 +181,10 @@ class RayCorrection:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> RayCorrection:
-        """From :meth:`to_dict`'s data (:data:`OPTIONAL_PARAMETERS` may be absent: earlier files)."""
+        """From :meth:`to_dict`'s data (``pupil_drift_m`` optional: 0 in earlier files)."""
+        optional = {"pupil_drift_m"}
         reject_unknown_keys(where, dict(data), set(PARAMETERS))
-        require_keys(where, dict(data), set(PARAMETERS) - set(OPTIONAL_PARAMETERS))
+        require_keys(where, dict(data), set(PARAMETERS) - optional)
         return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in PARAMETERS if k in data})
 
 
@@ -223,7 +195,7 @@ class CorrectionEstimate:
     Attributes
     ----------
     correction : RayCorrection
-    covariance : ndarray, shape (6, 6)
+    covariance : ndarray, shape (5, 5)
         Covariance of :data:`PARAMETERS` (in that order; the drift's entries in metres), marginal over
         everything else the calibration fitted (the board poses). Symmetric positive definite.
     """
@@ -248,7 +220,7 @@ class CorrectionEstimate:
 
     @property
     def std(self) -> np.ndarray:
-        """Standard deviations of :data:`PARAMETERS`, shape (6,)."""
+        """Standard deviations of :data:`PARAMETERS`, shape (5,)."""
         return np.sqrt(np.diag(self.covariance))
 
     def covariance_to_dict(self) -> dict:
@@ -257,36 +229,26 @@ class CorrectionEstimate:
 
     @staticmethod
     def covariance_from_dict(data: Mapping[str, Any], *, where: str = "correction_covariance") -> np.ndarray:
-        """The matrix of :meth:`covariance_to_dict`'s data (its parameter order checked).
-
-        A file written before the last of :data:`PARAMETERS` joined the model lists the ones before
-        it: the matrix is extended with :data:`ABSENT_PARAMETER_STD` for each missing one (the file's
-        model holds them at their :data:`OPTIONAL_PARAMETERS` values), uncorrelated.
-        """
+        """The matrix of :meth:`covariance_to_dict`'s data (its parameter order checked)."""
         reject_unknown_keys(where, dict(data), {"parameters", "matrix"})
         require_keys(where, dict(data), {"parameters", "matrix"})
-        names = data["parameters"]
-        n = len(names) if isinstance(names, list) else 0
-        if not n or names != list(PARAMETERS[:n]) or not set(PARAMETERS[n:]) <= set(OPTIONAL_PARAMETERS):
+        if list(data["parameters"]) != list(PARAMETERS):
             raise ParameterError(f"{where}.parameters must be {list(PARAMETERS)}, got {data['parameters']!r}")
         rows = data["matrix"]
+        n = len(PARAMETERS)
         if not isinstance(rows, list) or len(rows) != n or not all(isinstance(r, list) and len(r) == n for r in rows):
             raise ParameterError(f"{where}.matrix must be {n} rows of {n} numbers")
-        given = np.array(
+        return np.array(
             [[finite_float(f"{where}.matrix[{i}][{j}]", v) for j, v in enumerate(r)] for i, r in enumerate(rows)]
         )
-        matrix = np.diag(np.full(len(PARAMETERS), ABSENT_PARAMETER_STD**2))
-        matrix[:n, :n] = given
-        return matrix
 
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`RayCorrection.apply` for the parameter vector ``p`` (:data:`PARAMETERS`; the fit's form)."""
-    m, drift, pupil_k1 = p[0], p[4], p[5]
+    m, drift = p[0], p[4]
     slopes = corrected_slopes(p, t)
-    r2 = np.sum(slopes * slopes, axis=1, keepdims=True)
-    shift = drift * r2 * slopes  # back from z = d |t'|^2 to z = 0
-    origins = np.column_stack([m * (1.0 + pupil_k1 * r2) * a - shift, np.zeros(len(a))])
+    shift = drift * np.sum(slopes * slopes, axis=1, keepdims=True) * slopes  # back from z = d |t'|^2 to z = 0
+    origins = np.column_stack([m * a - shift, np.zeros(len(a))])
     directions = np.column_stack([slopes, np.ones(len(a))])
     return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
 

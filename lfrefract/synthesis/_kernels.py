@@ -54,19 +54,18 @@ class AirFace(NamedTuple):
 class RayModel(NamedTuple):
     """The camera's departure from its thin-lens rays (:class:`lfrefract.optics.ray_correction.RayCorrection`):
     a thin-lens ray through aperture point ``a`` with slopes ``t`` is the ray of slopes
-    ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m (1 + q |t'|^2) a - d |t'|^2 t', 0)``. The
-    identity ``(1, 1, 0, 0, 0, 0)`` leaves every ray, to the last bit, as it is."""
+    ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` through ``(m a - d |t'|^2 t', 0)``. The identity
+    ``(1, 1, 0, 0, 0)`` leaves every ray, to the last bit, as it is."""
 
     pupil_scale: float  #: m
     slope_scale: float  #: s
     k1: float
     k2: float
     pupil_drift_m: float  #: d, metres
-    pupil_k1: float  #: q
 
 
 #: The thin-lens camera's own rays.
-THIN_LENS = RayModel(pupil_scale=1.0, slope_scale=1.0, k1=0.0, k2=0.0, pupil_drift_m=0.0, pupil_k1=0.0)
+THIN_LENS = RayModel(pupil_scale=1.0, slope_scale=1.0, k1=0.0, k2=0.0, pupil_drift_m=0.0)
 
 
 class SearchQuery(NamedTuple):
@@ -122,15 +121,13 @@ sensor_to_plane_scale_jit = numba.njit(cache=True, inline="always")(sensor_to_pl
 
 @numba.njit(cache=True, inline="always")
 def _model_slopes(dx, dy, model):
-    """The camera's slopes of thin-lens slopes ``(dx, dy)`` (:class:`RayModel`), the scale
-    ``m (1 + q |t'|^2)`` of the aperture point and the shift ``d |t'|^2 t'`` of its ray's crossing of
-    z = 0 from the scaled aperture point."""
+    """The camera's slopes of thin-lens slopes ``(dx, dy)`` (:class:`RayModel`), and the shift
+    ``d |t'|^2 t'`` of its ray's crossing of z = 0 from the scaled aperture point."""
     r2 = dx * dx + dy * dy
     scale = model.slope_scale * (1.0 + model.k1 * r2 + model.k2 * r2 * r2)
     mx, my = scale * dx, scale * dy
-    m2 = mx * mx + my * my
-    drift = model.pupil_drift_m * m2
-    return mx, my, model.pupil_scale * (1.0 + model.pupil_k1 * m2), drift * mx, drift * my
+    drift = model.pupil_drift_m * (mx * mx + my * my)
+    return mx, my, drift * mx, drift * my
 
 
 @numba.njit(cache=True, inline="always")
@@ -262,7 +259,7 @@ def select_candidates(rays, query, camera, lattice, face, model, sel_index, sel_
             dy0 = sin0_y * spread - cy / f
             # With spread == 0 the camera's slopes (a function of the thin-lens slopes) and the
             # shift of its rays' crossings are the lens's too.
-            mdx0, mdy0, pupil0, shift_x0, shift_y0 = _model_slopes(dx0, dy0, model)
+            mdx0, mdy0, shift_x0, shift_y0 = _model_slopes(dx0, dy0, model)
             lens_angle = 0.0
             lens_inv_denom = 0.0
             if spread == 0.0:
@@ -299,9 +296,9 @@ def select_candidates(rays, query, camera, lattice, face, model, sel_index, sel_
                         continue
                     if spread == 0.0:
                         dx, dy, inv_denom = mdx0, mdy0, lens_inv_denom
-                        pupil, shift_x, shift_y = pupil0, shift_x0, shift_y0
+                        shift_x, shift_y = shift_x0, shift_y0
                     else:
-                        dx, dy, pupil, shift_x, shift_y = _model_slopes(
+                        dx, dy, shift_x, shift_y = _model_slopes(
                             dx0 + du * slope_step * spread, dy0 + dv * slope_step * spread, model
                         )
                         denom = nx * dx + ny * dy + nz
@@ -309,8 +306,8 @@ def select_candidates(rays, query, camera, lattice, face, model, sel_index, sel_
                             continue
                         inv_denom = 1.0 / denom
                     # The camera's ray crosses z = 0 at (ox, oy) and meets the face t later.
-                    ox = pupil * hx - shift_x
-                    oy = pupil * hy - shift_y
+                    ox = model.pupil_scale * hx - shift_x
+                    oy = model.pupil_scale * hy - shift_y
                     t = (plane_d - (nx * ox + ny * oy)) * inv_denom
                     ex = ox + t * dx - px
                     ey = oy + t * dy - py

@@ -16,25 +16,18 @@ from lfrefract.calibration.joint import (
     calibrate_port_and_camera,
 )
 from lfrefract.calibration.port import BoardView
-from lfrefract.optics.ray_correction import (
-    ABSENT_PARAMETER_STD,
-    PARAMETERS,
-    CorrectionEstimate,
-    RayCorrection,
-    apply_correction,
-)
+from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection, apply_correction
 from tests.tolerances import JOINT_DISTANCE_M, JOINT_NORMAL_DEG
 
 CAMERA = PinholeCamera(focal_px=600.0, cx_px=399.5, cy_px=299.5, width_px=800, height_px=600)
-TRUE = RayCorrection(pupil_scale=0.985, slope_scale=1.0, k1=0.08, k2=0.1, pupil_drift_m=-0.006, pupil_k1=0.7)
+TRUE = RayCorrection(pupil_scale=0.985, slope_scale=1.0, k1=0.08, k2=0.1, pupil_drift_m=-0.006)
 PORT = FlatPort.from_degrees(distance_m=0.015, thickness_m=0.004, tilt_x_deg=20.0, tilt_y_deg=-3.0)
 #: Aperture points the corners are seen from (the centre and four 3 mm off it), metres.
 APERTURE_M = np.array([[0.0, 0.0], [0.003, 0.0], [-0.003, 0.0], [0.0, 0.003], [0.0, -0.003]])
-#: The in-air estimate's standard deviations, and its error: 1.3 sigma in pupil scale, 1 in drift, none
-#: in the pupil's radial term.
-PRIOR_STD = np.array([0.003, 0.0015, 0.02, 0.05, 0.002, 0.3])
+#: The in-air estimate's standard deviations, and its error: 1.3 sigma in pupil scale, 1 in drift.
+PRIOR_STD = np.array([0.003, 0.0015, 0.02, 0.05, 0.002])
 PRIOR = CorrectionEstimate(
-    correction=RayCorrection.from_vector(TRUE.vector() + np.array([0.004, -0.001, 0.01, 0.0, 0.002, 0.0])),
+    correction=RayCorrection.from_vector(TRUE.vector() + np.array([0.004, -0.001, 0.01, 0.0, 0.002])),
     covariance=np.diag(PRIOR_STD**2),
 )
 
@@ -99,8 +92,7 @@ def test_a_step_to_no_port_costs_much_and_does_not_fail():
     problem = _JointProblem(CAMERA, views, PORT)
     x = np.concatenate([TRUE.vector(), [PORT.tilt_x_rad, PORT.tilt_y_rad, PORT.distance_m], np.zeros(12)])
     assert np.all(np.isfinite(problem.residuals_px(x)))
-    npar = len(PARAMETERS)  # then the tilts about x and y and the distance
-    for bad in ({npar + 2: -0.02}, {npar + 2: 0.0}, {npar: TILT_LIMIT_RAD}, {npar + 1: -1.2 * TILT_LIMIT_RAD}):
+    for bad in ({7: -0.02}, {7: 0.0}, {5: TILT_LIMIT_RAD}, {6: -1.2 * TILT_LIMIT_RAD}):
         y = x.copy()
         for index, value in bad.items():
             y[index] = value
@@ -125,28 +117,15 @@ def test_a_correction_estimate_round_trips_and_refuses_a_bad_covariance():
     np.testing.assert_allclose(PRIOR.std, PRIOR_STD)
     with pytest.raises(ParameterError, match="parameters must be"):
         CorrectionEstimate.covariance_from_dict({**data, "parameters": data["parameters"][::-1]})
-    with pytest.raises(ParameterError, match="6 rows of 6"):
+    with pytest.raises(ParameterError, match="5 rows of 5"):
         CorrectionEstimate.covariance_from_dict({**data, "matrix": data["matrix"][:4]})
     with pytest.raises(ParameterError, match=r"matrix\[0\]\[0\]"):
-        CorrectionEstimate.covariance_from_dict({**data, "matrix": [["a"] * 6, *data["matrix"][1:]]})
+        CorrectionEstimate.covariance_from_dict({**data, "matrix": [["a"] * 5, *data["matrix"][1:]]})
     skew = PRIOR.covariance.copy()
     skew[0, 1] = 1e-6
-    for bad, match in ((np.eye(4), "6 x 6"), (skew, "symmetric"), (-np.eye(6), "positive definite")):
+    for bad, match in ((np.eye(4), "5 x 5"), (skew, "symmetric"), (-np.eye(5), "positive definite")):
         with pytest.raises(ParameterError, match=match):
             CorrectionEstimate(correction=TRUE, covariance=bad)
     with pytest.raises(ParameterError, match="correction must be a RayCorrection"):
-        CorrectionEstimate(correction=TRUE.vector(), covariance=np.eye(6))  # type: ignore[arg-type]
+        CorrectionEstimate(correction=TRUE.vector(), covariance=np.eye(5))  # type: ignore[arg-type]
     assert not PRIOR.covariance.flags.writeable
-
-
-def test_a_covariance_written_before_the_pupils_radial_term_holds_it():
-    """A camera.json written before ``pupil_k1`` joined the model lists five parameters: the term is
-    read as held at 0 (a standard deviation of ABSENT_PARAMETER_STD, uncorrelated)."""
-    data = PRIOR.covariance_to_dict()
-    earlier = {"parameters": data["parameters"][:5], "matrix": [row[:5] for row in data["matrix"][:5]]}
-    matrix = CorrectionEstimate.covariance_from_dict(earlier)
-    np.testing.assert_array_equal(matrix[:5, :5], PRIOR.covariance[:5, :5])
-    assert matrix[5, 5] == ABSENT_PARAMETER_STD**2
-    np.testing.assert_array_equal(matrix[5, :5], 0.0)
-    with pytest.raises(ParameterError, match="parameters must be"):
-        CorrectionEstimate.covariance_from_dict({"parameters": data["parameters"][:3], "matrix": earlier["matrix"][:3]})
