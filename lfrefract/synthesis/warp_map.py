@@ -696,7 +696,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
     # (rim_margin_px) are vignetted, so their pixels are never used.
     r_ok = camera.usable_aperture_radius_m(options.rim_margin_px)
     covered = has_twin & (radius <= r_ok)
-    # A necessary ray outside it has no captured twin: aim the search at the parallel ray through
+    # A necessary ray outside it has no captured ray along it: aim the search at the parallel ray through
     # the nearest usable point of the aperture instead (paper section 6: nearby rays stand in;
     # these pixels are outside the exact coverage).
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -732,7 +732,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
         by_tree = usable | no_twin
     elif options.search == "auto":
         by_tree |= no_twin
-    elif np.any(by_tree):
+    elif options.search == "analytic" and np.any(by_tree):
         raise ParameterError(
             "the port's air-side face is conjugate to the MLA through the main lens "
             f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there; "
