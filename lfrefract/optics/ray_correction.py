@@ -137,24 +137,22 @@ class RayCorrection:
             slopes_out = d[:, :2] / d[:, 2:3]
         rho_out = np.hypot(slopes_out[:, 0], slopes_out[:, 1])
         s, k1, k2 = self.slope_scale, self.k1, self.k2
-        rho = rho_out / s
-        for _ in range(_INVERSE_MAX_STEPS):
+
+        def radial(rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """``s rho (1 + k1 rho^2 + k2 rho^4) - |t'|`` and its derivative in ``rho``."""
             r2 = rho * rho
-            residual = s * rho * (1.0 + k1 * r2 + k2 * r2 * r2) - rho_out
-            if not np.any(np.abs(residual) > _INVERSE_TOLERANCE * np.maximum(rho_out, 1e-300)):  # NaN: done
+            return s * rho * (1.0 + k1 * r2 + k2 * r2 * r2) - rho_out, s * (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2)
+
+        tolerance = _INVERSE_TOLERANCE * np.maximum(rho_out, 1e-300)
+        rho = rho_out / s
+        for step in range(_INVERSE_MAX_STEPS + 1):
+            residual, derivative = radial(rho)
+            if step == _INVERSE_MAX_STEPS or not np.any(np.abs(residual) > tolerance):  # NaN: done
                 break
-            slope = s * (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2)
             with np.errstate(invalid="ignore", divide="ignore"):
-                rho = rho - residual / slope
-        r2 = rho * rho
-        residual = s * rho * (1.0 + k1 * r2 + k2 * r2 * r2) - rho_out
+                rho = rho - residual / derivative
         # On the branch through 0: rho >= 0 and the map increasing there (k2 >= 0 or below its turn).
-        found = (
-            (np.abs(residual) <= 1e3 * _INVERSE_TOLERANCE * np.maximum(rho_out, 1e-300))
-            & (rho >= 0.0)
-            & (s * (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2) > 0.0)
-            & np.isfinite(rho_out)
-        )
+        found = (np.abs(residual) <= 1e3 * tolerance) & (rho >= 0.0) & (derivative > 0.0) & np.isfinite(rho_out)
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.where(rho_out > 0.0, rho / np.where(rho_out > 0.0, rho_out, 1.0), 1.0 / s)
         slopes = np.where(found[:, None], slopes_out * ratio[:, None], np.nan)
