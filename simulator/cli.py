@@ -5,7 +5,7 @@
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA] [--lens LENS]
                      [--port-distance-m D] [--thickness-m T] [--tilts-deg T1,T2] [--f-numbers N1,N2]
-                     [--overwrite]
+                     [--renders DIR] [--overwrite]
     lfsim whites --out DIR [--camera PRESET] [--sensor PRESET] [--lens LENS] [--focal-lengths-mm F1,F2]
                  [--focus-m D1,inf] [--frames N] [--spp N] [--seed S] [--overwrite]
     lfsim demo [--out DIR] [--overwrite]
@@ -235,6 +235,12 @@ def _parser() -> argparse.ArgumentParser:
         choices=[THIN_LENS, *sorted(LENS_PRESETS)],
         help="main lens every rig camera renders through (the core still assumes a thin lens)",
     )
+    exp.add_argument(
+        "--renders",
+        type=Path,
+        help="keep the experiment's renders in this folder (outside --out) and reuse those that match on a later "
+        "run, so that an interrupted run resumes where it stopped (experiments that render: pipeline, planes)",
+    )
     exp.add_argument("--overwrite", action="store_true", help="replace an earlier output of the experiment")
     exp.add_argument("--quiet", action="store_true", help="no progress bars")
     whites = _command(
@@ -344,7 +350,14 @@ def _experiment(args: argparse.Namespace) -> int:
         f_numbers=args.f_numbers,
         lens=args.lens,
     )
-    result = run_experiment(args.name, out=args.out, options=options, progress=not args.quiet, overwrite=args.overwrite)
+    result = run_experiment(
+        args.name,
+        out=args.out,
+        options=options,
+        progress=not args.quiet,
+        overwrite=args.overwrite,
+        renders_dir=args.renders,
+    )
     if result.summary:
         print(result.summary)
     print(f"wrote {args.out}/: table.csv table.md meta.json {' '.join(p.name for p in result.figures)}")

@@ -220,17 +220,22 @@ class Experiment:
     ----------
     name : str
     run : callable
-        ``run(out_dir, options, *, progress) -> ExperimentResult``.
+        ``run(out_dir, options, *, progress) -> ExperimentResult``; with ``keeps_renders`` also the
+        keyword ``renders_dir`` (a folder or None).
     options : tuple of str
         The :class:`ExperimentOptions` fields (but ``scale``) that apply to it.
     description : str
         One line, for ``lfsim experiment --help``.
+    keeps_renders : bool
+        Whether it can keep its renders in a folder of the caller's and reuse those that match on a
+        later run (``lfsim experiment --renders``).
     """
 
     name: str
     run: ExperimentFunction
     options: tuple[str, ...]
     description: str
+    keeps_renders: bool = False
 
     def check(self, options: ExperimentOptions) -> None:
         """Refuse an option that does not apply (:class:`ParameterError` naming it and its flag)."""
@@ -247,7 +252,9 @@ class Experiment:
 EXPERIMENTS: dict[str, Experiment] = {}
 
 
-def register(name: str, *, options: Sequence[str] = ()) -> Callable[[ExperimentFunction], ExperimentFunction]:
+def register(
+    name: str, *, options: Sequence[str] = (), keeps_renders: bool = False
+) -> Callable[[ExperimentFunction], ExperimentFunction]:
     """Decorator: register ``run(out_dir, options, *, progress)`` as experiment ``name``.
 
     Parameters
@@ -256,6 +263,8 @@ def register(name: str, *, options: Sequence[str] = ()) -> Callable[[ExperimentF
         The experiment's name (``lfsim experiment NAME``).
     options : sequence of str
         The :class:`ExperimentOptions` fields (but ``scale``) it reads; any other one given is refused.
+    keeps_renders : bool
+        ``run`` also takes the keyword ``renders_dir`` (:attr:`Experiment.keeps_renders`).
     """
     unknown = sorted(set(options) - set(OPTION_FLAGS))
     if unknown:
@@ -265,7 +274,7 @@ def register(name: str, *, options: Sequence[str] = ()) -> Callable[[ExperimentF
         if name in EXPERIMENTS:
             raise ValueError(f"experiment {name!r} registered twice")
         doc = (function.__doc__ or "").strip().splitlines()
-        EXPERIMENTS[name] = Experiment(name, function, tuple(options), doc[0] if doc else "")
+        EXPERIMENTS[name] = Experiment(name, function, tuple(options), doc[0] if doc else "", keeps_renders)
         return function
 
     return wrap
@@ -318,6 +327,23 @@ def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tup
     return csv_path, md_path
 
 
+def _renders_dir(experiment: Experiment, renders: Path, out: Path) -> Path:
+    """``renders`` checked for ``experiment`` writing into ``out`` (see :func:`run_experiment`)."""
+    if not experiment.keeps_renders:
+        keeping = sorted(e.name for e in EXPERIMENTS.values() if e.keeps_renders)
+        raise ParameterError(
+            f"renders_dir ({str(renders)!r}) does not apply to experiment {experiment.name!r}: it keeps no renders "
+            f"(those that do: {', '.join(keeping)})"
+        )
+    here, there = renders.resolve(), out.resolve()
+    if here == there or here.is_relative_to(there) or there.is_relative_to(here):
+        raise ParameterError(
+            f"renders_dir ({str(renders)!r}) and out ({str(out)!r}) must not hold one another: the output is "
+            "replaced as a whole, the renders are kept"
+        )
+    return renders
+
+
 def load_experiments() -> dict[str, Experiment]:
     """Import the experiment modules (which register themselves) and return :data:`EXPERIMENTS`."""
     from simulator.experiments import averaging, fov, objects, pipeline, planes  # noqa: F401  (registration)
@@ -344,6 +370,7 @@ def run_experiment(
     options: ExperimentOptions | None = None,
     progress: bool = True,
     overwrite: bool = False,
+    renders_dir: str | Path | None = None,
 ) -> ExperimentResult:
     """Run experiment ``name`` into ``out``: its figures, ``table.csv``, ``table.md`` and
     ``meta.json``, assembled in a staging directory (nothing half-written on failure).
@@ -364,6 +391,11 @@ def run_experiment(
         Progress bars on the terminal.
     overwrite : bool
         Replace an earlier output of the same experiment (only that: see docs/conventions.md).
+    renders_dir : path-like, optional
+        For an experiment that keeps its renders (:attr:`Experiment.keeps_renders`): the folder to keep
+        them in (created if absent); a later run reuses those that match its scenes, so an
+        interrupted run resumes where it stopped. It must lie outside ``out``, and ``out`` outside it.
+        Default: a temporary folder, deleted.
 
     Returns
     -------
@@ -374,7 +406,8 @@ def run_experiment(
     ------
     ParameterError
         Before any work: for an unknown experiment, scale or method, an invalid option, or one
-        that does not apply to the experiment (naming it).
+        that does not apply to the experiment (naming it); for ``renders_dir`` given to an
+        experiment that keeps no renders, or overlapping ``out``.
     FileExistsError
         If ``out`` is not empty (and not an earlier output with ``overwrite``).
     """
@@ -400,6 +433,7 @@ def run_experiment(
         if both:
             raise ParameterError(f"give either options or {', '.join(both)}, not both")
     experiment.check(options)
+    keep = {} if renders_dir is None else {"renders_dir": _renders_dir(experiment, Path(renders_dir), Path(out))}
     if options.methods is not None:
         from simulator.experiments.methods import method_names
 
@@ -408,7 +442,7 @@ def run_experiment(
             one_of("method", method, registered)
     start = time.perf_counter()
     with staged_directory(out, kind=f"lfsim.experiment.{name}", overwrite=overwrite) as stage:
-        result = experiment.run(stage, options, progress=progress)
+        result = experiment.run(stage, options, progress=progress, **keep)
         rows = complete_rows(result.rows)
         write_table(rows, stage)
         write_json(
@@ -421,6 +455,7 @@ def run_experiment(
                 "parameters": result.parameters,
                 "figures": [p.name for p in result.figures],
                 "summary": result.summary,
+                "renders_dir": None if renders_dir is None else str(renders_dir),
                 "seconds": time.perf_counter() - start,
             },
         )

@@ -894,7 +894,9 @@ def _summary_figure(out_dir: Path, rows: Sequence[dict], *, scale: str, lens: st
     return path
 
 
-@register("pipeline", options=("lens", "port_distance_m", "thickness_m"))
-def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+@register("pipeline", options=("lens", "port_distance_m", "thickness_m"), keeps_renders=True)
+def run(
+    out_dir: Path, options: ExperimentOptions, *, progress: bool, renders_dir: Path | None = None
+) -> ExperimentResult:
     """From Lytro files alone (real lens, sensor model): MLA, camera, port calibrated, stereo; against the oracle."""
-    return run_pipeline(out_dir, options=options, progress=progress)
+    return run_pipeline(out_dir, options=options, progress=progress, renders_dir=renders_dir)

@@ -441,7 +441,9 @@ def plane_figures(
     return tuple(paths)
 
 
-@register("planes", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"))
-def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> ExperimentResult:
+@register("planes", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"), keeps_renders=True)
+def run(
+    out_dir: Path, options: ExperimentOptions, *, progress: bool, renders_dir: Path | None = None
+) -> ExperimentResult:
     """Stereo on a slanted textured plane at three depths, by method (paper Figs. 5-6)."""
-    return run_planes(out_dir, options=options, progress=progress)
+    return run_planes(out_dir, options=options, progress=progress, renders_dir=renders_dir)

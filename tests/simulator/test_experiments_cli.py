@@ -167,3 +167,61 @@ def test_options_or_separate_values_not_both(tmp_path):
     with pytest.raises(ParameterError, match="options must be an ExperimentOptions"):
         run_experiment("fov", out=tmp_path / "x", options={"scale": "tiny"}, progress=False)
     assert not (tmp_path / "x").exists()
+
+
+def test_the_experiments_that_render_keep_their_renders_on_request():
+    experiments = load_experiments()
+    assert {name for name, e in experiments.items() if e.keeps_renders} == {"pipeline", "planes"}
+
+
+@pytest.fixture
+def renders_probe(monkeypatch):
+    """A registered experiment that records the ``renders_dir`` it was given and counts its renders
+    there: the harness's part of ``--renders``, without rendering."""
+    from simulator.experiments import EXPERIMENTS, Experiment, ExperimentResult
+
+    def run(out_dir, options, *, progress, renders_dir=None):
+        made = 0
+        if renders_dir is not None:
+            renders_dir.mkdir(parents=True, exist_ok=True)
+            if not (renders_dir / "render.txt").exists():  # what a later run finds is not made again
+                (renders_dir / "render.txt").write_text("a render")
+                made = 1
+        return ExperimentResult(name="probe", scale=options.scale, rows=({"made": made},))
+
+    monkeypatch.setitem(EXPERIMENTS, "probe", Experiment("probe", run, (), "records renders_dir", keeps_renders=True))
+    return run
+
+
+def test_renders_reach_the_experiment_and_a_later_run_reuses_them(tmp_path, capsys, renders_probe):
+    renders = tmp_path / "renders"
+    for k, made in enumerate((1, 0)):
+        out = tmp_path / f"out-{k}"
+        assert sim_cli.main(["experiment", "probe", "--out", str(out), "--renders", str(renders), "--quiet"]) == 0
+        assert (out / "table.csv").read_text().splitlines() == ["made", str(made)]
+        assert read_json(out / "meta.json")["renders_dir"] == str(renders)
+        assert not (out / "render.txt").exists()
+    assert (renders / "render.txt").read_text() == "a render"  # kept after both runs
+    out = tmp_path / "out-2"
+    assert sim_cli.main(["experiment", "probe", "--out", str(out), "--quiet"]) == 0
+    assert read_json(out / "meta.json")["renders_dir"] is None
+
+
+@pytest.mark.parametrize("where", ["inside", "same", "around"])
+def test_renders_overlapping_the_output_are_refused_before_any_work(tmp_path, capsys, renders_probe, where):
+    out = tmp_path / "out"
+    renders = {"inside": out / "renders", "same": out, "around": tmp_path}[where]
+    assert sim_cli.main(["experiment", "probe", "--out", str(out), "--renders", str(renders), "--quiet"]) == 2
+    assert "must not hold one another" in capsys.readouterr().err
+    assert not out.exists()
+    assert not (tmp_path / "renders").exists()
+
+
+def test_renders_for_an_experiment_that_keeps_none_are_refused(tmp_path, capsys):
+    out, renders = tmp_path / "out", tmp_path / "renders"
+    assert sim_cli.main(["experiment", "fov", "--out", str(out), "--renders", str(renders), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "does not apply to experiment 'fov'" in err
+    assert "pipeline, planes" in err
+    assert not out.exists()
+    assert not renders.exists()
