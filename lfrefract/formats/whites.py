@@ -35,6 +35,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 from scipy import ndimage
 
@@ -65,6 +66,19 @@ LYTRO_SUFFIXES = (".lfr", ".raw")
 #: receives too little light to devignet: its value is set to 0. The gaps between micro-images hold
 #: a few percent; a tenth keeps the edge of every micro-image whose light is measurable.
 MIN_WHITE_FRACTION = 0.1
+#: A lit pixel whose white is below this fraction of the brightest white within
+#: :data:`PEAK_REACH_PX` of it is partly vignetted: a stop cuts the part of the main lens's aperture
+#: it sees (the lens's barrel at the field's edge, which the thin-lens model does not know, or the
+#: micro-image's rim), so its light passes the aperture off the point the camera model gives it. Its
+#: devignetted value is right, its ray is not: a fit on every raw pixel (chessboard corners in the
+#: light field) leaves it out (:attr:`DevelopedCapture.fully_lit`). Across a vignetting edge the white
+#: falls from its full value to the gap's within 1-2 px, inside a micro-image it changes by a few
+#: percent over 2 px; measured on an Illum white through the double Gauss lens, 15 % of the pixels
+#: the corner fit used lie below 0.8 (docs/calibration.md).
+FULLY_LIT_FRACTION = 0.8
+#: How far (pixels, along rows and columns) :data:`FULLY_LIT_FRACTION`'s brightest neighbour is sought:
+#: the width of a vignetting edge.
+PEAK_REACH_PX = 2
 #: A white pixel this many times darker than the darkest of its eight nearest neighbours, all
 #: bright, is dead (:func:`bad_pixels`; each colour relative to its bright level). Inside a
 #: micro-image a white changes by less than a factor of 2 from pixel to pixel; a dead pixel reads
@@ -228,6 +242,9 @@ class FlatField:
     usable : ndarray of bool, shape (H, W)
         Pixels the white lights enough to devignette: at least :data:`MIN_WHITE_FRACTION` of their
         colour's bright level.
+    fully_lit : ndarray of bool, shape (H, W)
+        Usable pixels no stop vignettes in part: at least :data:`FULLY_LIT_FRACTION` of the
+        brightest white within :data:`PEAK_REACH_PX` (each colour relative to its bright level).
     bad : ndarray of bool, shape (H, W)
         The white's :func:`bad_pixels`.
     cfa_pattern : str
@@ -236,6 +253,7 @@ class FlatField:
 
     lit_dn: np.ndarray
     usable: np.ndarray
+    fully_lit: np.ndarray
     bad: np.ndarray
     cfa_pattern: str
 
@@ -251,11 +269,19 @@ def flat_field(white: RawMosaic) -> FlatField:
     if not isinstance(white, RawMosaic):
         raise ParameterError(f"white must be a RawMosaic, got {type(white).__name__}")
     lit = np.maximum(white.counts.astype(np.float64) - white.black_level_dn, 0.0)
-    usable = lit >= MIN_WHITE_FRACTION * _bright_levels(lit, white.channel_index())
+    bright = _bright_levels(lit, white.channel_index())
+    usable = lit >= MIN_WHITE_FRACTION * bright
+    bad = bad_pixels(white)
+    # Each colour relative to its bright level, so that neighbours of other colours compare; a bad
+    # pixel (a hot one) must not make its neighbours look vignetted.
+    relative = np.divide(lit, bright, out=np.zeros_like(lit), where=(bright > 0.0) & ~bad).astype(np.float32)
+    reach = 2 * PEAK_REACH_PX + 1
+    peak = cv2.dilate(relative, np.ones((reach, reach), dtype=np.uint8), borderType=cv2.BORDER_REPLICATE)
+    fully_lit = usable & (relative >= FULLY_LIT_FRACTION * peak)
     field = FlatField(
-        lit_dn=lit.astype(np.float32), usable=usable, bad=bad_pixels(white), cfa_pattern=white.cfa_pattern
+        lit_dn=lit.astype(np.float32), usable=usable, fully_lit=fully_lit, bad=bad, cfa_pattern=white.cfa_pattern
     )
-    for array in (field.lit_dn, field.usable, field.bad):
+    for array in (field.lit_dn, field.usable, field.fully_lit, field.bad):
         array.flags.writeable = False  # shared between the captures a white develops
     return field
 
@@ -304,6 +330,9 @@ class DevelopedCapture:
     lit : ndarray of bool, shape (H, W)
         Pixels the white image lights enough to devignet (every pixel without a white); elsewhere
         ``values`` is 0.
+    fully_lit : ndarray of bool, shape (H, W)
+        Lit pixels that no stop vignettes in part (:attr:`FlatField.fully_lit`; every pixel without a
+        white): those whose ray is the camera model's.
     unrecorded : ndarray of bool, shape (H, W)
         The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach).
     white : WhiteImage or None
@@ -320,24 +349,27 @@ class DevelopedCapture:
     bad: np.ndarray
     flagged: np.ndarray
     lit: np.ndarray
+    fully_lit: np.ndarray
     unrecorded: np.ndarray
     white: WhiteImage | None
     color_matrix: np.ndarray
 
     def measured(self) -> np.ndarray:
-        """:attr:`image` with the pixels the white does not light unrecorded (NaN) too.
+        """:attr:`image` with the pixels the white does not light fully unrecorded (NaN) too.
 
-        In :attr:`image` they are 0, which suits a synthesis (they lie in the gaps between
+        In :attr:`image` unlit pixels are 0, which suits a synthesis (they lie in the gaps between
         micro-images, outside every micro-image's usable disc) but not a fit on every raw pixel: at
         the field's edge the main lens vignettes parts of micro-images, and read as 0 those parts
         are black samples (an Illum in-air board 17.5 deg off the axis had 9 of its 24 corners
-        located in the light field so; 24 with them unrecorded).
+        located in the light field so; 24 with them unrecorded). The pixels on the edge of such a
+        part, lit in part (not :attr:`fully_lit`), are unrecorded too: their light passes the
+        aperture away from where the camera model puts their ray.
 
         Returns
         -------
         ndarray of float32, shape (H, W, 3)
         """
-        return np.where(self.lit[..., None], self.image, np.float32(np.nan))
+        return np.where(self.fully_lit[..., None], self.image, np.float32(np.nan))
 
     def grey(self) -> np.ndarray:
         """The devignetted mosaic as one grey light field at full resolution, nothing interpolated.
@@ -345,7 +377,8 @@ class DevelopedCapture:
         Each colour's sites of :attr:`values` are divided by that colour's bright level (the 99th
         percentile of its recorded sites), so that on a neutral target (a black and white
         chessboard) the three colours agree whatever the light's colour; NaN at :attr:`flagged`
-        pixels and where the white image gives no light. Corners located on it are not moved by
+        pixels and where the white image gives no light or not its full light (:attr:`fully_lit`,
+        as :meth:`measured`). Corners located on it are not moved by
         demosaicing, which mixes each micro-image's border pixels with its dark neighbours
         (docs/calibration.md measures the difference).
 
@@ -354,7 +387,7 @@ class DevelopedCapture:
         ndarray of float32, shape (H, W)
         """
         channels = cfa_channels(self.cfa_pattern, self.values.shape)
-        recorded = self.lit & ~self.flagged
+        recorded = self.fully_lit & ~self.flagged
         levels = np.zeros(3)
         for c in range(3):
             sites = self.values[recorded & (channels == c)]
@@ -422,7 +455,7 @@ def develop(
     if white is None:
         values = counts / (mosaic.white_level_dn - mosaic.black_level_dn) * gains[mosaic.channel_index()]
         bad = np.zeros(mosaic.shape, dtype=bool)
-        usable = np.ones(mosaic.shape, dtype=bool)
+        usable = fully_lit = np.ones(mosaic.shape, dtype=bool)
     else:
         if not isinstance(white, (RawMosaic, FlatField)):
             raise ParameterError(f"white must be a RawMosaic or a FlatField, got {type(white).__name__}")
@@ -432,7 +465,7 @@ def develop(
                 f"capture ({mosaic.shape[1]} x {mosaic.shape[0]} px, {mosaic.cfa_pattern})"
             )
         field = white if isinstance(white, FlatField) else flat_field(white)
-        usable, bad = field.usable, field.bad
+        usable, fully_lit, bad = field.usable, field.fully_lit, field.bad
         values = np.divide(counts, field.lit_dn, out=np.zeros_like(counts), where=usable)
     flagged = saturated | bad
     kept = np.where(flagged, 0.0, values)
@@ -449,6 +482,7 @@ def develop(
         bad=bad,
         flagged=flagged,
         lit=usable,
+        fully_lit=fully_lit,
         unrecorded=unrecorded,
         white=white_image,
         color_matrix=matrix,

@@ -186,8 +186,11 @@ def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
     # A board command reads what the white does not light as unrecorded, not as black: at the
     # field's edge the main lens vignettes parts of micro-images, which the light-field corner fit
     # took for black squares (an Illum in-air board 17.5 deg off the axis: 9 of 24 corners located).
-    lit = capture.developed.lit
+    # The pixels the white lights in part (a micro-image's rim here) are unrecorded too.
+    developed = capture.developed
+    lit = developed.fully_lit
     assert (~lit).any()
+    assert (developed.lit & ~lit).any()
     for command in ("camera", "port", "approx"):
         for colour in ("demosaic", "cfa"):
             board = core_cli._board_raw(str(path), camera, str(tmp_path), colour, command=command)
@@ -213,9 +216,42 @@ def test_the_grey_mosaic_of_a_neutral_scene_agrees_across_colours_under_coloured
     grey = developed.grey()
     assert grey.shape == lit.shape
     assert grey.dtype == np.float32
-    assert np.array_equal(np.isnan(grey), ~developed.lit | developed.flagged)
+    assert np.array_equal(np.isnan(grey), ~developed.fully_lit | developed.flagged)
     bright = ~np.isnan(grey) & (lit > 0.5 * lit.max())  # away from the 1-DN rounding of dim pixels
     # Each colour divided by its bright level (the 0.9 squares): the reflectance over 0.9, whatever the colour.
     np.testing.assert_allclose(grey[bright], reflectance[bright] / 0.9, atol=0.02)
     # The demosaiced image keeps the light's colour, and mixes the pattern's neighbours.
     assert abs(np.nanmean(developed.image[..., 0]) / np.nanmean(developed.image[..., 2]) - 0.7 / 0.3) < 0.2
+
+
+def test_pixels_a_stop_vignettes_in_part_are_lit_but_not_fully_lit():
+    """A vignetting edge across the field (a lens barrel's): the column on the edge keeps 40 % of its
+    light, those beyond none. Its pixels can be devignetted but their rays are not the model's, so a
+    fit on every raw pixel must not take them; a hot pixel marks none of its neighbours."""
+    white = white_mosaic()
+    whole = flat_field(white)
+    lit = white.counts.astype(np.float64) - BLACK
+    profile = np.ones(lit.shape[1])
+    profile[100], profile[101:] = 0.4, 0.0
+    counts = np.rint(BLACK + lit * profile).astype(np.uint16)
+    counts[60, 40] = WHITE_LEVEL  # a hot pixel inside the lit field
+    edge = flat_field(
+        RawMosaic(counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10)
+    )
+    on_edge = whole.fully_lit[:, 100] & edge.usable[:, 100]
+    assert on_edge.sum() > 20  # lit enough to devignet ...
+    assert not edge.fully_lit[:, 100][on_edge].any()  # ... but not fully
+    assert edge.bad[60, 40]
+    np.testing.assert_array_equal(edge.fully_lit[:, :95], whole.fully_lit[:, :95] & ~edge.bad[:, :95])
+    assert not edge.fully_lit[:, 101:].any()
+    capture = RawMosaic(
+        counts=np.rint(BLACK + 0.3 * lit).astype(np.uint16),
+        cfa_pattern="GRBG",
+        black_level_dn=BLACK,
+        white_level_dn=WHITE_LEVEL,
+        bit_depth=10,
+    )
+    developed = develop(capture, edge)
+    assert np.isfinite(developed.image[:, 100][on_edge]).all()  # a synthesis still has their values
+    assert np.isnan(developed.grey()[:, 100][on_edge]).all()
+    assert np.isnan(developed.measured()[:, 100][on_edge]).all()
