@@ -378,9 +378,9 @@ class DevelopedCapture:
         percentile of its recorded sites), so that on a neutral target (a black and white
         chessboard) the three colours agree whatever the light's colour; NaN at :attr:`flagged`
         pixels and where the white image gives no light or not its full light (:attr:`fully_lit`,
-        as :meth:`measured`). Corners located on it are not moved by
-        demosaicing, which mixes each micro-image's border pixels with its dark neighbours
-        (docs/calibration.md measures the difference).
+        as :meth:`measured`). Corners located on it are not moved by demosaicing, which mixes each
+        micro-image's border pixels with its dark neighbours (docs/calibration.md measures the
+        difference).
 
         Returns
         -------
