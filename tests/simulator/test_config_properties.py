@@ -162,7 +162,7 @@ def mesh_dir(tmp_path_factory):
     return folder
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=200, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=damaged_scenes())
 def test_a_damaged_scene_is_refused_clearly_or_parsed_into_finite_numbers(mesh_dir, data):
     try:
