@@ -8,3 +8,9 @@ from hypothesis import settings
 def test_property_examples_have_no_deadline():
     # A deadline fails examples on a loaded machine (the CI VM beside another job), not wrong results.
     assert settings.default.deadline is None
+
+
+def test_files_that_take_minutes_are_collected_first(request):
+    # tests/conftest.py puts them first, so that a parallel run (README) starts them at once.
+    takes_minutes = [item.get_closest_marker("minutes") is not None for item in request.session.items]
+    assert takes_minutes == sorted(takes_minutes, reverse=True)

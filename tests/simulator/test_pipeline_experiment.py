@@ -26,6 +26,8 @@ from tests.tolerances import (
 #: version deleted and remade ``delivered/`` and ``core/`` there).
 USER_FILES = ("delivered/notes.txt", "core/notes.txt", "notes.txt")
 
+pytestmark = pytest.mark.minutes
+
 
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
