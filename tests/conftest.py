@@ -16,6 +16,7 @@ settings.load_profile("lfrefract")
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Files marked ``minutes`` first, in place (the sort is stable, so each file stays whole and in
-    its order). With ``-n logical --dist loadfile`` (README) a worker then starts such a file at
-    once, while the others share the rest, instead of meeting it last and running it alone."""
+    its order). With ``-n logical`` (README; ``pyproject.toml`` hands each file whole to a worker, in
+    this order) a worker then starts such a file at once while the others share the rest, instead of
+    meeting it last and running it alone."""
     items.sort(key=lambda item: item.get_closest_marker("minutes") is None)

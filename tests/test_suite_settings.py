@@ -14,3 +14,10 @@ def test_files_that_take_minutes_are_collected_first(request):
     # tests/conftest.py puts them first, so that a parallel run (README) starts them at once.
     takes_minutes = [item.get_closest_marker("minutes") is not None for item in request.session.items]
     assert takes_minutes == sorted(takes_minutes, reverse=True)
+
+
+def test_a_parallel_run_keeps_each_file_whole_and_in_the_collected_order(request):
+    # pyproject.toml's addopts: module fixtures render once per file, and the files marked `minutes`
+    # start first (xdist otherwise reorders files by their number of tests).
+    assert request.config.getoption("dist") == "loadfile"
+    assert request.config.getoption("loadscopereorder") is False
