@@ -19,5 +19,7 @@ def test_files_that_take_minutes_are_collected_first(request):
 def test_a_parallel_run_keeps_each_file_whole_and_in_the_collected_order(request):
     # pyproject.toml's addopts: module fixtures render once per file, and the files marked `minutes`
     # start first (xdist otherwise reorders files by their number of tests).
-    assert request.config.getoption("dist") == "loadfile"
-    assert request.config.getoption("loadscopereorder") is False
+    # (read from the settings: a worker's own options say "no distribution")
+    addopts = request.config.getini("addopts")
+    assert "--dist=loadfile" in addopts
+    assert "--no-loadscope-reorder" in addopts
