@@ -968,14 +968,42 @@ def describe_command(args: argparse.Namespace) -> int:
         # A camera file: `lfrefract describe PRESET --json > CAMERA.json` is a --camera of the other commands.
         print(json.dumps({"schema_version": SCHEMA_VERSION, "kind": "lfrefract.describe", **info}, indent=2))
         return 0
+    print("\n".join(describe_lines(info)))
+    return 0
+
+
+#: The unit of a value, by its key's suffix (the project's convention), as ``describe`` prints it.
+_KEY_UNITS = {"_m": "m", "_deg": "deg", "_rad": "rad", "_px": "px"}
+#: Keys whose unit their name does not carry.
+_NAMED_UNITS = {"K": "px"}
+
+
+def format_value(value: object, *, digits: int = 6) -> str:
+    """A value as printed for people: floats to ``digits`` significant digits (``1.8``, not
+    ``1.7999999999999998``), lists element by element, everything else as ``str``."""
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(format_value(v, digits=digits) for v in value) + "]"
+    return str(value)
+
+
+def describe_lines(info: dict, *, indent: int = 0) -> list[str]:
+    """:func:`describe`'s data as the lines ``lfrefract describe`` prints: ``key: value unit``, a
+    nested table indented by two spaces under its key, floats to six significant digits, and the unit
+    each key's suffix names (``_m``, ``_deg``, ``_rad``, ``_px``) after the value."""
+    lines = []
     for key, value in info.items():
         if isinstance(value, dict):
-            print(f"{key}:")
-            for k, v in value.items():
-                print(f"  {k}: {v}")
-        else:
-            print(f"{key}: {value}")
-    return 0
+            lines.append(f"{' ' * indent}{key}:")
+            lines += describe_lines(value, indent=indent + 2)
+            continue
+        unit = _NAMED_UNITS.get(key) or next((u for s, u in _KEY_UNITS.items() if key.endswith(s)), None)
+        shown = format_value(value)
+        lines.append(f"{' ' * indent}{key}: {shown}" + (f" {unit}" if unit and value is not None else ""))
+    return lines
 
 
 # ----------------------------------------------------------------------------- the parser

@@ -33,7 +33,7 @@ def test_describe_meta_json_includes_the_port(tmp_path, capsys):
     assert main(["describe", str(meta)]) == 0
     out = capsys.readouterr().out
     assert "port:" in out
-    assert f"total_tilt_deg: {math.degrees(port.total_tilt_rad)}" in out
+    assert f"total_tilt_deg: {math.degrees(port.total_tilt_rad):.6g} deg" in out
 
 
 def test_describe_takes_a_camera_file(tmp_path, capsys):
