@@ -56,9 +56,11 @@ from lfrefract.formats.whites import (
     DevelopedCapture,
     WhiteImage,
     develop,
+    existing_path,
     find_white_images,
     is_lytro_file,
     read_lytro_file,
+    same_file,
     select_white_image,
 )
 from lfrefract.optics.camera import LightFieldCamera
@@ -550,15 +552,15 @@ def white_for(
     the ``capture`` itself is never its own white, should it lie in the folder)."""
     if isinstance(white, WhiteImage):
         return white
-    path = Path(white)
+    path = existing_path(white, "white image")
     if path.is_dir():
         found = find_white_images(path)
         if capture is not None:
-            found = [w for w in found if w.path.resolve() != capture.resolve()]
+            found = [w for w in found if not same_file(w.path, capture)]
         if not found:
             raise FileFormatError(f"white-image folder {str(path)!r} holds no white image but the capture itself")
         return select_white_image(found, zoom_step=zoom_step, focus_step=focus_step)
-    if capture is not None and path.resolve() == capture.resolve():
+    if capture is not None and same_file(path, capture):
         raise FileFormatError(f"{str(path)!r} is the capture itself, not its white image")
     return WhiteImage.from_file(path)
 

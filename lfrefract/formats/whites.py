@@ -29,6 +29,7 @@ the metadata's ``devices.lens.zoomStep`` / ``focusStep`` (integers).
 
 from __future__ import annotations
 
+import errno
 import functools
 import json
 import os
@@ -53,10 +54,12 @@ __all__ = [
     "WhiteImage",
     "bad_pixels",
     "develop",
+    "existing_path",
     "find_white_images",
     "flat_field",
     "is_lytro_file",
     "read_lytro_file",
+    "same_file",
     "select_white_image",
 ]
 
@@ -95,6 +98,41 @@ def is_lytro_file(path: str | os.PathLike) -> bool:
     return Path(path).suffix.lower() in LYTRO_SUFFIXES
 
 
+def existing_path(path: str | os.PathLike, what: str, *, kind: str = "file") -> Path:
+    """``path``, after checking that it names something that can be looked at.
+
+    ``Path.is_file()`` reads a symbolic link loop as a missing file and ``Path.resolve()`` raises
+    RuntimeError on one: a loop is named here instead.
+
+    Raises
+    ------
+    FileFormatError
+        If ``path`` is a symbolic link loop, missing (or a link to nothing: "no such ``kind``") or
+        cannot be looked at; the message names it as ``what``.
+    """
+    path = Path(path)
+    try:
+        path.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise FileFormatError(
+                f"{what} {str(path)!r} is a symbolic link loop (it never reaches a file): point it at a file"
+            ) from None
+        if isinstance(exc, FileNotFoundError):
+            dangling = " (a symbolic link to nothing)" if path.is_symlink() else ""
+            raise FileFormatError(f"no such {kind}: {what} {str(path)!r}{dangling}") from None
+        raise FileFormatError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
+    return path
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` (both existing) are the same file."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _raw_metadata(path: Path) -> tuple[Path, dict] | None:
     for suffix in (".json", ".txt", ".JSON", ".TXT"):
         meta = path.with_suffix(suffix)
@@ -115,9 +153,9 @@ def read_lytro_file(path: str | os.PathLike) -> LytroCapture:
     FileFormatError
         If the file is missing, is no Lytro file, or its metadata is missing or malformed.
     """
-    path = Path(path)
+    path = existing_path(path, "Lytro file")
     if not path.is_file():
-        raise FileFormatError(f"no such file: {str(path)!r}")
+        raise FileFormatError(f"{str(path)!r} is not a file (a Lytro file is a .lfr, or a .raw with its metadata)")
     suffix = path.suffix.lower()
     if suffix == ".lfr":
         return read_lfr(path)
@@ -160,7 +198,7 @@ class WhiteImage:
     @classmethod
     def from_file(cls, path: str | os.PathLike) -> WhiteImage:
         """The white image of ``path``, its lens steps read from its metadata (not its mosaic)."""
-        path = Path(path)
+        path = existing_path(path, "white image")
         where = repr(str(path))
         if path.suffix.lower() == ".lfr":
             metadata = read_lfr(path).metadata
@@ -201,9 +239,10 @@ def find_white_images(folder: str | os.PathLike) -> list[WhiteImage]:
         If ``folder`` is no folder, holds no white image, or a file's metadata lacks the lens steps.
     """
     folder = Path(folder)
-    if not folder.is_dir():
+    if not existing_path(folder, "white-image folder", kind="folder").is_dir():
         raise FileFormatError(f"white-image folder {str(folder)!r} is not a folder")
-    files = sorted(p for p in folder.iterdir() if p.is_file() and is_lytro_file(p))
+    # A link among them that reaches nothing is named, not skipped.
+    files = sorted(p for p in folder.iterdir() if is_lytro_file(p) and existing_path(p, "white image").is_file())
     whites = [WhiteImage.from_file(p) for p in files if p.suffix.lower() == ".lfr" or _raw_metadata(p) is not None]
     if not whites:
         raise FileFormatError(f"white-image folder {str(folder)!r} holds no .raw (with metadata) or .lfr file")

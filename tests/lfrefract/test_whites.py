@@ -71,8 +71,11 @@ def test_lytro_files_are_told_apart_by_their_metadata(tmp_path):
 
 
 def test_bad_paths_are_named(tmp_path):
-    with pytest.raises(FileFormatError, match="not a folder"):
+    with pytest.raises(FileFormatError, match="no such folder"):
         find_white_images(tmp_path / "missing")
+    with pytest.raises(FileFormatError, match="not a folder"):
+        find_white_images(write_white(tmp_path, "white", white_mosaic(), zoom=0, focus=0))
+    (tmp_path / "white.raw").unlink()
     with pytest.raises(FileFormatError, match=r"holds no \.raw"):
         find_white_images(tmp_path)
     (tmp_path / "lonely.raw").write_bytes(b"\0" * 16)
@@ -255,3 +258,47 @@ def test_pixels_a_stop_vignettes_in_part_are_lit_but_not_fully_lit():
     assert np.isfinite(developed.image[:, 100][on_edge]).all()  # a synthesis still has their values
     assert np.isnan(developed.grey()[:, 100][on_edge]).all()
     assert np.isnan(developed.measured()[:, 100][on_edge]).all()
+
+
+def lytro_capture(tmp_path, fraction: float = 0.25, *, zoom: int = 6000, focus: int = 0):
+    """A capture of a uniform scene at ``fraction`` of the white's light, as an LFR file."""
+    lit = white_mosaic().counts.astype(np.float64) - BLACK
+    counts = np.rint(BLACK + fraction * lit).astype(np.uint16)
+    mosaic = RawMosaic(
+        counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10
+    )
+    return write_lfr(
+        tmp_path / "capture.lfr", mosaic, small_camera(), settings=LytroSettings(zoom_step=zoom, focus_step=focus)
+    )
+
+
+def test_a_symlink_loop_is_named_wherever_a_lytro_path_is_taken(tmp_path, capsys):
+    capture = lytro_capture(tmp_path)
+    (tmp_path / "whites").mkdir()
+    write_white(tmp_path / "whites", "white", white_mosaic(), zoom=6000, focus=0)
+    for name in ("loop", "loop.raw", "loop.lfr"):
+        (tmp_path / name).symlink_to(name)
+    for white in ("loop", "loop.raw", "loop.lfr"):
+        with pytest.raises(FileFormatError, match=rf"{white}'.* symbolic link loop"):
+            read_capture(capture, white=tmp_path / white)
+    with pytest.raises(FileFormatError, match=r"loop.lfr'.* symbolic link loop"):
+        read_capture(tmp_path / "loop.lfr")
+    with pytest.raises(FileFormatError, match=r"loop.raw'.* symbolic link loop"):
+        read_lytro_file(tmp_path / "loop.raw")
+    with pytest.raises(FileFormatError, match=r"loop'.* symbolic link loop"):
+        find_white_images(tmp_path / "loop")
+    # A loop among the white images is named, not skipped.
+    (tmp_path / "whites" / "other.raw").symlink_to("other.raw")
+    with pytest.raises(FileFormatError, match=r"other.raw'.* symbolic link loop"):
+        find_white_images(tmp_path / "whites")
+    port = tmp_path / "port.toml"
+    port.write_text("[port]\nnormal = [0.0, 0.0, 1.0]\ndistance_m = 0.05\n")
+    out = tmp_path / "o.exr"
+    loop = str(tmp_path / "loop")
+    status = core_cli.main(["synth", str(capture), "--white", loop, "--port", str(port), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1
+    assert "symbolic link loop" in err
+    assert loop in err
+    assert not (tmp_path / "o.exr").exists()
