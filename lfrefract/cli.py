@@ -117,7 +117,7 @@ from lfrefract.formats.exr import write_exr
 from lfrefract.formats.flatport import write_flat_port
 from lfrefract.formats.jsonio import SCHEMA_VERSION, read_json, write_json
 from lfrefract.formats.outputs import ExpectedKind, atomic_file, prepare_output_files, terminate_cleanly
-from lfrefract.formats.paramfile import read_camera_file
+from lfrefract.formats.paramfile import MLA_CALIBRATION_KIND, read_camera_file
 from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
@@ -173,7 +173,7 @@ SYNTH_CONFIDENCE_ROLE = "confidence"
 
 #: Kinds of the JSON files the commands write (their ``kind``; ``--overwrite`` replaces only these).
 SYNTH_KIND = "lfrefract.synth"
-MLA_KIND = "lfrefract.calibrate.mla"
+MLA_KIND = MLA_CALIBRATION_KIND
 
 __all__ = [
     "CALIBRATE_COMMANDS",

@@ -46,12 +46,11 @@ from typing import Any
 import numpy as np
 
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
-from lfrefract.calibration.port import PORT_CALIBRATION_KIND
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.outputs import atomic_file, staged_directory
-from lfrefract.formats.paramfile import read_camera_file, read_port_file
+from lfrefract.formats.paramfile import check_kind, read_camera_file, read_parameter_json, read_port_file
 from lfrefract.formats.whites import (
     DevelopedCapture,
     WhiteImage,
@@ -194,10 +193,13 @@ def read_sidecar(path: str | os.PathLike, *, camera_required: bool = True) -> Ca
     FileFormatError
         If the file is missing, not UTF-8 JSON of this schema, lacks ``camera`` (when required), or
         a key the core reads (``camera``, ``port``, ``ideal``, ``pose``) is not a table or holds an
-        invalid value: the message names the file and the key.
+        invalid value; or if it holds a table of a camera or ray model that its ``kind`` does not
+        hold (:func:`lfrefract.formats.paramfile.check_kind`: a ``correction`` is not read from a
+        sidecar): the message names the file and the key.
     """
     path = Path(path)
     data = read_json(path)
+    check_kind(path, data)  # a camera or ray model table the sidecar's kind does not hold: refused
     camera_data = _table(path, data, "camera", required=camera_required, nullable=False)
     port_data = _table(path, data, "port", required=False, nullable=True)
     ideal_data = _table(path, data, "ideal", required=False, nullable=True)
@@ -685,35 +687,48 @@ def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
 
 def ray_correction_from_option(value: str | os.PathLike | None) -> RayCorrection | None:
     """The calibrated ray correction a ``--camera`` option carries: that of a camera calibration
-    (``lfrefract calibrate camera`` output, kind ``lfrefract.calibrate.camera``); None for any other
-    camera (a preset, a camera file, a ``meta.json``).
+    (``lfrefract calibrate camera`` output, kind ``lfrefract.calibrate.camera``, of any suffix but
+    ``.toml``); None for any other camera (a preset, a camera file, a ``meta.json``), which holds no
+    ray correction (one that does is refused: :func:`lfrefract.formats.paramfile.read_parameter_json`).
+
+    A calibration's ``correction_covariance`` is checked too when it has one (a file written before
+    it was recorded has none; only a refinement needs it, :func:`correction_estimate_from_option`).
 
     Raises
     ------
     FileFormatError
-        If a camera calibration's ``correction`` is missing or invalid.
+        If a camera calibration's ``correction`` is missing or invalid, its covariance is invalid,
+        or the file's kind and content disagree; the message names the file and the key.
     """
     found = _camera_calibration(value)
-    return None if found is None else _correction(*found)
+    return None if found is None else _calibration_estimate(*found)[0]
 
 
 def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | None:
-    """The path and content of a ``--camera`` camera calibration (read once), or None for any other camera."""
+    """The path and content of a ``--camera`` camera calibration (read once, its kind checked
+    against its content), or None for any other camera."""
     if value is None:
         return None
     path = Path(value)
-    if not path.is_file() or path.suffix.lower() != ".json":
+    if not path.is_file() or path.suffix.lower() == ".toml":  # a preset; a TOML file holds a [camera] only
         return None
-    data = read_json(path)
+    data = read_parameter_json(path)
     return (path, data) if data.get("kind") == CAMERA_CALIBRATION_KIND else None
 
 
-def _correction(path: Path, data: dict) -> RayCorrection:
-    """The ``correction`` of a camera calibration's content ``data`` (read from ``path``)."""
+def _calibration_estimate(path: Path, data: dict) -> tuple[RayCorrection, CorrectionEstimate | None]:
+    """The ``correction`` of a camera calibration's content ``data`` (read from ``path``), and its
+    estimate with the ``correction_covariance`` (None if the file has none)."""
     try:
-        return RayCorrection.from_dict(
+        correction = RayCorrection.from_dict(
             _json_key(path, "correction", "--camera", data), where=f"{str(path)!r}: correction"
         )
+        if "correction_covariance" not in data:
+            return correction, None
+        covariance = CorrectionEstimate.covariance_from_dict(
+            data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
+        )
+        return correction, CorrectionEstimate(correction=correction, covariance=covariance)
     except ParameterError as exc:
         raise FileFormatError(str(exc)) from None
 
@@ -737,19 +752,13 @@ def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstim
             "a refinement needs the calibrated ray model and its covariance"
         )
     path, data = found
-    correction = _correction(path, data)
-    if "correction_covariance" not in data:
+    _, estimate = _calibration_estimate(path, data)
+    if estimate is None:
         raise FileFormatError(
             f"{str(path)!r} has no correction_covariance (written by an earlier lfrefract): run "
             "lfrefract calibrate camera again to refine it"
         )
-    try:
-        covariance = CorrectionEstimate.covariance_from_dict(
-            data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
-        )
-        return CorrectionEstimate(correction=correction, covariance=covariance)
-    except ParameterError as exc:
-        raise FileFormatError(str(exc)) from None
+    return estimate
 
 
 def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection | None, *, camera: object) -> None:
@@ -757,7 +766,9 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection
 
     A port is calibrated on one ray model of the camera (``lfrefract calibrate port`` records it in
     its JSON as ``ray_model``); with another, its normal and distance are wrong for the rays. Port
-    files that record none (a flat-port ``.txt``, TOML, a render's ``meta.json``) pass.
+    files that record none (a flat-port ``.txt``, TOML, a render's ``meta.json``, a port calibration
+    of an earlier lfrefract) pass; a ``ray_model`` in a file of another kind is refused
+    (:func:`lfrefract.formats.paramfile.read_parameter_json`).
 
     Parameters
     ----------
@@ -776,18 +787,22 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection
         If its ``ray_model`` is not valid.
     """
     path = Path(port_path)
-    if path.suffix.lower() != ".json":
+    if path.suffix.lower() in (".txt", ".toml"):  # as read_port_file reads them: no ray model
         return
-    data = read_json(path)
-    if data.get("kind") != PORT_CALIBRATION_KIND or "ray_model" not in data:
+    data = read_parameter_json(path)  # a ray_model only in a port calibration
+    if "ray_model" not in data:
         return
     model = data["ray_model"]
     if not isinstance(model, dict) or "correction" not in model:
         raise FileFormatError(f"{str(path)!r}: ray_model must be a table with a correction (or null), got {model!r}")
     try:
-        recorded = None if model["correction"] is None else RayCorrection.from_dict(model["correction"])
+        recorded = (
+            None
+            if model["correction"] is None
+            else RayCorrection.from_dict(model["correction"], where=f"{str(path)!r}: ray_model.correction")
+        )
     except ParameterError as exc:
-        raise FileFormatError(f"{str(path)!r}: ray_model: {exc}") from None
+        raise FileFormatError(str(exc)) from None
     same = (recorded is None and correction is None) or (
         recorded is not None
         and correction is not None
@@ -832,7 +847,8 @@ def mla_from_file(path: str | os.PathLike):
     from lfrefract.calibration import MlaCalibration
 
     path = Path(path)
-    return _parse(path, "mla", _json_key(path, "mla", "an MLA calibration"), MlaCalibration.from_dict)
+    data = read_parameter_json(path)  # an mla only in an MLA calibration
+    return _parse(path, "mla", _json_key(path, "mla", "an MLA calibration", data), MlaCalibration.from_dict)
 
 
 def mask_warp_map(warp, recorded: np.ndarray | None):

@@ -9,8 +9,10 @@ A camera file or a port file is one of (the format is chosen by the file's suffi
   the two;
 * ``.json``: lfrefract JSON (:func:`lfrefract.formats.jsonio.read_json`) holding a ``camera`` or
   ``port`` table, e.g. a render's ``meta.json``, ``lfrefract describe PRESET --json`` output,
-  ``lfrefract calibrate mla`` / ``calibrate port`` output; other keys are ignored. A file of any
-  other suffix (but ``.txt`` for ports) is read as JSON too;
+  ``lfrefract calibrate mla`` / ``calibrate camera`` / ``calibrate port`` output; its ``kind`` must
+  agree with its content (:func:`read_parameter_json`: a ray correction only in a camera
+  calibration, and so on), other keys are not read. A file of any other suffix (but ``.txt`` for
+  ports) is read as JSON too;
 * ``.txt`` (ports only): the one-line flat-port layout of Refractive COLMAP / calibmar
   (:mod:`lfrefract.formats.flatport`).
 
@@ -45,9 +47,12 @@ __all__ = [
     "CAMERA_FILE_KIND",
     "CAMERA_SUFFIXES",
     "MAX_PARAMETER_FILE_BYTES",
+    "MLA_CALIBRATION_KIND",
     "PORT_FILE_KIND",
     "PORT_SUFFIXES",
+    "check_kind",
     "read_camera_file",
+    "read_parameter_json",
     "read_port_file",
     "write_camera_file",
     "write_port_file",
@@ -67,6 +72,10 @@ PORT_SUFFIXES = (".toml", ".json", ".txt")
 CAMERA_FILE_KIND = "lfrefract.camera"
 PORT_FILE_KIND = "lfrefract.port"
 
+#: ``kind`` of an MLA calibration (``lfrefract calibrate mla`` output: its ``mla`` table and, when the
+#: camera was known, the camera it calibrates).
+MLA_CALIBRATION_KIND = "lfrefract.calibrate.mla"
+
 _PORT_SCALARS = ("distance_m", "thickness_m", "n_air", "n_glass", "n_water")
 _DEG_ANGLES = ("tilt_x_deg", "tilt_y_deg")
 _RAD_ANGLES = ("tilt_x_rad", "tilt_y_rad")
@@ -80,11 +89,93 @@ def read_camera_file(path: str | os.PathLike) -> LightFieldCamera:
     ------
     FileFormatError
         If the file is missing, too large, not UTF-8 TOML / JSON, has no ``camera`` table, or a
-        key of it is unknown, missing, of the wrong type or out of range (named with the file).
+        key of it is unknown, missing, of the wrong type or out of range (named with the file);
+        if a JSON file's ``kind`` disagrees with its content (:func:`read_parameter_json`) or it
+        holds a ``lens`` table (a real main lens, which the camera model does not read).
     """
     path = Path(path)
     table = _toml_table(path, "camera") if _is_toml(path) else _json_table(path, "camera")
     return _parsed(path, "camera", table, LightFieldCamera.from_dict)
+
+
+def read_parameter_json(path: str | os.PathLike) -> dict:
+    """The content of an lfrefract JSON parameter file (a camera, port or MLA file), its ``kind``
+    checked against its content: what the file is, its content decides.
+
+    The tables that carry a model of the camera or of its rays belong to one kind of file each:
+    ``correction`` and ``correction_covariance`` to a camera calibration (``lfrefract calibrate
+    camera``), ``mla`` to an MLA calibration, ``ray_model`` to a port calibration. A file that holds
+    one of them under another ``kind`` (or none) was edited or mixed up; it would be read as if the
+    table were not there, so it is refused. A camera or MLA calibration must hold its own table, and the files
+    :func:`write_camera_file` / :func:`write_port_file` write (kinds :data:`CAMERA_FILE_KIND`,
+    :data:`PORT_FILE_KIND`) hold their one table only. Other files (a render's ``meta.json``,
+    ``lfrefract describe --json`` output) may hold any other key.
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, too large, not lfrefract JSON, or its kind and content disagree
+        (naming the file, the key and its value).
+    """
+    path = Path(path)
+    _check_size(path)
+    data = read_json(path)
+    check_kind(path, data)
+    return data
+
+
+def _model_tables() -> dict[str, tuple[str, str]]:
+    """Top-level tables of a camera or ray model: table -> (what holds it, the one kind that may)."""
+    # Imported here: the calibration package imports the formats.
+    from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
+    from lfrefract.calibration.port import PORT_CALIBRATION_KIND
+
+    calibration = ("a camera calibration (lfrefract calibrate camera output)", CAMERA_CALIBRATION_KIND)
+    return {
+        "correction": calibration,
+        "correction_covariance": calibration,
+        "mla": ("an MLA calibration (lfrefract calibrate mla output)", MLA_CALIBRATION_KIND),
+        "ray_model": ("a port calibration (lfrefract calibrate port output)", PORT_CALIBRATION_KIND),
+    }
+
+
+def check_kind(path: str | os.PathLike, data: dict) -> None:
+    """Refuse the content ``data`` of an lfrefract JSON file ``path`` (a parameter file or a
+    capture's sidecar) if its ``kind`` and its content disagree (see :func:`read_parameter_json`).
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file, the key and its value.
+    """
+    path = Path(path)
+    kind = data.get("kind")
+    if kind is not None and not isinstance(kind, str):
+        raise FileFormatError(f"{str(path)!r}: key 'kind' must be a string, got {shown(kind)}")
+    tables = _model_tables()
+    for table, (holder, holder_kind) in tables.items():
+        if table in data and kind != holder_kind:
+            raise FileFormatError(
+                f"{str(path)!r}: key 'kind' is {shown(kind)}, but the file holds a {table!r} table, which only "
+                f"{holder} holds (kind {holder_kind!r}): the file was edited or mixed up. Give it back its kind "
+                "if it is such a file, or remove the table; it is not read as if the table were not there"
+            )
+    required = {tables["correction"][1]: "correction", MLA_CALIBRATION_KIND: "mla"}
+    if kind in required and required[kind] not in data:
+        holder = tables[required[kind]][0].split(" (")[0]
+        raise FileFormatError(
+            f"{str(path)!r} is {holder} (key 'kind' is {kind!r}) but has no {required[kind]!r} table: the file "
+            "is damaged or its kind was edited; write it again with the command that makes it"
+        )
+    own = {CAMERA_FILE_KIND: "camera", PORT_FILE_KIND: "port"}
+    if kind in own:
+        extra = sorted(set(data) - {"schema_version", "kind", own[kind]})
+        if extra:
+            raise FileFormatError(
+                f"{str(path)!r}: key 'kind' is {kind!r}, but the file holds {extra} as well as its {own[kind]!r} "
+                f"table: a file of this kind holds that table only. Remove the other keys, or give the file the "
+                "kind of what wrote them"
+            )
 
 
 def write_camera_file(path: str | os.PathLike, camera: LightFieldCamera) -> Path:
@@ -257,9 +348,15 @@ def _toml_table(path: Path, key: str) -> dict:
 
 
 def _json_table(path: Path, key: str) -> dict:
-    """The ``key`` table of the lfrefract JSON file ``path``."""
-    _check_size(path)
-    data = read_json(path)
+    """The ``key`` table of the lfrefract JSON file ``path`` (:func:`read_parameter_json`)."""
+    data = read_parameter_json(path)
+    if key == "camera" and "lens" in data:
+        raise FileFormatError(
+            f"{str(path)!r} holds a 'lens' table (a real main lens, {shown(data['lens'])}), which lfrefract's camera "
+            "model does not read: its 'camera' table is only the lens's thin-lens equivalent. Calibrate the "
+            "camera's rays from in-air boards (lfrefract calibrate camera) and pass that file as --camera, or "
+            "remove the table to use the thin lens"
+        )
     if key not in data:
         raise FileFormatError(f"{str(path)!r} has no key {key!r}: it is not a {key} file")
     value = data[key]

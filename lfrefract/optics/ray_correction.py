@@ -34,7 +34,7 @@ import numpy as np
 
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import CapturedRays
-from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys
+from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys, shown
 
 __all__ = ["PARAMETERS", "CorrectionEstimate", "RayCorrection", "apply_correction", "corrected_slopes"]
 
@@ -47,6 +47,21 @@ _INVERSE_TOLERANCE = 1e-14
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
 PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")
+
+#: Each parameter's range (inclusive) and unit (see :class:`RayCorrection`).
+_RANGES = {
+    "pupil_scale": (0.5, 2.0, ""),
+    "slope_scale": (0.5, 2.0, ""),
+    "k1": (-10.0, 10.0, ""),
+    "k2": (-10.0, 10.0, ""),
+    "pupil_drift_m": (-0.5, 0.5, "m"),
+}
+
+
+def _checked(name: str, value: Any, *, where: str = "") -> float:
+    """The parameter ``name``'s ``value`` as a float in its range; a message names it as ``where.name``."""
+    low, high, unit = _RANGES[name]
+    return bounded_float(f"{where}.{name}" if where else name, value, low, high, unit=unit)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,13 +89,8 @@ class RayCorrection:
     pupil_drift_m: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "pupil_scale", bounded_float("pupil_scale", self.pupil_scale, 0.5, 2.0))
-        object.__setattr__(self, "slope_scale", bounded_float("slope_scale", self.slope_scale, 0.5, 2.0))
-        object.__setattr__(self, "k1", bounded_float("k1", self.k1, -10.0, 10.0))
-        object.__setattr__(self, "k2", bounded_float("k2", self.k2, -10.0, 10.0))
-        object.__setattr__(
-            self, "pupil_drift_m", bounded_float("pupil_drift_m", self.pupil_drift_m, -0.5, 0.5, unit="m")
-        )
+        for name in PARAMETERS:
+            object.__setattr__(self, name, _checked(name, getattr(self, name)))
 
     @classmethod
     def from_vector(cls, values: np.ndarray) -> RayCorrection:
@@ -181,9 +191,10 @@ class RayCorrection:
     def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> RayCorrection:
         """From :meth:`to_dict`'s data (``pupil_drift_m`` optional: 0 in earlier files)."""
         optional = {"pupil_drift_m"}
-        reject_unknown_keys(where, dict(data), set(PARAMETERS))
-        require_keys(where, dict(data), set(PARAMETERS) - optional)
-        return cls(**{k: finite_float(f"{where}.{k}", data[k]) for k in PARAMETERS if k in data})
+        table: Any = data  # any value read from a file: reject_unknown_keys says if it is no table
+        reject_unknown_keys(where, table, set(PARAMETERS))
+        require_keys(where, table, set(PARAMETERS) - optional)
+        return cls(**{k: _checked(k, table[k], where=where) for k in PARAMETERS if k in table})
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -204,15 +215,7 @@ class CorrectionEstimate:
     def __post_init__(self) -> None:
         if not isinstance(self.correction, RayCorrection):
             raise ParameterError(f"correction must be a RayCorrection, got {type(self.correction).__name__}")
-        cov = np.asarray(self.covariance, dtype=np.float64)
-        n = len(PARAMETERS)
-        if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
-            raise ParameterError(f"covariance must be a finite {n} x {n} matrix, got shape {cov.shape}")
-        if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0):
-            raise ParameterError("covariance must be symmetric")
-        if np.linalg.eigvalsh(cov)[0] <= 0.0:
-            raise ParameterError("covariance must be positive definite (every parameter determined)")
-        cov = cov.copy()
+        cov = _checked_covariance(np.asarray(self.covariance, dtype=np.float64), "covariance").copy()
         cov.setflags(write=False)
         object.__setattr__(self, "covariance", cov)
 
@@ -227,18 +230,33 @@ class CorrectionEstimate:
 
     @staticmethod
     def covariance_from_dict(data: Mapping[str, Any], *, where: str = "correction_covariance") -> np.ndarray:
-        """The matrix of :meth:`covariance_to_dict`'s data (its parameter order checked)."""
-        reject_unknown_keys(where, dict(data), {"parameters", "matrix"})
-        require_keys(where, dict(data), {"parameters", "matrix"})
-        if list(data["parameters"]) != list(PARAMETERS):
-            raise ParameterError(f"{where}.parameters must be {list(PARAMETERS)}, got {data['parameters']!r}")
-        rows = data["matrix"]
+        """The matrix of :meth:`covariance_to_dict`'s data: its parameter order checked, and the
+        matrix finite, symmetric and positive definite (every message names ``where`` and the key)."""
+        table: Any = data  # any value read from a file: reject_unknown_keys says if it is no table
+        reject_unknown_keys(where, table, {"parameters", "matrix"})
+        require_keys(where, table, {"parameters", "matrix"})
+        if table["parameters"] != list(PARAMETERS):
+            raise ParameterError(f"{where}.parameters must be {list(PARAMETERS)}, got {shown(table['parameters'])}")
+        rows = table["matrix"]
         n = len(PARAMETERS)
         if not isinstance(rows, list) or len(rows) != n or not all(isinstance(r, list) and len(r) == n for r in rows):
-            raise ParameterError(f"{where}.matrix must be {n} rows of {n} numbers")
-        return np.array(
+            raise ParameterError(f"{where}.matrix must be {n} rows of {n} numbers, got {shown(rows)}")
+        matrix = np.array(
             [[finite_float(f"{where}.matrix[{i}][{j}]", v) for j, v in enumerate(r)] for i, r in enumerate(rows)]
         )
+        return _checked_covariance(matrix, where)
+
+
+def _checked_covariance(cov: np.ndarray, where: str) -> np.ndarray:
+    """``cov`` if it is a finite, symmetric, positive definite matrix over :data:`PARAMETERS`."""
+    n = len(PARAMETERS)
+    if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
+        raise ParameterError(f"{where} must be a finite {n} x {n} matrix, got shape {cov.shape}")
+    if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0):
+        raise ParameterError(f"{where} must be symmetric")
+    if np.linalg.eigvalsh(cov)[0] <= 0.0:
+        raise ParameterError(f"{where} must be positive definite (every parameter determined)")
+    return cov
 
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
