@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.errors import ParameterError
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.optics.pinhole import PinholeCamera
@@ -507,6 +508,7 @@ def calibrate_approx(
     intrinsics: PinholeCamera | None = None,
     min_views: int = 3,
     refine_half_window_px: int = 3,
+    names: Sequence[str] | None = None,
 ) -> ApproxCalibration:
     """Calibrate a pinhole with radial-tangential distortion from chessboard views (Ferreira et al. 2005).
 
@@ -541,6 +543,8 @@ def calibrate_approx(
         Fewest views accepted (default 3).
     refine_half_window_px : int
         ``cornerSubPix`` half window, pixels (see :func:`detect_chessboard`).
+    names : sequence of str, optional
+        How errors name the views (their files); default ``images[i]``.
 
     Returns
     -------
@@ -552,6 +556,9 @@ def calibrate_approx(
         Too few views, views of different sizes or shapes, a view without a finite pixel, a view
         where the board is not found (the error names its index), ``corners_cam`` of the wrong
         count or shape, or a fit that does not converge to finite values.
+    CalibrationError
+        Two views of one board pose (the same image twice is one view:
+        :func:`lfrefract.calibration.distinct.require_distinct_corners`).
     """
     cols, rows = _pattern(pattern)
     square = positive_float("square_size_m", square_size_m)
@@ -564,6 +571,7 @@ def calibrate_approx(
         raise ParameterError(f"images must be a sequence of images, got {type(images).__name__}") from None
     if len(views) < minimum:
         raise ParameterError(f"calibration needs at least {minimum} views (min_views), got {len(views)}")
+    labels = view_names(names, len(views), "images")
     height, width = views[0].shape[:2]
     for i, v in enumerate(views):
         if v.shape != views[0].shape:
@@ -590,10 +598,11 @@ def calibrate_approx(
 
     detected = []
     for i, v in enumerate(views):
-        corners = detect_chessboard(v, (cols, rows), refine_half_window_px=refine_half_window_px, name=f"images[{i}]")
+        corners = detect_chessboard(v, (cols, rows), refine_half_window_px=refine_half_window_px, name=labels[i])
         if corners is None:
-            raise ParameterError(f"images[{i}]: no chessboard with {cols} x {rows} inner corners found")
+            raise ParameterError(f"{labels[i]}: no chessboard with {cols} x {rows} inner corners found")
         detected.append(corners)
+    require_distinct_corners(detected, labels, what="a calibration")
 
     board = _board_points((cols, rows), square)
     flags, k_init = 0, None

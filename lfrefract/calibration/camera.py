@@ -52,7 +52,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lfrefract.calibration.port import BoardView
+from lfrefract.calibration.distinct import require_distinct_corners, view_names
+from lfrefract.calibration.port import BoardView, board_corners
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
@@ -173,7 +174,13 @@ def _distances(p: np.ndarray, pose: np.ndarray, points: np.ndarray, a: np.ndarra
     return np.cross(corners - origins, directions)
 
 
-def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, view: PinholeCamera) -> CameraCalibration:
+def calibrate_camera(
+    camera: LightFieldCamera,
+    views: Sequence[BoardView],
+    *,
+    view: PinholeCamera,
+    names: Sequence[str] | None = None,
+) -> CameraCalibration:
     """Fit the ray model of ``camera`` to chessboard light fields taken in air.
 
     Parameters
@@ -185,11 +192,15 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         corners in the pinhole views of ``view`` seen from points of the main-lens plane.
     view : PinholeCamera
         The views' geometry ``K``.
+    names : sequence of str, optional
+        How errors name the views (their files); default ``views[i]``.
 
     Raises
     ------
     CalibrationError
-        With fewer than :data:`MIN_VIEWS` views, when a pose cannot be started (``solvePnP`` fails),
+        With fewer than :data:`MIN_VIEWS` views, two views of one board pose
+        (:func:`lfrefract.calibration.distinct.require_distinct_corners`: the same capture twice is one
+        view), when a pose cannot be started (``solvePnP`` fails),
         or when the pupil scale is not determined (its standard deviation above :data:`MAX_SCALE_STD`;
         an undetermined slope scale is held at 1 instead, see the module docstring).
     """
@@ -200,8 +211,10 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
     views = list(views)
     if not all(isinstance(v, BoardView) for v in views):
         raise ParameterError("views must be BoardView objects")
+    labels = view_names(names, len(views), "views")
     if len(views) < MIN_VIEWS:
         raise CalibrationError(f"a camera calibration needs at least {MIN_VIEWS} board captures, got {len(views)}")
+    require_distinct_corners([board_corners(v) for v in views], labels, what="a camera calibration")
     k_matrix = view.K
     observed = [(_board_points(v), *observed_rays(v, np.linalg.inv(k_matrix))) for v in views]
     poses = []
@@ -209,7 +222,7 @@ def calibrate_camera(camera: LightFieldCamera, views: Sequence[BoardView], *, vi
         central = v.central if v.central.sum() >= 4 else np.ones(len(v.corners_px), dtype=bool)
         ok, rvec, tvec = cv2.solvePnP(_board_points(v)[central], v.corners_px[central], k_matrix, None)
         if not ok:  # OpenCV reports failure by its return value
-            raise CalibrationError(f"board capture {k}: no pose from its central view's corners (cv2.solvePnP)")
+            raise CalibrationError(f"{labels[k]}: no pose from its central view's corners (cv2.solvePnP)")
         poses.append(np.concatenate([rvec.ravel(), tvec.ravel()]))
     identity = RayCorrection().vector()
     everything = np.ones(len(PARAMETERS), dtype=bool)

@@ -141,6 +141,7 @@ def calibrate_port_and_camera(
     distance_range_m: tuple[float, float] = (0.002, 0.3),
     max_normal_std_deg: float = 0.5,
     max_distance_std_m: float = 0.002,
+    names: Sequence[str] | None = None,
 ) -> JointCalibration:
     """Calibrate the port and refine the camera's ray model with it (see the module docstring).
 
@@ -154,7 +155,7 @@ def calibrate_port_and_camera(
     prior : CorrectionEstimate
         The in-air calibration's ray model and covariance
         (:attr:`lfrefract.calibration.camera.CameraCalibration.estimate`).
-    thickness_m, n_air, n_glass, n_water, distance_range_m, max_normal_std_deg, max_distance_std_m
+    thickness_m, n_air, n_glass, n_water, distance_range_m, max_normal_std_deg, max_distance_std_m, names
         As :func:`lfrefract.calibration.port.calibrate_port`, which starts the fit on the in-air model.
 
     Returns
@@ -183,6 +184,7 @@ def calibrate_port_and_camera(
         n_glass=n_glass,
         n_water=n_water,
         distance_range_m=distance_range_m,
+        names=names,
         **limits,
     )
     template = sequential.port

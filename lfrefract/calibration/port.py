@@ -30,6 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 import typing
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -41,6 +42,7 @@ from scipy.spatial.transform import Rotation
 from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
+from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
@@ -290,6 +292,13 @@ def board_view_from_light_field(
         board_points_m=np.tile(board, (len(corners), 1)),
         centres_m=np.concatenate(centres),
     )
+
+
+def board_corners(view: BoardView) -> tuple[np.ndarray, np.ndarray]:
+    """A view's central rows (all rows if it has none) as (board points (N, 2), metres; corners (N, 2),
+    pixels): what :func:`lfrefract.calibration.distinct.require_distinct_corners` compares."""
+    rows = view.central if view.central.any() else np.ones(len(view.corners_px), dtype=bool)
+    return view.board_points_m[rows], view.corners_px[rows]
 
 
 def _water_rays(port: FlatPort, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -571,6 +580,7 @@ def calibrate_port(
     distance_range_m: tuple[float, float] = (0.002, 0.3),
     max_normal_std_deg: float = 0.5,
     max_distance_std_m: float = 0.002,
+    names: Sequence[str] | None = None,
 ) -> PortCalibration:
     """Estimate a flat port's normal and distance from underwater chessboard views.
 
@@ -587,6 +597,8 @@ def calibrate_port(
     max_normal_std_deg, max_distance_std_m : float
         Largest standard deviations accepted; beyond them the views do not determine the port
         and :class:`CalibrationError` is raised.
+    names : sequence of str, optional
+        How errors name the views (their files); default ``views[i]``.
 
     Returns
     -------
@@ -595,13 +607,18 @@ def calibrate_port(
     Raises
     ------
     CalibrationError
-        Degenerate views: the normal or distance is not determined to the stated limits.
+        Degenerate views: two views of one board pose (the same capture twice is one view,
+        :func:`lfrefract.calibration.distinct.require_distinct_corners`), or the normal or distance
+        not determined to the stated limits.
     """
     if not isinstance(camera, PinholeCamera):
         raise ParameterError(f"camera must be a PinholeCamera, got {camera!r}")
     views = list(views)
     if len(views) < MIN_VIEWS or not all(isinstance(v, BoardView) for v in views):
         raise ParameterError(f"views must be at least {MIN_VIEWS} BoardView objects, got {len(views)}")
+    require_distinct_corners(
+        [board_corners(v) for v in views], view_names(names, len(views), "views"), what="a port calibration"
+    )
     lo = positive_float("distance_range_m[0]", distance_range_m[0])
     hi = positive_float("distance_range_m[1]", distance_range_m[1])
     if not lo < hi:

@@ -17,6 +17,7 @@ from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.calibration import calibrate_camera
 from lfrefract.calibration.camera import HELD_SLOPE_SCALE_STD
 from lfrefract.calibration.port import BoardView
+from lfrefract.errors import CalibrationError
 from tests.tolerances import CAMERA_CAL_BOARD_DEPTH_RELATIVE, CAMERA_CAL_FREE_SLOPE_SCALE
 
 CAMERA = camera_preset("illum")
@@ -100,3 +101,20 @@ def test_large_boards_determine_the_slope_scale():
     assert calibration.to_dict()["held"] == []
     ratios = _depth_ratios(calibration, views, depths)
     assert abs(np.mean(ratios) - 1.0) < CAMERA_CAL_BOARD_DEPTH_RELATIVE, ratios
+
+
+def test_one_capture_repeated_is_refused_naming_the_two():
+    """The same capture three times met the minimum of three and gave k1 -0.44, k2 -0.95 (truth 0.07,
+    0.1) with a slope scale fitted, not held: its clustered spread was 1e-6, the captures agreeing
+    perfectly. Two captures of one pose (corners 0.02 px apart) are refused the same way."""
+    views, _ = _board_views(square_at_015_m=2.1e-3)
+    with pytest.raises(CalibrationError, match=r"views\[0\] and views\[1\] show the board in the same pose"):
+        calibrate_camera(CAMERA, [views[0], views[0], views[0]], view=VIEW)
+    rng = np.random.default_rng(5)
+    again = BoardView(
+        corners_px=views[1].corners_px + rng.normal(0.0, CORNER_NOISE_PX, views[1].corners_px.shape),
+        board_points_m=views[1].board_points_m,
+        centres_m=views[1].centres_m,
+    )
+    with pytest.raises(CalibrationError, match=r"views\[1\] and views\[3\] show the board in the same pose"):
+        calibrate_camera(CAMERA, [*views[:3], again], view=VIEW)

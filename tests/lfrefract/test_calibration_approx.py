@@ -17,6 +17,7 @@ from scipy import ndimage
 from lfrefract import ParameterError, PinholeCamera
 from lfrefract.calibration import ApproxCalibration, calibrate_approx, detect_chessboard
 from lfrefract.calibration.approx import DISTORTION_MODEL, INTRINSIC_NAMES
+from lfrefract.errors import CalibrationError
 from lfrefract.optics.pose import rotation_from_euler_xyz
 from tests.tolerances import (
     APPROX_SYNTHETIC_DIST_ABS,
@@ -334,3 +335,13 @@ def test_corners_are_refined_on_the_unclipped_image():
     found = detect_chessboard(image, (6, 4))
     assert found is not None
     assert np.sqrt(np.mean(_distance_to_truth(found, true) ** 2)) < SMALL_BOARD_CORNER_RMS_PX
+
+
+def test_one_image_repeated_is_refused_naming_the_two(images):
+    """Three copies of one board image met the minimum of three views: fx 1067 px, fy 44154 px (fy's
+    standard deviation NaN, written as 0) on a capture whose truth is 240 px."""
+    options = {"pattern": PATTERN, "square_size_m": SQUARE_M}
+    with pytest.raises(CalibrationError, match=r"images\[0\] and images\[1\] show the board in the same pose"):
+        calibrate_approx([images[0]] * 3, **options)
+    with pytest.raises(CalibrationError, match=r"images\[1\] and images\[3\] show the board in the same pose"):
+        calibrate_approx([*images[:3], images[1] * 2.0], **options)  # brighter, the same pose

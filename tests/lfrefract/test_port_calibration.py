@@ -181,3 +181,15 @@ def test_light_field_board_views_start_from_the_central_view():
         board_view_from_light_field(tiny, raw, aperture_fraction=1.5, **kwargs)
     with pytest.raises(ParameterError, match="blank"):  # a black capture is refused by the detector
         board_view_from_light_field(tiny, raw, **kwargs)
+
+
+def test_one_view_repeated_or_half_turned_is_refused():
+    """Two copies of one view (a capture given twice) reported the port +-0.40 deg for a 0.65 deg
+    error; they, and the same view with its corners in the half-turned order, are one view."""
+    port = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.01, tilt_x_deg=10.0)
+    views = _views(port, 3, 0.2, seed=4)
+    with pytest.raises(CalibrationError, match=r"views\[0\] and views\[1\] show the board in the same pose"):
+        calibrate_port(CAMERA, [views[0], views[0]], thickness_m=0.01)
+    turned = BoardView(corners_px=views[2].corners_px[::-1], board_points_m=-views[2].board_points_m[::-1])
+    with pytest.raises(CalibrationError, match=r"views\[2\] and views\[3\] show the board in the same pose"):
+        calibrate_port(CAMERA, [*views, turned], thickness_m=0.01)
