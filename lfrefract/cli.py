@@ -96,6 +96,7 @@ from lfrefract.calibration.port import (
 )
 from lfrefract.calibration.port import MIN_VIEWS as PORT_MIN_VIEWS
 from lfrefract.errors import CalibrationError, FileFormatError
+from lfrefract.figures import save_figure, synth_figure, synth_setup
 from lfrefract.formats.capture import (
     NONFINITE_POLICIES,
     RAW_NAME,
@@ -104,6 +105,7 @@ from lfrefract.formats.capture import (
     CaptureParameters,
     camera_from_option,
     capture_parameters,
+    check_lens_modelled,
     check_port_ray_model,
     correction_estimate_from_option,
     mask_warp_map,
@@ -324,7 +326,7 @@ def synth(args: argparse.Namespace) -> int:
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     by_cfa = _colour_by_cfa(args, capture)
-    ray_correction = ray_correction_from_option(args.camera)
+    ray_correction = _ray_model(args, capture)
     if args.port is not None:
         check_port_ray_model(args.port, ray_correction, camera=args.camera)
     if depth_options is not None:
@@ -451,13 +453,13 @@ def synth(args: argparse.Namespace) -> int:
         },
     )
     if result is None or depth_options is None:  # the proposed method
-        _figure(figure, image, warp)
+        _figure(figure, image, warp, camera=camera, port=port, method=args.method)
         print(
             f"{how} warp map ({map_seconds:.2f} s), applied in {apply_seconds * 1e3:.1f} ms; exact coverage "
             f"{stats['exact_fraction']:.1%}, filled {stats['filled_fraction']:.1%}{_masked_note(capture)}; wrote {out}"
         )
         return 0
-    _depth_aware_figure(figure, image, warp, result, depth_options)
+    _figure(figure, image, warp, camera=camera, port=port, method=args.method, result=result, options=depth_options)
     print(
         f"{how} warp map ({map_seconds:.2f} s), rays traced in {rays_seconds:.2f} s, depth-aware synthesis in "
         f"{apply_seconds:.2f} s; exact coverage {stats['exact_fraction']:.1%}, exact given depth "
@@ -541,58 +543,28 @@ def _synth_map(
     return warp, f"built, cached as {cached}"
 
 
-def _figure(path: Path, image: np.ndarray, warp: WarpMap) -> None:
-    import matplotlib as mpl
-
-    mpl.use("Agg")
-    import matplotlib.pyplot as plt
-
-    shown = image if image.ndim == 2 else image[..., :3]
-    finite = shown[np.isfinite(shown)]
-    white = float(np.percentile(finite, 99.5)) if finite.size else 1.0
-    fig, ax = plt.subplots(figsize=(6, 6 * warp.output.height_px / warp.output.width_px + 0.5), dpi=120)
-    ax.imshow(np.clip(shown / (white or 1.0), 0, 1) ** (1 / 2.2), cmap="gray", interpolation="nearest")
-    ax.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)
-    ax.set_title("refraction-free image; yellow: edge of exact coverage")
-    ax.set_axis_off()
-    with atomic_file(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-
-
-def _depth_aware_figure(
-    path: Path, image: np.ndarray, warp: WarpMap, result: DepthAwareResult, options: DepthAwareOptions
+def _figure(
+    path: Path,
+    image: np.ndarray,
+    warp: WarpMap,
+    *,
+    camera: LightFieldCamera,
+    port: FlatPort,
+    method: str,
+    result: DepthAwareResult | None = None,
+    options: DepthAwareOptions | None = None,
 ) -> None:
-    """The figure of ``synth --method depth-aware``: the image (with the edge of the exact coverage,
-    as :func:`_figure`) beside the depth found in the light field."""
-    import matplotlib as mpl
-
-    mpl.use("Agg")
-    import matplotlib.pyplot as plt
-
-    shown = image if image.ndim == 2 else image[..., :3]
-    finite = shown[np.isfinite(shown)]
-    white = float(np.percentile(finite, 99.5)) if finite.size else 1.0
-    height = 6 * warp.output.height_px / warp.output.width_px + 0.5
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12.5, height), dpi=120)
-    left.imshow(np.clip(shown / (white or 1.0), 0, 1) ** (1 / 2.2), cmap="gray", interpolation="nearest")
-    left.contour(warp.coverage, levels=[0.999], colors="yellow", linewidths=1)
-    left.set_title("depth-aware refraction-free image\nyellow: edge of exact coverage")
-    left.set_axis_off()
-    colours = mpl.colormaps["viridis"].with_extremes(bad="0.5")  # grey: no depth
-    shown_depth = right.imshow(
-        result.depth.depth_m,
-        cmap=colours,
-        vmin=options.depth_min_m,
-        vmax=options.depth_max_m,
-        interpolation="nearest",
+    """The figure of ``synth`` (:func:`lfrefract.figures.synth_figure`): the image with the edge of
+    its exact coverage and, for ``--method depth-aware``, the depth found in the light field beside it."""
+    fig = synth_figure(
+        image,
+        warp.coverage,
+        setup=synth_setup(camera, port, warp.output, method=method),
+        depth_m=None if result is None else result.depth.depth_m,
+        depth_range_m=None if options is None else (options.depth_min_m, options.depth_max_m),
     )
-    right.set_title("depth-aware: depth from the light field\ngrey: no depth")
-    right.set_axis_off()
-    fig.colorbar(shown_depth, ax=right, fraction=0.046, pad=0.02).set_label("depth (m)")
     with atomic_file(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
+        save_figure(fig, tmp)
 
 
 def naive(args: argparse.Namespace) -> int:
@@ -611,7 +583,7 @@ def naive(args: argparse.Namespace) -> int:
         output=capture.output,
         kind=args.kind,
         recorded=capture.recorded,
-        ray_correction=ray_correction_from_option(args.camera),
+        ray_correction=_ray_model(args, capture),
     )
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
@@ -635,7 +607,7 @@ def views(args: argparse.Namespace) -> int:
         spacing_px=args.spacing_px,
         output=output,
         recorded=capture.recorded,
-        ray_correction=ray_correction_from_option(args.camera),
+        ray_correction=_ray_model(args, capture),
     )
     out = write_view_stack(
         Path(args.out),
@@ -699,6 +671,21 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     return found[0]
 
 
+def _ray_model(args: argparse.Namespace, capture: Capture | CaptureParameters) -> RayCorrection | None:
+    """The ray correction of ``--camera`` (None: the thin lens), once a capture taken through a real
+    main lens that the thin lens would stand for is refused (:func:`check_lens_modelled`)."""
+    correction = ray_correction_from_option(args.camera)
+    check_lens_modelled(capture, correction, camera=args.camera)
+    return correction
+
+
+def _boards_lens_modelled(args: argparse.Namespace) -> None:
+    """:func:`_ray_model` for every board capture, before any raw image is read."""
+    given = _given_camera(args)
+    for path in args.boards:
+        _ray_model(args, capture_parameters(path, camera=given))
+
+
 def _board_inputs(args: argparse.Namespace) -> list[Path]:
     return [f for path in args.boards for f in _capture_files(path)] + _option_files(args)
 
@@ -731,6 +718,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
     flat_port = out.with_suffix(".txt")
     first = _board_parameters(args)
+    _boards_lens_modelled(args)
     outputs = {
         out: ExpectedKind(json_kind=PORT_CALIBRATION_KIND),
         flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_CALIBRATION_KIND),
@@ -838,6 +826,7 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
     out = Path(args.out)
     first = _board_parameters(args)
+    _boards_lens_modelled(args)
     camera = _known(first.camera, first.raw_path)
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite

@@ -31,6 +31,7 @@ CONTRACT: dict[str, tuple[str, ...]] = {
     "lfrefract.validate": ("lfrefract.errors",),
     "lfrefract._memory": _BASE,
     "lfrefract.metrics": _BASE,
+    "lfrefract.figures": (),  # matplotlib and numpy only
     "lfrefract.formats.outputs": _BASE,
     "lfrefract.formats.jsonio": (*_BASE, "lfrefract.formats.outputs"),
     "lfrefract.formats.exr": (*_BASE, "lfrefract.formats.outputs", "lfrefract.formats.jsonio"),
