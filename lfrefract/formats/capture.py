@@ -49,6 +49,7 @@ from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.formats.lytro import colour_from_metadata
 from lfrefract.formats.outputs import atomic_file, staged_directory
 from lfrefract.formats.paramfile import check_kind, read_camera_file, read_parameter_json, read_port_file
 from lfrefract.formats.whites import (
@@ -58,6 +59,7 @@ from lfrefract.formats.whites import (
     existing_path,
     find_white_images,
     is_lytro_file,
+    lens_steps,
     read_lytro_file,
     same_file,
     select_white_image,
@@ -567,21 +569,11 @@ def white_for(
     return WhiteImage.from_file(path)
 
 
-def _lytro_colour(metadata: dict) -> tuple[np.ndarray | None, tuple[float, float, float]]:
+def _lytro_colour(metadata: dict, where: str) -> tuple[np.ndarray, tuple[float, float, float]]:
     """The colour matrix (``image.color.ccm``, the F01's ``ccmRgbToSrgbArray``) and the R, G, B white
-    balance gains of a Lytro file's metadata; None and ones where it has none."""
-    color = metadata.get("image", {}).get("color", {}) if isinstance(metadata.get("image"), dict) else {}
-    color = color if isinstance(color, dict) else {}
-    ccm = color.get("ccm", color.get("ccmRgbToSrgbArray"))
-    matrix = None
-    if isinstance(ccm, list) and len(ccm) == 9 and all(isinstance(v, (int, float)) for v in ccm):
-        matrix = np.asarray(ccm, dtype=np.float64).reshape(3, 3)
-    gains = color.get("whiteBalanceGain", {})
-    try:
-        rgb = (float(gains["r"]), 0.5 * (float(gains["gr"]) + float(gains["gb"])), float(gains["b"]))
-    except (KeyError, TypeError, ValueError):
-        rgb = (1.0, 1.0, 1.0)
-    return matrix, rgb
+    balance gains of a Lytro file's metadata (:func:`lfrefract.formats.lytro.colour_from_metadata`: a
+    missing or malformed one is refused, not read as identity and 1)."""
+    return colour_from_metadata(metadata, where=where)
 
 
 def read_lytro_capture(
@@ -613,8 +605,7 @@ def read_lytro_capture(
     """
     path = Path(path)
     lytro = read_lytro_file(path)
-    lens = lytro.metadata.get("devices", {}).get("lens", {})
-    steps = {key: lens.get(key) for key in ("zoomStep", "focusStep")}
+    steps = lens_steps(lytro.metadata, repr(str(path)))
     chosen = None
     flat = None
     if white is not None:
@@ -623,7 +614,7 @@ def read_lytro_capture(
             raise FileFormatError(f"{str(path)!r} has no lens steps (devices.lens): name the white image itself")
         chosen = white_for(white, zoom_step=steps["zoomStep"] or 0, focus_step=steps["focusStep"] or 0, capture=path)
         flat = chosen.flat_field()
-    matrix, gains = _lytro_colour(lytro.metadata)
+    matrix, gains = _lytro_colour(lytro.metadata, repr(str(path)))
     try:
         developed = develop(lytro.mosaic, flat, white_image=chosen, color_matrix=matrix, white_balance_gain=gains)
     except ParameterError as exc:

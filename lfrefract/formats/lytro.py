@@ -48,6 +48,8 @@ __all__ = [
     "LytroSettings",
     "RawMosaic",
     "camera_from_metadata",
+    "colour_from_metadata",
+    "colour_matrix",
     "f01_metadata",
     "illum_metadata",
     "pack_10bit",
@@ -129,6 +131,7 @@ class LytroSettings:
         ccm = tuple(
             finite_float(f"color_matrix[{i}]", v) for i, v in enumerate(_sequence("color_matrix", self.color_matrix, 9))
         )
+        colour_matrix("color_matrix", ccm)
         gains = tuple(
             bounded_float(f"white_balance_gain[{i}]", v, 0.0, 1e3, low_open=True)
             for i, v in enumerate(_sequence("white_balance_gain", self.white_balance_gain, 4))
@@ -149,6 +152,43 @@ class LytroSettings:
     def serial_for(self, prefix: str) -> str:
         """The serial as written for a camera whose serials begin with ``prefix`` (``"B"`` or ``"A"``)."""
         return self.serial_number if self.serial_number.startswith(prefix) else f"{prefix}-{self.serial_number}"
+
+
+#: Largest condition number of a colour matrix: beyond it the matrix is singular in float arithmetic (an
+#: all-zero ``ccm`` made every image black). Real matrices are near 2-10.
+_MAX_CCM_CONDITION = 1e6
+
+
+def colour_matrix(name: str, value: Any) -> np.ndarray:
+    """``value`` as a colour matrix (9 numbers row-major, or 3 x 3) from camera RGB to linear RGB, checked.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``name``, unless it is 9 finite numbers whose matrix is invertible (a singular one loses a
+        colour: all zeros make every image black) and takes white (1, 1, 1) to light in every colour
+        (each row sums to more than 0).
+    """
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
+        raise ParameterError(f"{name} must be 9 numbers (a 3 x 3 matrix, row by row), got {shown(value)}")
+    array = np.asarray(value, dtype=object).reshape(-1) if len(value) else np.zeros(0, dtype=object)
+    if array.size != 9 or any(isinstance(v, bool) or not isinstance(v, (int, float, np.number)) for v in array):
+        raise ParameterError(f"{name} must be 9 numbers (a 3 x 3 matrix, row by row), got {shown(value)}")
+    matrix = array.astype(np.float64).reshape(3, 3)
+    if not np.all(np.isfinite(matrix)):
+        raise ParameterError(f"{name} must hold finite numbers, got {matrix.reshape(-1).tolist()}")
+    rows = matrix.sum(axis=1)
+    if np.linalg.cond(matrix) > _MAX_CCM_CONDITION:
+        raise ParameterError(
+            f"{name} {matrix.reshape(-1).tolist()} is singular: it loses colours (all zeros makes every image black)"
+        )
+    if not np.all(rows > 0.0):
+        row = int(np.argmin(rows))
+        raise ParameterError(
+            f"{name} {matrix.reshape(-1).tolist()}: row {row} sums to {rows[row]:g}, so white gets no light in that "
+            "colour; each row of a colour matrix sums to more than 0 (about 1)"
+        )
+    return matrix
 
 
 def _sequence(name: str, value: Any, length: int) -> tuple:
@@ -473,6 +513,93 @@ def _integer(metadata: dict, path: str, where: str) -> int:
     return value
 
 
+def colour_from_metadata(metadata: dict, *, where: str = "metadata") -> tuple[np.ndarray, tuple[float, float, float]]:
+    """The colour matrix and the R, G, B white-balance gains of a Lytro frame's metadata.
+
+    The matrix is ``image.color.ccm`` (Illum) or ``image.color.ccmRgbToSrgbArray`` (F01), checked by
+    :func:`colour_matrix`; where a file has both they must agree. The gains are
+    ``image.color.whiteBalanceGain`` (``r``, ``gr``, ``gb``, ``b``, each finite and in (0, 1000]), G the
+    mean of the two greens. Both cameras write both keys: a file without them is refused, never read
+    as identity and 1.
+
+    Returns
+    -------
+    (ndarray of shape (3, 3), (float, float, float))
+
+    Raises
+    ------
+    FileFormatError
+        Naming ``where`` and the key, for a missing, malformed, non-finite or contradictory value.
+    """
+    color = _get(metadata, "image.color", where)
+    if not isinstance(color, dict):
+        raise FileFormatError(f"{where}: metadata 'image.color' must be a table, got {shown(color)}")
+    keys = [key for key in ("ccm", "ccmRgbToSrgbArray") if key in color]
+    if not keys:
+        raise FileFormatError(
+            f"{where}: the metadata has no 'image.color.ccm' (Illum) or 'image.color.ccmRgbToSrgbArray' (F01)"
+        )
+    matrices = []
+    for key in keys:
+        try:
+            matrices.append(colour_matrix(f"metadata 'image.color.{key}'", color[key]))
+        except ParameterError as exc:
+            raise FileFormatError(f"{where}: {exc}") from None
+    if len(matrices) == 2 and not np.array_equal(matrices[0], matrices[1]):
+        raise FileFormatError(f"{where}: metadata 'image.color.ccm' and 'image.color.ccmRgbToSrgbArray' differ")
+    gains = _get(metadata, "image.color.whiteBalanceGain", where)
+    if not isinstance(gains, dict):
+        raise FileFormatError(
+            f"{where}: metadata 'image.color.whiteBalanceGain' must be a table of r, gr, gb, b, got {shown(gains)}"
+        )
+    missing = [c for c in _CHANNELS if c not in gains]
+    if missing:
+        raise FileFormatError(
+            f"{where}: metadata 'image.color.whiteBalanceGain' has no {', '.join(map(repr, missing))}"
+        )
+    values = {}
+    for c in _CHANNELS:
+        try:
+            values[c] = bounded_float(f"metadata 'image.color.whiteBalanceGain.{c}'", gains[c], 0.0, 1e3, low_open=True)
+        except ParameterError as exc:
+            raise FileFormatError(f"{where}: {exc}") from None
+    return matrices[0], (values["r"], 0.5 * (values["gr"] + values["gb"]), values["b"])
+
+
+def _check_layout(metadata: dict, format_table: str, shape: tuple[int, int], bits: int, where: str) -> None:
+    """Refuse metadata whose keys contradict the image's size, packing and pattern (``format_table``:
+    ``image`` or ``image.rawDetails``), or ask for a shift lfrefract does not apply.
+
+    ``devices.sensor.pixelWidth``, ``pixelHeight`` (the Illum writes them, the F01 does not),
+    ``bitsPerPixel`` and ``mosaic``, and ``pixelFormat.rightShift`` are checked where the file has them.
+    """
+    sensor = metadata.get("devices", {}).get("sensor") if isinstance(metadata.get("devices"), dict) else None
+    sensor = sensor if isinstance(sensor, dict) else {}
+    expected = {"pixelWidth": ("image.width", shape[1]), "pixelHeight": ("image.height", shape[0])}
+    expected["bitsPerPixel"] = (f"{format_table}.pixelPacking.bitsPerPixel", bits)
+    for key, (other, value) in expected.items():
+        if key in sensor:
+            found = _integer(metadata, f"devices.sensor.{key}", where)
+            if found != value:
+                raise FileFormatError(
+                    f"{where}: metadata {other!r} is {value} but 'devices.sensor.{key}' is {found}: the metadata "
+                    "contradicts itself (swapped or edited?)"
+                )
+    if "mosaic" in sensor and sensor["mosaic"] != _get(metadata, f"{format_table}.mosaic", where):
+        raise FileFormatError(
+            f"{where}: metadata 'devices.sensor.mosaic' {shown(sensor['mosaic'])} contradicts "
+            f"'{format_table}.mosaic' {shown(_get(metadata, f'{format_table}.mosaic', where))}"
+        )
+    shift_key = f"{format_table}.pixelFormat.rightShift"
+    try:
+        _get(metadata, shift_key, where)
+    except FileFormatError:
+        return  # absent: no shift
+    shift = _integer(metadata, shift_key, where)
+    if shift != 0:
+        raise FileFormatError(f"{where}: metadata {shift_key!r} is {shift}; lfrefract reads unshifted counts only (0)")
+
+
 def camera_from_metadata(metadata: dict, *, where: str = "metadata") -> LightFieldCamera:
     """The thin-lens camera a Lytro frame's metadata describes (Illum or F01 layout).
 
@@ -783,6 +910,7 @@ def read_lfr(path: str | os.PathLike) -> LytroCapture:
         counts = unpack_10bit(by_name[refs["imageRef"]], shape)
     except FileFormatError as exc:
         raise FileFormatError(f"{where}: wrong image size: {exc}") from None
+    _check_layout(metadata, "image", shape, bits, where)
     mosaic = _mosaic_from_metadata(counts, metadata, "image", bits, where)
     camera = camera_from_metadata(metadata, where=where)
     camera_ref = toc.get("lfrefract", {}).get("cameraRef") if isinstance(toc.get("lfrefract"), dict) else None
@@ -794,6 +922,12 @@ def read_lfr(path: str | os.PathLike) -> LytroCapture:
             camera = LightFieldCamera.from_dict(table["lfrefractCamera"])
         except (KeyError, ParameterError) as exc:
             raise FileFormatError(f"{where}: the lfrefractCamera section holds no camera: {exc}") from None
+        sensor = (camera.sensor.width_px, camera.sensor.height_px)
+        if sensor != (shape[1], shape[0]):
+            raise FileFormatError(
+                f"{where}: the lfrefractCamera section's sensor is {sensor[0]} x {sensor[1]} px but the image is "
+                f"{shape[1]} x {shape[0]} px (metadata 'image.width', 'image.height'): the file contradicts itself"
+            )
     thumbnail = b""
     thumbs = toc.get("thumbnails")
     if isinstance(thumbs, list) and thumbs and isinstance(thumbs[0], dict) and thumbs[0].get("imageRef") in by_name:
@@ -915,6 +1049,7 @@ def read_f01_raw(path: str | os.PathLike, *, metadata_suffix: str | None = None)
         counts = unpack_12bit(packed, shape)
     except FileFormatError as exc:
         raise FileFormatError(f"{where}: wrong size: {exc}") from None
+    _check_layout(metadata, "image.rawDetails", shape, bits, where)
     mosaic = _mosaic_from_metadata(counts, metadata, "image.rawDetails", bits, where)
     return LytroCapture(mosaic=mosaic, camera=camera_from_metadata(metadata, where=where), metadata=metadata)
 
@@ -932,5 +1067,6 @@ def read_illum_raw(path: str | os.PathLike, *, metadata_suffix: str | None = Non
         counts = unpack_10bit(packed, shape)
     except FileFormatError as exc:
         raise FileFormatError(f"{where}: wrong size: {exc}") from None
+    _check_layout(metadata, "image", shape, bits, where)
     mosaic = _mosaic_from_metadata(counts, metadata, "image", bits, where)
     return LytroCapture(mosaic=mosaic, camera=camera_from_metadata(metadata, where=where), metadata=metadata)

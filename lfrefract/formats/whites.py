@@ -41,7 +41,7 @@ import numpy as np
 from scipy import ndimage
 
 from lfrefract.errors import FileFormatError, ParameterError
-from lfrefract.formats.lytro import LytroCapture, read_f01_raw, read_illum_raw, read_lfr
+from lfrefract.formats.lytro import LytroCapture, colour_matrix, read_f01_raw, read_illum_raw, read_lfr
 from lfrefract.formats.mosaic import RawMosaic, cfa_channels, demosaic_values
 from lfrefract.validate import bounded_float, one_of
 
@@ -58,6 +58,7 @@ __all__ = [
     "find_white_images",
     "flat_field",
     "is_lytro_file",
+    "lens_steps",
     "read_lytro_file",
     "same_file",
     "select_white_image",
@@ -171,10 +172,28 @@ def read_lytro_file(path: str | os.PathLike) -> LytroCapture:
     return read_illum_raw(path)
 
 
+def lens_steps(metadata: dict, where: str) -> dict[str, int | None]:
+    """``devices.lens.zoomStep`` and ``focusStep`` of a Lytro file's metadata, None where absent.
+
+    Raises
+    ------
+    FileFormatError
+        If one is present but not an integer (the message names the key and ``where``).
+    """
+    devices = metadata.get("devices") if isinstance(metadata, dict) else None
+    lens = devices.get("lens") if isinstance(devices, dict) else None
+    steps: dict[str, int | None] = {}
+    for key in ("zoomStep", "focusStep"):
+        value = lens.get(key) if isinstance(lens, dict) else None
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise FileFormatError(f"{where}: metadata 'devices.lens.{key}' must be an integer, got {value!r}")
+        steps[key] = value
+    return steps
+
+
 def _lens_step(metadata: dict, key: str, where: str) -> int:
-    lens = metadata.get("devices", {}).get("lens", {}) if isinstance(metadata.get("devices"), dict) else {}
-    value = lens.get(key) if isinstance(lens, dict) else None
-    if isinstance(value, bool) or not isinstance(value, int):
+    value = lens_steps(metadata, where)[key]
+    if value is None:
         raise FileFormatError(f"{where}: the metadata has no integer devices.lens.{key}")
     return value
 
@@ -482,9 +501,7 @@ def develop(
     one_of("method", method, ("bilinear", "edge_aware"))
     saturated = mosaic.saturated
     counts = np.maximum(mosaic.counts.astype(np.float64) - mosaic.black_level_dn, 0.0)
-    matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix, dtype=np.float64)
-    if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
-        raise ParameterError(f"color_matrix must be a finite 3 x 3 matrix, got shape {matrix.shape}")
+    matrix = np.eye(3) if color_matrix is None else colour_matrix("color_matrix", np.asarray(color_matrix).reshape(-1))
     gains = np.array(
         [
             bounded_float(f"white_balance_gain[{i}]", g, 0.0, 1e3, low_open=True)

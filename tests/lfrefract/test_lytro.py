@@ -198,12 +198,14 @@ def test_thumbnail_shows_the_colour_that_was_lit(tmp_path, pattern):
 
 def test_exit_pupil_and_steps_are_recorded(tmp_path):
     cam = camera_preset("tiny")
-    settings = LytroSettings(exit_pupil_offset_m=0.0973, zoom_step=-5, focus_step=7, color_matrix=(2, -1, 0) * 3)
+    settings = LytroSettings(
+        exit_pupil_offset_m=0.0973, zoom_step=-5, focus_step=7, color_matrix=(2, -1, 0, 0, 2, -1, -1, 0, 2)
+    )
     meta = illum_metadata(full_scale_mosaic((360, 480), 10, 64, "GRBG", 5), cam, settings)
     lens = meta["devices"]["lens"]
     assert lens["exitPupilOffset"]["z"] == 0.0973
     assert (lens["zoomStep"], lens["focusStep"]) == (-5, 7)
-    assert meta["image"]["color"]["ccm"] == [2.0, -1.0, 0.0] * 3
+    assert meta["image"]["color"]["ccm"] == [2.0, -1.0, 0.0, 0.0, 2.0, -1.0, -1.0, 0.0, 2.0]
     assert meta["devices"]["mla"]["sensorOffset"]["z"] == cam.mla.focal_length_m
     assert meta["devices"]["sensor"]["pixelPitch"] == cam.sensor.pixel_pitch_m
     # PlenoptiCam scales its highlight clipping by 2 ** -modulationExposureBias: it must be a number.
@@ -471,3 +473,120 @@ def test_mosaics_take_keywords_only():
     counts = np.zeros((2, 2), dtype=np.uint16)
     with pytest.raises(TypeError):
         RawMosaic(counts, 10, 32, 1023, "GRBG")
+
+
+# =============================================================================== metadata checked
+def edited_raw(tmp_path, reader: str, edit) -> Path:
+    """A tiny Illum (or F01) RAW whose metadata ``edit(meta)`` changed in place."""
+    cam = camera_preset("tiny")
+    if reader == "f01":
+        raw_path, meta_path = write_f01_raw(tmp_path / "f.raw", full_scale_mosaic((360, 480), 12, 168, "BGGR", 8), cam)
+    else:
+        raw_path, meta_path = write_illum_raw(tmp_path / "i.raw", full_scale_mosaic((360, 480), 10, 64, "GRBG", 8), cam)
+    meta = json.loads(meta_path.read_text())
+    edit(meta)
+    meta_path.write_text(json.dumps(meta))
+    return raw_path
+
+
+def _swap_size(meta):
+    meta["image"]["width"], meta["image"]["height"] = meta["image"]["height"], meta["image"]["width"]
+
+
+def _set(path: str, value):
+    def edit(meta):
+        *parents, last = path.split(".")
+        node = meta
+        for key in parents:
+            node = node[key]
+        node[last] = value
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("reader", "edit", "match"),
+    [
+        # Width and height swapped: the same byte count, read as a sheared image.
+        ("illum", _swap_size, r"image.width.*360.*devices.sensor.pixelWidth.*480"),
+        (
+            "illum",
+            _set("devices.sensor.bitsPerPixel", 12),
+            r"bitsPerPixel' is 10 but 'devices.sensor.bitsPerPixel' is 12",
+        ),
+        ("illum", _set("devices.sensor.mosaic.upperLeftPixel", "b"), r"devices.sensor.mosaic.*image.mosaic"),
+        ("f01", _set("devices.sensor.mosaic.upperLeftPixel", "r"), r"devices.sensor.mosaic.*image.rawDetails.mosaic"),
+        ("illum", _set("image.pixelFormat.rightShift", 2), r"image.pixelFormat.rightShift.*2"),
+        ("f01", _set("image.rawDetails.pixelFormat.rightShift", "x"), r"rightShift.*'x'"),
+        ("illum", _set("devices.sensor.pixelWidth", "480"), r"devices.sensor.pixelWidth.*integer.*'480'"),
+    ],
+)
+def test_metadata_that_contradicts_itself_is_refused_naming_the_keys(tmp_path, reader, edit, match):
+    path = edited_raw(tmp_path, reader, edit)
+    read = read_f01_raw if reader == "f01" else read_illum_raw
+    with pytest.raises(FileFormatError, match=match):
+        read(path)
+
+
+def test_an_lfr_whose_camera_section_contradicts_its_image_is_refused(tmp_path):
+    cam = camera_preset("tiny")
+    other = dataclasses.replace(cam, sensor=dataclasses.replace(cam.sensor, width_px=360, height_px=480))
+    mosaic = full_scale_mosaic((360, 480), 10, 64, "GRBG", 8)
+    path = write_lfr(tmp_path / "c.lfr", mosaic, cam)
+    data = bytearray(path.read_bytes())
+    old = json.dumps({"lfrefractCamera": cam.to_dict()}, indent=2).encode()
+    new = json.dumps({"lfrefractCamera": other.to_dict()}, indent=2).encode()
+    sections = parse_sections(bytes(data))
+    rebuilt = [(magic, new if body == old else body) for magic, _, body in sections]
+    assert any(body == old for _, _, body in sections)
+    toc = json.loads(rebuilt[-1][1])
+    toc["lfrefract"]["cameraRef"] = lytro._sha1_name(new)
+    rebuilt[-1] = (rebuilt[-1][0], json.dumps(toc).encode())
+    path.write_bytes(assemble(rebuilt))
+    with pytest.raises(FileFormatError, match=r"lfrefractCamera.*360 x 480.*480 x 360"):
+        read_lfr(path)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("ccm", [0.0] * 9, r"image.color.ccm.*singular"),
+        ("ccm", [1, 0, 0, 0, 1, 0, 0, 0, float("nan")], r"image.color.ccm.*finite.*nan"),
+        ("ccm", [1, 0, 0, 0, 1, 0, 0, 0], r"image.color.ccm.*9 numbers"),
+        ("ccm", "identity", r"image.color.ccm.*9 numbers.*'identity'"),
+        ("ccm", [-1, 0, 0, 0, 1, 0, 0, 0, 1], r"image.color.ccm.*row 0.*no light"),
+        ("whiteBalanceGain", {"r": 1.0, "gr": 1.0, "gb": 1.0}, r"image.color.whiteBalanceGain.*'b'"),
+        ("whiteBalanceGain", {"r": "2", "gr": 1.0, "gb": 1.0, "b": 1.0}, r"whiteBalanceGain.r.*'2'"),
+        ("whiteBalanceGain", {"r": 0.0, "gr": 1.0, "gb": 1.0, "b": 1.0}, r"whiteBalanceGain.r.*0"),
+        ("whiteBalanceGain", [1, 1, 1, 1], r"image.color.whiteBalanceGain.*table"),
+    ],
+)
+def test_a_malformed_colour_is_refused_naming_the_key(tmp_path, key, value, match):
+    """A malformed ccm or gain was replaced by identity / 1, an all-zero ccm gave a black image."""
+    path = edited_raw(tmp_path, "illum", _set(f"image.color.{key}", value))
+    with pytest.raises(FileFormatError, match=match):
+        lytro.colour_from_metadata(read_illum_raw(path).metadata, where=repr(str(path)))
+
+
+def test_colour_keys_are_read_and_their_absence_named(tmp_path):
+    ccm = [1.5, -0.3, -0.2, -0.1, 1.3, -0.2, 0.0, -0.4, 1.4]
+    settings = LytroSettings(color_matrix=ccm, white_balance_gain=(2.0, 1.0, 1.2, 1.5))
+    cam = camera_preset("tiny")
+    for write in (write_illum_raw, write_f01_raw):
+        bits = 10 if write is write_illum_raw else 12
+        _, meta_path = write(
+            tmp_path / f"{bits}.raw", full_scale_mosaic((360, 480), bits, 64, "GRBG", 8), cam, settings=settings
+        )
+        metadata = json.loads(meta_path.read_text())
+        matrix, gains = lytro.colour_from_metadata(metadata, where="m")
+        np.testing.assert_array_equal(matrix, np.reshape(ccm, (3, 3)))
+        assert gains == (2.0, 1.1, 1.5)
+        del metadata["image"]["color"]
+        with pytest.raises(FileFormatError, match=r"m: the metadata has no 'image.color"):
+            lytro.colour_from_metadata(metadata, where="m")
+
+
+@pytest.mark.parametrize("matrix", [(0.0,) * 9, (1, 0, 0, 0, 1, 0, 0, 0, -1)])
+def test_settings_refuse_a_colour_matrix_that_loses_light(matrix):
+    with pytest.raises(ParameterError, match="color_matrix"):
+        LytroSettings(color_matrix=matrix)

@@ -6,6 +6,8 @@ into 10-bit counts and written as the Illum ships its whites (.raw with a .txt o
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -302,3 +304,38 @@ def test_a_symlink_loop_is_named_wherever_a_lytro_path_is_taken(tmp_path, capsys
     assert "symbolic link loop" in err
     assert loop in err
     assert not (tmp_path / "o.exr").exists()
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda color: color.update(ccm=[0.0] * 9), r"image.color.ccm.*singular"),
+        (lambda color: color.update(ccm="identity"), r"image.color.ccm.*9 numbers"),
+        (lambda color: color["whiteBalanceGain"].pop("gb"), r"whiteBalanceGain' has no 'gb'"),
+        (lambda color: color.update(whiteBalanceGain={"r": 1, "gr": 1, "gb": 1, "b": "x"}), r"whiteBalanceGain.b"),
+    ],
+)
+def test_a_capture_with_a_malformed_colour_is_refused_not_developed_with_identity(tmp_path, edit, match):
+    """An all-zero ccm gave an all-black image; a malformed ccm or gain was replaced by identity / 1."""
+    path = write_white(tmp_path, "capture", white_mosaic(scale=200.0), zoom=0, focus=0)
+    meta_path = path.with_suffix(".txt")
+    meta = json.loads(meta_path.read_text())
+    edit(meta["image"]["color"])
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(FileFormatError, match=match):
+        read_capture(path)
+
+
+def test_develop_names_a_colour_matrix_that_is_not_finite():
+    with pytest.raises(ParameterError, match=r"color_matrix must hold finite numbers.*nan"):
+        develop(white_mosaic(), color_matrix=np.where(np.eye(3) > 0, np.nan, 0.0))
+
+
+def test_malformed_lens_steps_are_named(tmp_path):
+    path = write_white(tmp_path, "capture", white_mosaic(scale=200.0), zoom=0, focus=0)
+    meta_path = path.with_suffix(".txt")
+    meta = json.loads(meta_path.read_text())
+    meta["devices"]["lens"]["zoomStep"] = "6000"
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(FileFormatError, match=r"devices.lens.zoomStep' must be an integer, got '6000'"):
+        read_capture(path)
