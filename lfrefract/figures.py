@@ -19,6 +19,8 @@ __all__ = [
     "WHITE_PERCENTILE",
     "display_image",
     "new_figure",
+    "pixel_axes",
+    "port_setup",
     "save_figure",
     "synth_figure",
     "synth_setup",
@@ -71,16 +73,25 @@ def display_image(image: np.ndarray, *, white: float) -> np.ndarray:
     return rgb
 
 
-def synth_setup(camera, port, output, *, method: str) -> str:
-    """The set-up of a ``synth`` figure, two lines: camera, port and water; method and output size."""
+def port_setup(camera, port) -> str:
+    """The set-up of a figure in one line: the camera and, if any, its port and the water."""
+    if port is None:
+        return f"{camera.name} camera, no port"
     return (
         f"{camera.name} camera behind a port tilted {np.degrees(port.total_tilt_rad):.3g} deg "
         f"({port.thickness_m * 1e3:.3g} mm glass, {port.distance_m * 1e3:.3g} mm away, water n = "
-        f"{port.n_water:.4g})\n{method}, {output.width_px} x {output.height_px} px"
+        f"{port.n_water:.4g})"
     )
 
 
-def _pixel_axes(ax) -> None:
+def synth_setup(camera, port, output, *, method: str) -> str:
+    """The set-up of a ``synth`` figure, two lines: camera, port and water (:func:`port_setup`);
+    method and output size."""
+    return f"{port_setup(camera, port)}\n{method}, {output.width_px} x {output.height_px} px"
+
+
+def pixel_axes(ax) -> None:
+    """Label an image's axes in pixels (u: column, v: row, as OpenCV's)."""
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
 
@@ -127,7 +138,7 @@ def synth_figure(
     ax.imshow(display_image(image, white=white), interpolation="nearest")
     ax.contour(coverage, levels=[0.999], colors=EXACT_EDGE_COLOUR, linewidths=1)
     ax.set_title("refraction-free image" if depth_m is None else "depth-aware refraction-free image")
-    _pixel_axes(ax)
+    pixel_axes(ax)
     scale = ScalarMappable(norm=PowerNorm(1.0 / DISPLAY_GAMMA, vmin=0.0, vmax=white), cmap="gray")
     fig.colorbar(scale, ax=ax, shrink=0.9).set_label("radiance per channel (the raw's units)")
     handles = [
@@ -141,7 +152,7 @@ def synth_figure(
         lo, hi = depth_range_m if depth_range_m is not None else (None, None)
         shown = axes[1].imshow(depth_m, cmap=colours, vmin=lo, vmax=hi, interpolation="nearest")
         axes[1].set_title("depth found in the light field")
-        _pixel_axes(axes[1])
+        pixel_axes(axes[1])
         fig.colorbar(shown, ax=axes[1], shrink=0.9).set_label("depth: camera-frame z (m)")
         handles[1] = Patch(facecolor=NO_VALUE_RGB, edgecolor="0.3", label="no captured ray / no depth")
     fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize=9)

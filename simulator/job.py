@@ -370,5 +370,13 @@ def render_job(
                 pupil = None if real is None else real.exit_pupil_distance_m
                 write_lytro_file(stage, mosaic, config, exit_pupil_offset_m=pupil)
         if write_previews:
-            previews.write_all(stage / "previews", raw=raw, ideal=truth.ideal, depth_m=truth.depth_m, camera=camera)
+            previews.write_all(
+                stage / "previews",
+                raw=raw,
+                ideal=truth.ideal,
+                depth_m=truth.depth_m,
+                camera=camera,
+                port=config.port,
+                scene=config.name,
+            )
     return RenderResult(Path(out_dir), raw_seconds, ideal_seconds, metadata)

@@ -7,12 +7,13 @@ from pathlib import Path
 import matplotlib as mpl
 import numpy as np
 
-from lfrefract import LightFieldCamera
+from lfrefract import FlatPort, LightFieldCamera
+from lfrefract.figures import NO_VALUE_RGB, new_figure, pixel_axes, port_setup, save_figure
 
 mpl.use("Agg")
 import matplotlib.pyplot as plt
 
-__all__ = ["display_rgb", "downsample", "white_level", "write_all"]
+__all__ = ["depth_figure", "display_rgb", "downsample", "white_level", "write_all"]
 
 #: Longest side of the downsampled whole-raw preview, pixels.
 PREVIEW_MAX_SIDE_PX = 1600
@@ -60,10 +61,37 @@ def _enlarge(img: np.ndarray, min_side: int = PREVIEW_MIN_SIDE_PX) -> np.ndarray
     return img if factor <= 1 else np.repeat(np.repeat(img, factor, axis=0), factor, axis=1)
 
 
+def depth_figure(depth_m: np.ndarray, *, setup: str):
+    """The ground-truth depth preview (``depth.png``) as a Figure: camera-frame z with its colour bar in
+    metres, pixel axes, the set-up in the title, and pixels with no surface (+inf) grey with a legend."""
+    from matplotlib.patches import Patch
+
+    height, width = depth_m.shape
+    fig = new_figure(6.4, 5.2 * height / width + 1.9)
+    ax = fig.subplots()
+    colours = mpl.colormaps["viridis"].with_extremes(bad=NO_VALUE_RGB)
+    im = ax.imshow(np.where(np.isfinite(depth_m), depth_m, np.nan), cmap=colours, interpolation="nearest")
+    ax.set_title("ground-truth depth of the ideal image")
+    pixel_axes(ax)
+    fig.colorbar(im, ax=ax, shrink=0.9).set_label("depth: camera-frame z (m)")
+    no_surface = Patch(facecolor=NO_VALUE_RGB, edgecolor="0.3", label="no surface")
+    fig.legend(handles=[no_surface], loc="outside lower center", fontsize=9)
+    fig.suptitle(setup, fontsize=9)
+    return fig
+
+
 def write_all(
-    folder: Path, *, raw: np.ndarray, ideal: np.ndarray, depth_m: np.ndarray, camera: LightFieldCamera
+    folder: Path,
+    *,
+    raw: np.ndarray,
+    ideal: np.ndarray,
+    depth_m: np.ndarray,
+    camera: LightFieldCamera,
+    port: FlatPort | None = None,
+    scene: str | None = None,
 ) -> list[Path]:
-    """Write ``raw.png``, ``raw_crop.png``, ``ideal.png`` and ``depth.png`` into ``folder``."""
+    """Write ``raw.png``, ``raw_crop.png``, ``ideal.png`` and ``depth.png`` into ``folder``; ``port``
+    and ``scene`` (its name) go into the depth figure's title."""
     folder.mkdir(parents=True, exist_ok=True)
     white = white_level(raw)
     written = []
@@ -76,14 +104,7 @@ def write_all(
     written.append(folder / "raw_crop.png")
     plt.imsave(folder / "ideal.png", _enlarge(display_rgb(ideal)))
     written.append(folder / "ideal.png")
-    fig, ax = plt.subplots(figsize=(6, 6 * depth_m.shape[0] / depth_m.shape[1] + 0.6), dpi=120)
-    finite = np.isfinite(depth_m)
-    shown = np.where(finite, depth_m, np.nan)
-    im = ax.imshow(shown, cmap="viridis")
-    ax.set_title("ground-truth depth (camera-frame z, m); white: no surface")
-    ax.set_axis_off()
-    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="z [m]")
-    fig.savefig(folder / "depth.png", bbox_inches="tight")
-    plt.close(fig)
+    setup = port_setup(camera, port) if scene is None else f"{scene!r} scene, {port_setup(camera, port)}"
+    save_figure(depth_figure(depth_m, setup=setup), folder / "depth.png")
     written.append(folder / "depth.png")
     return written
