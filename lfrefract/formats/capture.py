@@ -77,6 +77,7 @@ __all__ = [
     "DEPTH_NAME",
     "IDEAL_NAME",
     "LENSES_NAME",
+    "MAX_RAW_VALUE",
     "NONFINITE_POLICIES",
     "RAW_NAME",
     "SIDECAR_NAME",
@@ -127,6 +128,11 @@ _SIDECAR_KEYS = ("kind", "files", "camera", "pose", "port", "ideal")
 
 #: What :func:`read_capture` does with NaN, infinite and negative raw values.
 NONFINITE_POLICIES = ("refuse", "mask")
+#: Largest raw value taken (any unit of radiance). The steps after reading scale raw values in float32
+#: (the port's radiometric gain, the weighted sums of the synthesis, the depth search's gain): a finite
+#: 3e38 overflowed to infinity there. 1e30 leaves them a factor 1e8 below float32's 3.4e38, far
+#: beyond any image's range.
+MAX_RAW_VALUE = 1e30
 
 
 def _table(path: Path, data: dict, key: str, *, required: bool, nullable: bool) -> dict | None:
@@ -364,6 +370,7 @@ class Capture:
                     f"{name!r} is {raw.shape[1]} x {raw.shape[0]} px, but the camera ({self.camera_source}) has a "
                     f"{sensor[1]} x {sensor[0]} px sensor"
                 )
+        self._check_range(raw, name)
         counts = UnrecordedValues.of(raw)
         recorded = None
         if counts.values:
@@ -378,6 +385,23 @@ class Capture:
         object.__setattr__(self, "raw_path", Path(self.raw_path))
         object.__setattr__(self, "unrecorded", counts)
         object.__setattr__(self, "recorded", recorded)
+
+    @staticmethod
+    def _check_range(raw: np.ndarray, name: str) -> None:
+        """Refuse finite values above :data:`MAX_RAW_VALUE` (NaN and infinities are ``nonfinite``'s)."""
+        top = float(np.nanmax(raw, initial=-np.inf))  # inf if any value is +inf
+        if top <= MAX_RAW_VALUE:
+            return
+        finite = np.isfinite(raw)
+        large = finite & (raw > MAX_RAW_VALUE)
+        if not large.any():
+            return
+        largest = float(raw[large].max())
+        raise FileFormatError(
+            f"{name!r} has {int(large.sum())} values above {MAX_RAW_VALUE:g} (the largest {largest:g}): "
+            "later steps scale raw values in float32, where they would overflow to infinity; scale the image down "
+            "(any unit of radiance is taken)"
+        )
 
     @property
     def output(self) -> PinholeCamera:

@@ -157,6 +157,9 @@ class LytroSettings:
 #: Largest condition number of a colour matrix: beyond it the matrix is singular in float arithmetic (an
 #: all-zero ``ccm`` made every image black). Real matrices are near 2-10.
 _MAX_CCM_CONDITION = 1e6
+#: Largest magnitude of a colour matrix's entry (real ones lie within +-5): it bounds the developed image
+#: (at most 65535 DN / a tenth of a bright white / 1e3 gain, times 3 entries) far inside float32.
+_MAX_CCM_ENTRY = 100.0
 
 
 def colour_matrix(name: str, value: Any) -> np.ndarray:
@@ -165,9 +168,9 @@ def colour_matrix(name: str, value: Any) -> np.ndarray:
     Raises
     ------
     ParameterError
-        Naming ``name``, unless it is 9 finite numbers whose matrix is invertible (a singular one loses a
-        colour: all zeros make every image black) and takes white (1, 1, 1) to light in every colour
-        (each row sums to more than 0).
+        Naming ``name``, unless it is 9 finite numbers within +-100 whose matrix is invertible (a
+        singular one loses a colour: all zeros make every image black) and takes white (1, 1, 1) to
+        light in every colour (each row sums to more than 0).
     """
     if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
         raise ParameterError(f"{name} must be 9 numbers (a 3 x 3 matrix, row by row), got {shown(value)}")
@@ -177,6 +180,11 @@ def colour_matrix(name: str, value: Any) -> np.ndarray:
     matrix = array.astype(np.float64).reshape(3, 3)
     if not np.all(np.isfinite(matrix)):
         raise ParameterError(f"{name} must hold finite numbers, got {matrix.reshape(-1).tolist()}")
+    if np.abs(matrix).max() > _MAX_CCM_ENTRY:
+        raise ParameterError(
+            f"{name} {matrix.reshape(-1).tolist()} has an entry beyond +-{_MAX_CCM_ENTRY:g} (real colour matrices "
+            "lie within +-5)"
+        )
     rows = matrix.sum(axis=1)
     if np.linalg.cond(matrix) > _MAX_CCM_CONDITION:
         raise ParameterError(

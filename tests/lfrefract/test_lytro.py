@@ -555,6 +555,7 @@ def test_an_lfr_whose_camera_section_contradicts_its_image_is_refused(tmp_path):
         ("ccm", [1, 0, 0, 0, 1, 0, 0, 0], r"image.color.ccm.*9 numbers"),
         ("ccm", "identity", r"image.color.ccm.*9 numbers.*'identity'"),
         ("ccm", [-1, 0, 0, 0, 1, 0, 0, 0, 1], r"image.color.ccm.*row 0.*no light"),
+        ("ccm", [1e300, 0, 0, 0, 1, 0, 0, 0, 1], r"image.color.ccm.*entry beyond"),
         ("whiteBalanceGain", {"r": 1.0, "gr": 1.0, "gb": 1.0}, r"image.color.whiteBalanceGain.*'b'"),
         ("whiteBalanceGain", {"r": "2", "gr": 1.0, "gb": 1.0, "b": 1.0}, r"whiteBalanceGain.r.*'2'"),
         ("whiteBalanceGain", {"r": 0.0, "gr": 1.0, "gb": 1.0, "b": 1.0}, r"whiteBalanceGain.r.*0"),
