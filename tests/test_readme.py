@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -57,7 +58,48 @@ def test_the_python_section_runs_as_written_and_prints_what_the_readme_says(tmp_
     # The render is seeded; Mitsuba's CPU and GPU variants may differ in the last digits.
     assert float(printed[1]) == pytest.approx(float(said[1]), abs=0.3)
     assert float(printed[2]) == pytest.approx(float(said[2]), abs=0.1)
-    figure = matplotlib.image.imread(tmp_path / "python.png")
+    figure = matplotlib.image.imread(tmp_path / "out" / "python.png")
     output = virtual_camera_for(camera_preset("tiny"))
     assert figure.shape[:2] == (output.height_px, 2 * output.width_px)  # refraction-free | ideal
     assert (tmp_path / "out" / "python" / "raw.exr").is_file()
+
+
+def readme_outputs(readme: str) -> list[str]:
+    """Every path the README's commands write to: each ``--out`` and ``--refine-camera`` of a command in
+    a code block or an inline code span (with ``synth``'s companions OUT.json and OUT.png), the
+    demo's default ``demo/``, and the files the Python section writes."""
+    commands = re.findall(r"^```bash\n(.*?)^```$", readme, re.MULTILINE | re.DOTALL)
+    commands += re.findall(r"`((?:\.venv/bin/)?(?:lfsim|lfrefract) [^`]+)`", readme)
+    paths = []
+    for block in commands:
+        for line in block.replace("\\\n", " ").splitlines():
+            words = shlex.split(line.split("#")[0])
+            for i, word in enumerate(words[:-1]):
+                if word in ("--out", "--refine-camera"):
+                    paths.append(words[i + 1])
+                    if "synth" in words and word == "--out" and words[i + 1].endswith(".exr"):
+                        paths += [words[i + 1][: -len(".exr")] + suffix for suffix in (".json", ".png")]
+            if re.search(r"lfsim demo\b(?!.*--out)", line):
+                paths.append("demo/")
+    for call in re.findall(r"(?:render_job\([^,]+|imsave|savefig)\(?,?\s*\"([^\"]+)\"", python_block()):
+        paths.append(call)
+    return [p for p in paths if not p.isupper()]  # not the placeholders of a synopsis (--out DIR)
+
+
+def test_the_readmes_commands_write_only_where_git_ignores():
+    """Run in the checkout, the README's commands left untracked files (rig/, white/, mla.json,
+    python.png ...): every path they write is ignored by .gitignore."""
+    paths = readme_outputs((ROOT / "README.md").read_text())
+    assert "out/python" in paths  # the parser finds the Python section's render ...
+    assert "demo/" in paths  # ... the demo's default folder ...
+    assert "out/rf.json" in paths  # ... and synth's companions
+    files = [f"{p.rstrip('/')}/any-file" if p.endswith("/") or not Path(p).suffix else p for p in paths]
+    done = subprocess.run(
+        ["git", "check-ignore", "--no-index", "--verbose", "--non-matching", *files],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    tracked = [line.split("\t")[-1] for line in done.stdout.splitlines() if line.startswith("::")]
+    assert not tracked, f"the README's commands write outside the ignored folders: {tracked}"
