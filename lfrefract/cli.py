@@ -105,6 +105,7 @@ from lfrefract.formats.capture import (
     CaptureParameters,
     camera_from_option,
     capture_parameters,
+    check_lens_modelled,
     check_port_ray_model,
     correction_estimate_from_option,
     mask_warp_map,
@@ -325,7 +326,7 @@ def synth(args: argparse.Namespace) -> int:
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     by_cfa = _colour_by_cfa(args, capture)
-    ray_correction = ray_correction_from_option(args.camera)
+    ray_correction = _ray_model(args, capture)
     if args.port is not None:
         check_port_ray_model(args.port, ray_correction, camera=args.camera)
     if depth_options is not None:
@@ -582,7 +583,7 @@ def naive(args: argparse.Namespace) -> int:
         output=capture.output,
         kind=args.kind,
         recorded=capture.recorded,
-        ray_correction=ray_correction_from_option(args.camera),
+        ray_correction=_ray_model(args, capture),
     )
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
@@ -606,7 +607,7 @@ def views(args: argparse.Namespace) -> int:
         spacing_px=args.spacing_px,
         output=output,
         recorded=capture.recorded,
-        ray_correction=ray_correction_from_option(args.camera),
+        ray_correction=_ray_model(args, capture),
     )
     out = write_view_stack(
         Path(args.out),
@@ -670,6 +671,21 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     return found[0]
 
 
+def _ray_model(args: argparse.Namespace, capture: Capture | CaptureParameters) -> RayCorrection | None:
+    """The ray correction of ``--camera`` (None: the thin lens), once a capture taken through a real
+    main lens that the thin lens would stand for is refused (:func:`check_lens_modelled`)."""
+    correction = ray_correction_from_option(args.camera)
+    check_lens_modelled(capture, correction, camera=args.camera)
+    return correction
+
+
+def _boards_lens_modelled(args: argparse.Namespace) -> None:
+    """:func:`_ray_model` for every board capture, before any raw image is read."""
+    given = _given_camera(args)
+    for path in args.boards:
+        _ray_model(args, capture_parameters(path, camera=given))
+
+
 def _board_inputs(args: argparse.Namespace) -> list[Path]:
     return [f for path in args.boards for f in _capture_files(path)] + _option_files(args)
 
@@ -702,6 +718,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
     flat_port = out.with_suffix(".txt")
     first = _board_parameters(args)
+    _boards_lens_modelled(args)
     outputs = {
         out: ExpectedKind(json_kind=PORT_CALIBRATION_KIND),
         flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_CALIBRATION_KIND),
@@ -809,6 +826,7 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
     out = Path(args.out)
     first = _board_parameters(args)
+    _boards_lens_modelled(args)
     camera = _known(first.camera, first.raw_path)
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite

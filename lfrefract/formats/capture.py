@@ -88,6 +88,7 @@ __all__ = [
     "UnrecordedValues",
     "camera_from_option",
     "capture_parameters",
+    "check_lens_modelled",
     "check_port_ray_model",
     "correction_estimate_from_option",
     "mask_warp_map",
@@ -98,6 +99,7 @@ __all__ = [
     "read_ground_truth",
     "read_lytro_capture",
     "read_sidecar",
+    "recorded_main_lens",
     "white_for",
     "write_capture",
     "write_capture_files",
@@ -831,6 +833,76 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection
             f"{str(camera)!r} ({'the thin lens' if correction is None else 'another correction'}): give the camera "
             "file the port was calibrated with (after --refine-camera: the refined one)"
         )
+
+
+def recorded_main_lens(data: Mapping | None) -> str | None:
+    """The real (multi-element) main lens a capture's sidecar, or a camera file, says the camera
+    has: its name; None for the thin lens, or where the file records no lens.
+
+    ``lfsim render`` records it in its ``meta.json`` twice: ``scene.lens`` (``"thin"``, or the
+    prescription: a table with its ``name``) and ``derived.main_lens`` (null, or a summary of the
+    lens with its ``name``).
+    """
+    if not isinstance(data, Mapping):
+        return None
+    found = []
+    scene, derived = data.get("scene"), data.get("derived")
+    if isinstance(scene, Mapping) and isinstance(scene.get("lens"), Mapping):
+        found.append(scene["lens"].get("name"))
+    if isinstance(derived, Mapping) and isinstance(derived.get("main_lens"), Mapping):
+        found.append(derived["main_lens"].get("name"))
+    if not found:
+        return None
+    return next((name for name in found if isinstance(name, str) and name), "an unnamed prescription")
+
+
+def check_lens_modelled(
+    capture: Capture | CaptureParameters, correction: RayCorrection | None, *, camera: str | os.PathLike | None = None
+) -> None:
+    """Refuse a capture taken through a real main lens when the camera model is the bare thin lens.
+
+    The core's camera model is a thin lens, plus the ray correction of a camera calibration
+    (``lfrefract calibrate camera`` output). A render through a real lens (``lfsim render --lens
+    double-gauss``) records that lens (:func:`recorded_main_lens`), and the thin lens it is scaled to
+    does not give its rays: a synthesis or a port fit on it is wrong without saying so (the board
+    of a double-Gauss render was not found in the refraction-free image). The core does not trace
+    the recorded prescription instead: its ray model comes from calibration on data, which holds
+    for any lens, not from a render's truth.
+
+    Parameters
+    ----------
+    capture : Capture or CaptureParameters
+        Its sidecar (if any) is read for the lens.
+    correction : RayCorrection or None
+        The ray correction of ``--camera`` (None: the thin lens).
+    camera : path-like or None
+        The ``--camera`` option: a camera file that records a real lens (a render's ``meta.json``)
+        is checked too.
+
+    Raises
+    ------
+    ParameterError
+        If the capture's sidecar or the camera file records a real main lens and ``correction`` is None.
+    FileFormatError
+        If the camera file's kind and content disagree.
+    """
+    if correction is not None:
+        return
+    sources: list[tuple[Path, Mapping | None, str]] = []
+    if capture.sidecar_path is not None:
+        sources.append((capture.sidecar_path, capture.sidecar, f"the capture {str(capture.raw_path)!r} was taken"))
+    if camera is not None and Path(camera).is_file() and Path(camera).suffix.lower() != ".toml":
+        sources.append((Path(camera), read_parameter_json(Path(camera)), "the camera of --camera was taken"))
+    for path, data, what in sources:
+        lens = recorded_main_lens(data)
+        if lens is not None:
+            given = "the thin lens of its camera" if camera is None else f"--camera {str(camera)!r}, a thin lens"
+            raise ParameterError(
+                f"{str(path)!r} says {what} through the real main lens {lens!r}, but the camera model is "
+                f"{given} with no calibrated ray model: its rays are not that lens's, and the result would be "
+                "wrong without saying so. Calibrate the camera from in-air boards (lfrefract calibrate camera "
+                "BOARD ... --out camera.json) and pass --camera camera.json"
+            )
 
 
 def port_from_file(path: str | os.PathLike) -> FlatPort:

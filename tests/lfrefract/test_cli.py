@@ -239,7 +239,7 @@ def test_calibration_files_given_as_options_are_checked(tmp_path, capsys, option
     given.write_bytes(given.read_text().encode("utf-16"))
     err = refused(capsys, [*commands(raw, tmp_path / "out")["synth"], option, str(given)])
     assert_says(err, repr(str(given)), "is not UTF-8 text")
-    write_json(given, {key: "x"})
+    write_json(given, {key: "x"} if key == "port" else {"kind": "lfrefract.calibrate.mla", key: "x"})
     err = refused(capsys, [*commands(raw, tmp_path / "out")["synth"], option, str(given)])
     assert_says(err, repr(str(given)), f"key {key!r} must be a table")
 
