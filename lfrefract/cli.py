@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import inspect
 import json
 import math
@@ -85,11 +86,13 @@ from lfrefract import (
 from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.approx import KIND as APPROX_KIND
+from lfrefract.calibration.approx import square_size
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
 from lfrefract.calibration.camera import MIN_VIEWS as CAMERA_MIN_VIEWS
 from lfrefract.calibration.joint import JointCalibration
 from lfrefract.calibration.port import (
     CORNER_METHODS,
+    MIN_BOARD_CORNERS,
     PORT_CALIBRATION_KIND,
     BoardView,
     board_view_from_light_field,
@@ -632,7 +635,14 @@ def views(args: argparse.Namespace) -> int:
 def calibrate_mla_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate mla``."""
     out = Path(args.out)
-    capture = read_capture(args.white, camera=_given_camera(args), camera_required=False)
+    # Read with its unrecorded values masked, to refuse them here: a white image must record every pixel,
+    # and calibrate mla has no --nonfinite to offer.
+    capture = read_capture(args.white, camera=_given_camera(args), camera_required=False, nonfinite="mask")
+    if capture.unrecorded.values:
+        raise ParameterError(
+            f"{str(args.white)!r} has {capture.unrecorded.describe()}: a white image must record every pixel "
+            "(calibrate mla takes none unrecorded); give a white image without them"
+        )
     prepare_output_files(
         {out: ExpectedKind(json_kind=MLA_KIND)},
         inputs=[*_capture_files(args.white), *_option_files(args)],
@@ -661,8 +671,20 @@ def _known(camera: LightFieldCamera | None, where: object) -> LightFieldCamera:
 def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     """The parameters of the first board capture, after every capture's sidecar is checked (before
     any raw image is read) and found to have the same camera (or ``--camera`` is given)."""
-    if min(args.squares) < 2:
-        raise ParameterError(f"--squares must be at least 2 x 2, got {args.squares!r}")
+    if min(args.squares) < 3:
+        raise ParameterError(
+            "--squares must be at least 3 x 3 (2 x 2 inner corners, the fewest the detector finds), "
+            f"got {args.squares!r}"
+        )
+    inner = (args.squares[0] - 1) * (args.squares[1] - 1)
+    if args.target != "approx" and inner < MIN_BOARD_CORNERS:
+        raise ParameterError(
+            f"--squares {args.squares[0]} {args.squares[1]} has {inner} inner corners; a board located in the light "
+            f"field needs at least {MIN_BOARD_CORNERS}"
+        )
+    for size in args.square_size_m if isinstance(args.square_size_m, list) else [args.square_size_m]:
+        square_size("--square-size-m", size)
+    _distinct_captures(args.boards)
     given = _given_camera(args)
     found = [capture_parameters(path, camera=given) for path in args.boards]
     for path, other in zip(args.boards, found, strict=True):
@@ -686,24 +708,54 @@ def _boards_lens_modelled(args: argparse.Namespace) -> None:
         _ray_model(args, capture_parameters(path, camera=given))
 
 
+def _distinct_captures(paths: list[str]) -> None:
+    """Refuse a board capture given twice: the same file, a link to it or a copy of it (equal content),
+    before any is read (:mod:`lfrefract.calibration.distinct` refuses two of one pose after detection)."""
+    seen: dict[tuple[int, bytes], str] = {}
+    for path in paths:
+        file = Path(path)
+        if not file.is_file():
+            continue  # read_capture names a missing file
+        digest = hashlib.sha256()
+        with file.open("rb") as stream:
+            for block in iter(lambda: stream.read(1 << 24), b""):
+                digest.update(block)
+        key = (file.stat().st_size, digest.digest())
+        if key in seen:
+            raise CalibrationError(
+                f"{seen[key]!r} and {path!r} are the same capture (the same file, a link to it or a copy of it): "
+                "give each capture once, and captures of the board in other poses"
+            )
+        seen[key] = path
+
+
 def _board_inputs(args: argparse.Namespace) -> list[Path]:
     return [f for path in args.boards for f in _capture_files(path)] + _option_files(args)
 
 
 def _board_raw(
-    path: str, camera: LightFieldCamera, white: str | None = None, colour: str | None = None, *, command: str
+    path: str,
+    camera: LightFieldCamera,
+    white: str | None = None,
+    colour: str | None = None,
+    *,
+    command: str,
+    nonfinite: str = NONFINITE_POLICIES[0],
 ) -> np.ndarray:
     """One board capture's raw image, checked (read one at a time: an Illum raw image is 0.5 GB): for
     a Lytro capture its grey mosaic (``colour`` ``"cfa"``) or its demosaiced image (``"demosaic"``,
     :meth:`DevelopedCapture.measured`), NaN where its white gives no light; None: ``command``'s
     default (:data:`DEFAULT_BOARD_COLOUR`)."""
-    capture = read_capture(path, camera=camera, white=white)
+    capture = read_capture(path, camera=camera, white=white, nonfinite=nonfinite)
     if capture.developed is None:
         if colour is not None:
             raise ParameterError(
                 f"--colour {colour} applies to a Lytro capture (its Bayer mosaic); {path!r} is a linear raw "
                 "image already"
             )
+        if capture.recorded is not None:  # --nonfinite mask: unrecorded pixels as NaN, left out of the views
+            mask = capture.recorded if capture.raw.ndim == 2 else capture.recorded[..., None]
+            return np.where(mask, capture.raw, np.nan)
         return capture.raw
     if (colour or DEFAULT_BOARD_COLOUR[command]) == "cfa":
         return capture.developed.grey()
@@ -759,7 +811,14 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         args, camera, view, pattern, command="port", minimum=PORT_MIN_VIEWS, method=args.corners, offsets_px=offsets
     )
     views = boards.views
-    glass = {"thickness_m": thickness, "n_air": n_air, "n_glass": n_glass, "n_water": n_water}
+    glass = {
+        "thickness_m": thickness,
+        "n_air": n_air,
+        "n_glass": n_glass,
+        "n_water": n_water,
+        "distance_range_m": tuple(args.distance_range_m),
+        "names": boards.sources,
+    }
     joint = None
     correction: RayCorrection | None
     if prior is not None:  # the port and the camera's ray model together
@@ -836,12 +895,12 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     )
 
     def central_view(path: str) -> np.ndarray:
-        raw = _board_raw(path, camera, args.white, args.colour, command="approx")
+        raw = _board_raw(path, camera, args.white, args.colour, command="approx", nonfinite=args.nonfinite)
         return conventional.apply(raw, recorded=finite_pixels(raw))  # NaN: unrecorded (see _board_raw)
 
     images = [central_view(path) for path in args.boards]
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
-    result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m)
+    result = calibrate_approx(images, pattern=pattern, square_size_m=args.square_size_m, names=list(args.boards))
     result.save(out)
     print(f"pinhole + distortion from {len(images)} views, {result.rms_px:.3f} px RMS; wrote {args.out}")
     return 0
@@ -896,7 +955,7 @@ def _board_views(
     for path, size in zip(args.boards, _square_sizes(args), strict=True):
         board_view = board_view_from_light_field(
             camera,
-            _board_raw(path, camera, args.white, args.colour, command=command),
+            _board_raw(path, camera, args.white, args.colour, command=command, nonfinite=args.nonfinite),
             pattern=pattern,
             square_size_m=size,
             view=view,
@@ -932,7 +991,7 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     boards = _board_views(args, camera, view, pattern, command="camera", minimum=CAMERA_MIN_VIEWS)
     views = boards.views
-    result = calibrate_camera(camera, views, view=view)
+    result = calibrate_camera(camera, views, view=view, names=boards.sources)
     write_json(out, {**result.to_dict(), **boards.to_dict()})
     c = result.correction
     slope = "held at 1 (the captures do not determine it)" if "slope_scale" in result.held else f"{c.slope_scale:.5f}"
@@ -1193,6 +1252,13 @@ def _board_arguments(parser: argparse.ArgumentParser, target: str, *, sizes_per_
     _camera_option(parser)
     _white_option(parser)
     parser.add_argument(
+        "--nonfinite",
+        choices=NONFINITE_POLICIES,
+        default=NONFINITE_POLICIES[0],
+        help=f"board captures with NaN, infinite or negative values: {NONFINITE_POLICIES[0]} them (default), or "
+        "mask those pixels as unrecorded (left out of the views the board is located in)",
+    )
+    parser.add_argument(
         "--colour",
         choices=COLOUR_MODES,
         help="for Lytro captures: locate the board on the devignetted Bayer mosaic read as one grey light field "
@@ -1206,6 +1272,14 @@ def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--thickness-m", type=float, help="glass thickness (default: the first capture's meta.json)")
     parser.add_argument("--n-glass", type=float, help="glass index (default: meta.json)")
     parser.add_argument("--n-water", type=float, help="water index (default: meta.json)")
+    parser.add_argument(
+        "--distance-range-m",
+        type=float,
+        nargs=2,
+        metavar=("MIN", "MAX"),
+        default=list(_default_of(calibrate_port, "distance_range_m")),
+        help="range searched for the port's distance (its air-side face along its normal), metres",
+    )
     corners = _default_of(board_view_from_light_field, "method")
     parser.add_argument(
         "--corners",

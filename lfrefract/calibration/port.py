@@ -39,7 +39,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from lfrefract.calibration.approx import detect_chessboard
+from lfrefract.calibration.approx import detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
@@ -54,6 +54,7 @@ from lfrefract.validate import as_points, finite_vector, one_of, positive_float,
 __all__ = [
     "CORNER_METHODS",
     "DISTANCE_AT_BOUND_M",
+    "MIN_BOARD_CORNERS",
     "PORT_CALIBRATION_KIND",
     "BoardView",
     "CalibrationError",
@@ -63,6 +64,11 @@ __all__ = [
     "estimate_normal",
     "project_through_port",
 ]
+
+
+#: Fewest corners a :class:`BoardView` holds (a board's pose and the port's parameters from fewer are
+#: not determined); :func:`board_view_from_light_field` finds a board with fewer inner corners as none.
+MIN_BOARD_CORNERS = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,8 +109,8 @@ class BoardView:
             raise ParameterError(
                 f"corners_px and board_points_m must have the same length, got {len(corners)} and {len(board)}"
             )
-        if len(corners) < 8:
-            raise ParameterError(f"a board view needs at least 8 corners, got {len(corners)}")
+        if len(corners) < MIN_BOARD_CORNERS:
+            raise ParameterError(f"a board view needs at least {MIN_BOARD_CORNERS} corners, got {len(corners)}")
         centres = np.zeros((len(corners), 3)) if self.centres_m is None else as_points("centres_m", self.centres_m, 3)
         if len(centres) != len(corners):
             raise ParameterError(f"centres_m must have one row per corner ({len(corners)}), got {len(centres)}")
@@ -260,7 +266,7 @@ def board_view_from_light_field(
     cols, rows = pattern
     jj, ii = np.mgrid[0:rows, 0:cols]
     board = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
-    board = board * positive_float("square_size_m", square_size_m)
+    board = board * square_size("square_size_m", square_size_m)
     recorded = finite_pixels(raw)
     central = detect_chessboard(
         subaperture_view(camera, raw, (0.0, 0.0), output=view, recorded=recorded), pattern, name=name
@@ -270,7 +276,7 @@ def board_view_from_light_field(
     corners, centres = [central], [np.zeros((len(central), 3))]
     if method == "light-field":
         tracks = light_field_corners(camera, raw, central, pattern=pattern, square_size_m=square_size_m, view=view)
-        if np.count_nonzero(tracks.ok) < 8:
+        if np.count_nonzero(tracks.ok) < MIN_BOARD_CORNERS:
             return None
         reach = fraction * camera.usable_aperture_radius_m(LIGHT_FIELD_RIM_MARGIN_PX)
         points = [(0.0, 0.0), (reach, 0.0), (-reach, 0.0), (0.0, reach), (0.0, -reach)]
@@ -691,7 +697,7 @@ def calibrate_port(
     if at_bound:
         raise CalibrationError(
             f"the port distance ended at {fit.x[2] * 1e3:.4g} mm, the end of distance_range_m={distance_range_m!r}: "
-            "widen the range (or the views do not determine the distance)"
+            "widen the range (--distance-range-m MIN MAX), or the views do not determine the distance"
         )
     return port_result(
         port,

@@ -345,3 +345,12 @@ def test_one_image_repeated_is_refused_naming_the_two(images):
         calibrate_approx([images[0]] * 3, **options)
     with pytest.raises(CalibrationError, match=r"images\[1\] and images\[3\] show the board in the same pose"):
         calibrate_approx([*images[:3], images[1] * 2.0], **options)  # brighter, the same pose
+
+
+def test_views_that_do_not_determine_the_focal_length_are_refused(images):
+    """One frontal board moved across the image: three distinct views, but a board facing the camera
+    looks the same at distance Z through fx as at 2 Z through 2 fx. The fit said fx 228 +- 148 px
+    (truth 300) and was written; now it is refused naming fx and what views would fix it."""
+    frontal = [images[4], np.roll(images[4], 25, axis=1), np.roll(images[4], -20, axis=0)]
+    with pytest.raises(CalibrationError, match=r"do not determine the focal length: fx 22\d(\.\d+)? \+- 1\d\d px"):
+        calibrate_approx(frontal, pattern=PATTERN, square_size_m=SQUARE_M)

@@ -100,7 +100,7 @@ def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
         )
         == 2
     )
-    assert "--squares must be at least 2 x 2" in capsys.readouterr().err
+    assert "--squares must be at least 3 x 3" in capsys.readouterr().err
 
 
 def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsys):
