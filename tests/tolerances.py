@@ -197,6 +197,12 @@ BOWL_VOLUME_RELATIVE = 0.01
 # Row sums of a warp map: float32 weights (eps 6e-8) summed over up to k * s^2 = 128 entries.
 FLOAT32_WEIGHT_SUM = 1e-5
 
+# The views' barycentric resampling (float64): weights may dip below 0 by the inside test's 100 eps
+# and sum to 1 within a few eps; mixed over vertices up to 1e5 px from the origin (the test's far
+# lenses) they reproduce a pixel's own coordinates to about 1e5 * 1e-16 * the triangle's condition.
+RESAMPLING_WEIGHT_ROUNDOFF = 1e-12
+RESAMPLING_REPRODUCTION_PX = 1e-6
+
 # dB and SSIM; refraction-free synthesis (k = 32, s = 2, lambda = 0.3 m/rad) of the tiny camera
 # against the ideal image inside the exact coverage, textured backdrop and chessboard, 32 spp,
 # port 12 mm away, tilts 0 / 15 / 30 deg: measured PSNR 22.9 / 22.2 / 29.1 dB and SSIM 0.913 /
@@ -752,9 +758,10 @@ OVERSIZE_REFUSAL_SECONDS = 1.0
 # (naive views, view stacks), on the tiny camera. An estimate may err high (it refuses work that would
 # have fitted, by at most 1 / 0.4 = 2.5x) more than low (the work may then fail for memory, so by at
 # most 25 %). Measured: warp maps 0.49-0.83 (analytic search) and 0.96-1.12 (k-d tree), naive views
-# 0.75-0.88, view stacks 0.80-0.91. tracemalloc counts numpy's allocations, not numba's or qhull's
-# small internal ones. The depth-aware synthesis (whose accumulators numba allocates) is measured by
-# the growth of the peak resident memory (VmHWM, reset before the work) instead: 0.59-0.70 on tiny-2x.
+# 0.46 (central) and 0.77 (full), view stacks 0.71-0.87. tracemalloc counts numpy's allocations, not
+# numba's or qhull's (the views' Delaunay triangulation: 950 B per lens, which their estimates
+# include). The depth-aware synthesis (whose accumulators numba allocates) is measured by the growth
+# of the peak resident memory (VmHWM, reset before the work) instead: 0.59-0.70 on tiny-2x.
 MEMORY_ESTIMATE_RATIO_MIN = 0.4
 MEMORY_ESTIMATE_RATIO_MAX = 1.25
 

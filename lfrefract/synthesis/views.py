@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,11 +66,13 @@ __all__ = [
     "ViewStack",
     "apply_resampling",
     "finite_pixels",
+    "lens_count",
     "micro_image_samples",
     "naive_view",
     "naive_view_bytes",
     "raw_channels",
     "recorded_mask",
+    "resampling_bytes",
     "resampling_matrix",
     "subaperture_centre_m",
     "subaperture_limit_px",
@@ -82,9 +85,23 @@ __all__ = [
 VIEW_KINDS = ("central", "full")
 
 #: Bytes per output pixel that resampling per-lens values onto a pinhole image allocates besides the
-#: image: the Delaunay interpolation weights, their candidates and the sparse matrix (measured with
-#: tracemalloc on the tiny camera: 480 B at 920 x 690 px, 710 B at 92 x 69 px, where fixed costs weigh more).
-RESAMPLING_BYTES_PER_PIXEL = 600
+#: image: the interpolation weights, their sort and the sparse matrix (measured with tracemalloc: 120 B
+#: at 0.1 to 7 Mpx on tiny, tiny-2x and the Illum; see :func:`resampling_bytes` for the rest).
+RESAMPLING_BYTES_PER_PIXEL = 150
+
+#: Bytes per lens of the resampling: the Delaunay triangulation (qhull's working memory, which
+#: tracemalloc does not see: 950 B per lens of resident memory at the Illum's 233 171 lenses) and the
+#: triangles' arrays (about 300 B).
+RESAMPLING_BYTES_PER_LENS = 1500
+
+#: Rows and candidate pixels the resampling's rasterisation (:func:`_linear_weights`) handles at once,
+#: so that its temporaries stay bounded (:data:`RESAMPLING_BYTES_PER_CHUNK_ITEM` each, about 6 MiB)
+#: and a signal (SIGTERM) is handled between chunks.
+RESAMPLING_CHUNK = 1 << 16
+
+#: Bytes of temporaries per row and candidate pixel of a rasterisation chunk, beyond the pixels it finds
+#: (measured 70-110 B).
+RESAMPLING_BYTES_PER_CHUNK_ITEM = 100
 
 #: Bytes per raw pixel of the full-aperture view's per-pixel captured rays (measured: 270 B).
 FULL_VIEW_BYTES_PER_RAW_PIXEL = 300
@@ -224,17 +241,47 @@ def naive_view(
 def naive_view_bytes(camera: LightFieldCamera, output: PinholeCamera, *, kind: str, channels: int) -> int:
     """Estimated peak memory of :func:`naive_view`, bytes (see :mod:`lfrefract._memory`).
 
-    The float32 raw copy, and the larger of: per output pixel the resampling
-    (:data:`RESAMPLING_BYTES_PER_PIXEL`) and the image (float64 product and float32 result, 12
-    bytes per channel); for ``kind="full"`` the captured rays of every raw pixel
-    (:data:`FULL_VIEW_BYTES_PER_RAW_PIXEL`), freed before the resampling. Measured with tracemalloc
-    on the tiny camera at 6 000 to 630 000 output pixels: 0.75-0.88 of the estimate.
+    The float32 raw copy, and the larger of: the resampling (:func:`resampling_bytes`) and the image
+    (float64 product and float32 result, 12 bytes per channel and output pixel); for
+    ``kind="full"`` the captured rays of every raw pixel (:data:`FULL_VIEW_BYTES_PER_RAW_PIXEL`),
+    freed before the resampling. Measured with tracemalloc, plus qhull's memory, on tiny and tiny-2x
+    at 6 000 to 240 000 output pixels: 0.5-0.6 of the estimate for the central view (a float32 raw
+    is not copied), 0.6-0.8 for the full view.
     """
     raw_pixels = camera.sensor.width_px * camera.sensor.height_px
     pixels = output.width_px * output.height_px
-    resampling = pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
+    resampling = resampling_bytes(lenses=lens_count(camera), pixels=pixels) + 12 * channels * pixels
     rays = FULL_VIEW_BYTES_PER_RAW_PIXEL * raw_pixels if kind == "full" else 0
     return int(4 * channels * raw_pixels + max(resampling, rays))
+
+
+def resampling_bytes(*, lenses: int, pixels: int) -> int:
+    """Estimated peak memory of :func:`resampling_matrix` over ``lenses`` lenses onto ``pixels`` output
+    pixels, bytes (see :mod:`lfrefract._memory`).
+
+    :data:`RESAMPLING_BYTES_PER_PIXEL` per pixel, :data:`RESAMPLING_BYTES_PER_LENS` per lens and one
+    chunk of the rasterisation (:data:`RESAMPLING_CHUNK` rows and candidates, fewer for small images).
+    Its work is bounded whatever the lenses' positions (a calibrated camera's distortion included).
+    Measured with tracemalloc, plus qhull's 950 B per lens that it does not see, on tiny, tiny-2x and
+    the Illum at 54 px to 7 Mpx, thin-lens and k1 = 0.05 lens fields: 0.65-0.9 of the estimate.
+    """
+    chunk = min(RESAMPLING_CHUNK, pixels + 2 * lenses)
+    return int(
+        RESAMPLING_BYTES_PER_PIXEL * pixels
+        + RESAMPLING_BYTES_PER_LENS * lenses
+        + RESAMPLING_BYTES_PER_CHUNK_ITEM * chunk
+    )
+
+
+def lens_count(camera: LightFieldCamera) -> int:
+    """About how many lenses have their micro-image centre on ``camera``'s sensor (what
+    :meth:`LightFieldCamera.lens_indices_on_sensor` lists), from the areas alone, erring high by the
+    lenses along the rim: for a memory estimate, without listing them."""
+    scale = camera.micro_image_scale
+    cell = abs(float(np.linalg.det(camera.mla.basis_m))) * scale * scale
+    width, height = camera.sensor.size_m
+    pitch = math.sqrt(cell)
+    return math.ceil((width + 2 * pitch) * (height + 2 * pitch) / cell)
 
 
 def view_stack_bytes(
@@ -243,16 +290,17 @@ def view_stack_bytes(
     """Estimated peak memory of :func:`subaperture_stack`, bytes (see :mod:`lfrefract._memory`).
 
     The views, ``grid^2`` float32 images of ``channels`` channels; the contiguous channel planes of
-    the raw image; one resampling (:data:`RESAMPLING_BYTES_PER_PIXEL` per output pixel) and one
-    view's product. ``exported`` adds what ``lfrefract.formats.viewstack.write_view_stack`` allocates over the
-    whole stack: one byte per value (its mask of finite values). Measured with tracemalloc on the
-    tiny camera (3 x 3 and 9 x 9 views of 6 000 to 630 000 pixels): 0.80-0.91 of the estimate.
+    the raw image; one resampling (:func:`resampling_bytes`) and one view's product (12 bytes per
+    channel and output pixel). ``exported`` adds what ``lfrefract.formats.viewstack.write_view_stack``
+    allocates over the whole stack: one byte per value (its mask of finite values). Measured with
+    tracemalloc, plus qhull's memory, on tiny and tiny-2x (3 x 3 and 9 x 9 views of 6 000 to 240 000
+    pixels): 0.55-0.9 of the estimate.
     """
     raw_pixels = camera.sensor.width_px * camera.sensor.height_px
     pixels = output.width_px * output.height_px
     values = grid * grid * pixels * channels
     total = (5 if exported else 4) * values + 8 * channels * raw_pixels
-    total += pixels * (RESAMPLING_BYTES_PER_PIXEL + 12 * channels)
+    total += resampling_bytes(lenses=lens_count(camera), pixels=pixels) + 12 * channels * pixels
     return int(total)
 
 
@@ -398,8 +446,17 @@ def resampling_matrix(
     matrix : scipy.sparse.csr_matrix, shape (height * width, M)
     inside : ndarray of bool, shape (height * width,)
         Pixels inside the triangulation (the others have no value).
+
+    Raises
+    ------
+    ParameterError
+        If its estimated memory (:func:`resampling_bytes`) exceeds the memory available.
     """
     lenses = camera.lens_indices_on_sensor() if lenses is None else lenses
+    require_memory(
+        f"resampling {len(lenses)} lenses onto a {output.width_px} x {output.height_px} px image",
+        resampling_bytes(lenses=len(lenses), pixels=output.width_px * output.height_px),
+    )
     slopes = camera.mla.centres_m(lenses) / camera.lens_to_mla_m + np.asarray(slope_shift)
     correction = checked_correction(ray_correction)
     if correction is not None:
@@ -419,7 +476,16 @@ def _linear_weights(positions: np.ndarray, width: int, height: int) -> tuple[np.
 
     Returns, for every pixel centre ``(u, v)`` of a ``width x height`` grid inside the
     triangulation: its flat index (``v * width + u``), the three vertices (P, 3) of a triangle
-    containing it and their barycentric weights (P, 3).
+    containing it and their barycentric weights (P, 3); a pixel on an edge two triangles share takes
+    the first triangle's.
+
+    Each triangle is rasterised row by row: on every pixel row its box spans, only the pixels
+    between its edges (and one on either side, for round-off) are tested. As the triangles do not
+    overlap, the work is about the pixels inside plus three per triangle row, whatever the
+    triangles' shapes (a calibrated lens field's sides bow in or out, and Delaunay fills the hull
+    with slivers as wide as the image). It runs in chunks of at most :data:`RESAMPLING_CHUNK` rows
+    and candidates, so that its temporaries stay bounded and a signal (SIGTERM) is handled between
+    them.
     """
     simplices = Delaunay(positions).simplices
     corners = positions[simplices]  # (M, 3, 2)
@@ -431,19 +497,73 @@ def _linear_weights(positions: np.ndarray, width: int, height: int) -> tuple[np.
     simplices, corners, e0, e1, det = simplices[proper], corners[proper], e0[proper], e1[proper], det[proper]
     # Inverse of the 2 x 2 matrix [e0 e1] (columns), per triangle.
     inverse = np.stack([np.stack([e1[:, 1], -e1[:, 0]], 1), np.stack([-e0[:, 1], e0[:, 0]], 1)], 1) / det[:, None, None]
-    lo = np.clip(np.ceil(corners.min(axis=1)).astype(np.int64), 0, [width - 1, height - 1])
-    hi = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, [width - 1, height - 1])
-    span = int(max((hi - lo).max(initial=0), 0)) + 1
-    oy, ox = np.mgrid[0:span, 0:span]
-    candidates = lo[:, None, :] + np.stack([ox.ravel(), oy.ravel()], axis=1)[None]  # (M, S, 2)
-    bary = np.einsum("mij,msj->msi", inverse, candidates - corners[:, None, 2])
-    weights = np.concatenate([bary, 1.0 - bary.sum(axis=2, keepdims=True)], axis=2)
+    del e0, e1, det
+    last = np.array([width - 1, height - 1])
+    lo = np.clip(np.ceil(corners.min(axis=1)), 0, last).astype(np.int64)  # each triangle's box, in the image
+    hi = np.clip(np.floor(corners.max(axis=1)), 0, last).astype(np.int64)
+    rows = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
     tol = 100 * np.finfo(np.float64).eps
-    inside = np.all(weights >= -tol, axis=2) & np.all(candidates <= hi[:, None, :], axis=2)
-    tri, cand = np.nonzero(inside)
-    pixel = candidates[tri, cand, 1] * width + candidates[tri, cand, 0]
-    pixel, first = np.unique(pixel, return_index=True)  # a pixel on a shared edge: either triangle
-    return pixel, simplices[tri[first]], weights[tri[first], cand[first]]
+    found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for t0, t1 in _chunks(rows, RESAMPLING_CHUNK):  # triangle rows, triangle by triangle
+        tri = np.repeat(np.arange(t0, t1), rows[t0:t1])
+        y = lo[tri, 1] + _ranks(rows[t0:t1])
+        x0, x1 = _row_extent(corners[tri], y)
+        x0 = np.maximum(np.clip(np.floor(x0), -1, width) - 1, lo[tri, 0]).astype(np.int64)  # a pixel's margin
+        x1 = np.minimum(np.clip(np.ceil(x1), -1, width) + 1, hi[tri, 0]).astype(np.int64)
+        counts = np.maximum(x1 - x0 + 1, 0)
+        for r0, r1 in _chunks(counts, RESAMPLING_CHUNK):  # candidate pixels, row by row
+            row = np.repeat(np.arange(r0, r1), counts[r0:r1])
+            u = x0[row] + _ranks(counts[r0:r1])
+            v = y[row]
+            t = tri[row]
+            du, dv = u - corners[t, 2, 0], v - corners[t, 2, 1]
+            b0 = inverse[t, 0, 0] * du + inverse[t, 0, 1] * dv
+            b1 = inverse[t, 1, 0] * du + inverse[t, 1, 1] * dv
+            weights = np.stack([b0, b1, 1.0 - (b0 + b1)], axis=1)
+            inside = np.all(weights >= -tol, axis=1)
+            found.append((v[inside] * width + u[inside], t[inside], weights[inside]))
+    if not found:
+        return np.zeros(0, np.int64), np.zeros((0, 3), simplices.dtype), np.zeros((0, 3))
+    pixel = np.concatenate([f[0] for f in found])
+    tri_of = np.concatenate([f[1] for f in found])
+    weights = np.concatenate([f[2] for f in found])
+    del found
+    pixel, first = np.unique(pixel, return_index=True)  # a pixel on a shared edge: the first triangle
+    return pixel, simplices[tri_of[first]], weights[first]
+
+
+def _chunks(sizes: np.ndarray, limit: int) -> Iterator[tuple[int, int]]:
+    """Consecutive ranges ``[i, j)`` of ``sizes`` whose sum is at most ``limit`` (or a single item)."""
+    total = np.cumsum(sizes)
+    start, n = 0, len(sizes)
+    while start < n:
+        base = int(total[start - 1]) if start else 0
+        stop = max(int(np.searchsorted(total, base + limit, side="right")), start + 1)
+        yield start, stop
+        start = stop
+
+
+def _ranks(counts: np.ndarray) -> np.ndarray:
+    """``0 .. c - 1`` for each ``c`` of ``counts``, concatenated."""
+    total = int(counts.sum())
+    return np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
+def _row_extent(corners: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the row ``y`` (N,) crosses the triangles ``corners`` (N, 3, 2): the least and greatest
+    x of its edges that span the row (every row between the lowest and highest corner is spanned by
+    two edges, or by three at a corner; an edge along the row is met by the other two at its ends)."""
+    lo = np.full(len(y), np.inf)
+    hi = np.full(len(y), -np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = corners[:, i], corners[:, j]
+        spans = (np.minimum(a[:, 1], b[:, 1]) <= y) & (y <= np.maximum(a[:, 1], b[:, 1])) & (a[:, 1] != b[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.clip((y - a[:, 1]) / (b[:, 1] - a[:, 1]), 0.0, 1.0)
+        x = a[:, 0] + t * (b[:, 0] - a[:, 0])
+        lo = np.where(spans, np.minimum(lo, x), lo)
+        hi = np.where(spans, np.maximum(hi, x), hi)
+    return lo, hi
 
 
 def subaperture_centre_m(

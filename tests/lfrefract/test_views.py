@@ -9,7 +9,12 @@ import pytest
 
 from lfrefract import ParameterError, camera_preset, virtual_camera_for
 from lfrefract.synthesis.views import naive_view, subaperture_centre_m, subaperture_view
-from tests.tolerances import SENSOR_VS_NUMPY_DIRECTION, SENSOR_VS_NUMPY_ORIGIN_M
+from tests.tolerances import (
+    RESAMPLING_REPRODUCTION_PX,
+    RESAMPLING_WEIGHT_ROUNDOFF,
+    SENSOR_VS_NUMPY_DIRECTION,
+    SENSOR_VS_NUMPY_ORIGIN_M,
+)
 
 TINY = camera_preset("tiny")
 
@@ -106,14 +111,14 @@ def test_a_recorded_mask_of_the_wrong_shape_or_type_is_refused():
 def test_a_view_beyond_the_memory_is_refused_before_it_is_allocated(monkeypatch):
     import lfrefract._memory
     from lfrefract import PinholeCamera
-    from lfrefract.synthesis.views import naive_view_bytes
+    from lfrefract.synthesis.views import RESAMPLING_BYTES_PER_PIXEL, naive_view_bytes
 
     huge = PinholeCamera(focal_px=3e4, cx_px=3e4, cy_px=3e4, width_px=60_000, height_px=60_000)
     raw, _ = _holed(0.0)
     estimate = naive_view_bytes(TINY, huge, kind="central", channels=3)
-    assert estimate > 3.6e9 * 600  # the resampling alone: 600 bytes per output pixel
+    assert estimate > 3.6e9 * RESAMPLING_BYTES_PER_PIXEL  # the resampling alone
     for call in (lambda: naive_view(TINY, raw, output=huge), lambda: subaperture_view(TINY, raw, (0, 0), output=huge)):
-        with pytest.raises(ParameterError, match=r"of 60000 x 60000 px needs about .* TiB of memory .* available"):
+        with pytest.raises(ParameterError, match=r"of 60000 x 60000 px needs about .* GiB of memory .* available"):
             call()
     # The default view fits; with no memory available it is refused too, naming the figures.
     monkeypatch.setattr(lfrefract._memory, "available_memory", lambda: (1000, "test"))
@@ -121,3 +126,140 @@ def test_a_view_beyond_the_memory_is_refused_before_it_is_allocated(monkeypatch)
         ParameterError, match=r"a full view of 92 x 69 px needs about .* more than the 1000 B available \(test\)"
     ):
         naive_view(TINY, raw, kind="full")
+
+
+# =============================================================================== the resampling's bounded work
+def _all_candidates_weights(positions: np.ndarray, width: int, height: int):
+    """The resampling's weights as first written: every triangle tested against a square of candidate
+    pixels as wide as the largest triangle's box (the reference the bounded rasterisation must equal)."""
+    from scipy.spatial import Delaunay
+
+    simplices = Delaunay(positions).simplices
+    corners = positions[simplices]
+    e0, e1 = corners[:, 0] - corners[:, 2], corners[:, 1] - corners[:, 2]
+    det = e0[:, 0] * e1[:, 1] - e0[:, 1] * e1[:, 0]
+    scale = np.max(np.abs(positions)) + 1.0
+    proper = np.abs(det) > 1e-12 * scale**2
+    proper &= np.all(corners.max(axis=1) >= 0, axis=1) & np.all(corners.min(axis=1) <= [width - 1, height - 1], axis=1)
+    simplices, corners, e0, e1, det = simplices[proper], corners[proper], e0[proper], e1[proper], det[proper]
+    inverse = np.stack([np.stack([e1[:, 1], -e1[:, 0]], 1), np.stack([-e0[:, 1], e0[:, 0]], 1)], 1) / det[:, None, None]
+    lo = np.clip(np.ceil(corners.min(axis=1)).astype(np.int64), 0, [width - 1, height - 1])
+    hi = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, [width - 1, height - 1])
+    span = int(max((hi - lo).max(initial=0), 0)) + 1
+    oy, ox = np.mgrid[0:span, 0:span]
+    candidates = lo[:, None, :] + np.stack([ox.ravel(), oy.ravel()], axis=1)[None]
+    bary = np.einsum("mij,msj->msi", inverse, candidates - corners[:, None, 2])
+    weights = np.concatenate([bary, 1.0 - bary.sum(axis=2, keepdims=True)], axis=2)
+    tol = 100 * np.finfo(np.float64).eps
+    inside = np.all(weights >= -tol, axis=2) & np.all(candidates <= hi[:, None, :], axis=2)
+    tri, cand = np.nonzero(inside)
+    pixel = candidates[tri, cand, 1] * width + candidates[tri, cand, 0]
+    pixel, first = np.unique(pixel, return_index=True)
+    return pixel, simplices[tri[first]], weights[tri[first], cand[first]]
+
+
+def _lens_positions(camera, output, correction=None, shift=(0.0, 0.0)) -> np.ndarray:
+    slopes = camera.mla.centres_m(camera.lens_indices_on_sensor()) / camera.lens_to_mla_m + np.asarray(shift)
+    if correction is not None:
+        slopes = correction.slopes(slopes)
+    return output.focal_px * slopes + np.array([output.cx_px, output.cy_px])
+
+
+@pytest.mark.parametrize(
+    ("correction", "shift", "size"),
+    [(None, (0.0, 0.0), None), (None, (0.003, -0.002), (150, 110)), (-0.05, (0.0, 0.0), None), (0.05, (0, 0), None)],
+    ids=["thin", "shifted-larger", "barrel", "pincushion"],
+)
+def test_the_bounded_resampling_equals_the_all_candidates_one(correction, shift, size):
+    """On the tiny camera (the pincushion's long hull triangles lie outside its image) the bounded
+    rasterisation finds the same pixels, triangles and weights as testing every candidate."""
+    from lfrefract.optics.ray_correction import RayCorrection
+    from lfrefract.synthesis.views import _linear_weights
+
+    output = virtual_camera_for(TINY)
+    if size is not None:
+        w, h = size  # finer pixels: 1.6 times the focal length
+        output = dataclasses.replace(
+            output, focal_px=1.6 * output.focal_px, width_px=w, height_px=h, cx_px=w / 2, cy_px=h / 2
+        )
+    ray_correction = None if correction is None else RayCorrection(k1=correction)
+    positions = _lens_positions(TINY, output, ray_correction, shift)
+    got = _linear_weights(positions, output.width_px, output.height_px)
+    want = _all_candidates_weights(positions, output.width_px, output.height_px)
+    assert len(got[0]) > 0.9 * output.width_px * output.height_px
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_array_equal(got[2], want[2])
+
+
+def _check_linear_reproduction(positions, pixel, corners, weights, width):
+    """Barycentric weights reproduce every inside pixel's own coordinates from its triangle's vertices."""
+    assert np.all(weights >= -RESAMPLING_WEIGHT_ROUNDOFF)
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=0, atol=RESAMPLING_WEIGHT_ROUNDOFF)
+    mixed = np.einsum("pi,pij->pj", weights, positions[corners])
+    uv = np.stack([pixel % width, pixel // width], axis=1)
+    np.testing.assert_allclose(mixed, uv, rtol=0, atol=RESAMPLING_REPRODUCTION_PX)
+
+
+def test_a_calibrated_cameras_distorted_lens_field_is_resampled_within_its_memory_estimate():
+    """A calibration's pincushion (k1 = 0.05) bows the sides of tiny-2x's lens field in: Delaunay fills
+    the hull with slivers as wide as the 188 x 141 px image, and giving every triangle the widest one's
+    box of candidates asked for 6.8 GiB. The resampling stays within resampling_bytes, and is right."""
+    import tracemalloc
+
+    from lfrefract.optics.ray_correction import RayCorrection
+    from lfrefract.synthesis.views import resampling_bytes, resampling_matrix
+
+    camera = camera_preset("tiny-2x")
+    output = virtual_camera_for(camera)
+    correction = RayCorrection(k1=0.05)
+    positions = _lens_positions(camera, output, correction)
+    tracemalloc.start()
+    try:
+        _, matrix, inside = resampling_matrix(camera, output, ray_correction=correction)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    pixels = output.width_px * output.height_px
+    assert peak < resampling_bytes(lenses=len(positions), pixels=pixels)
+    assert inside.sum() > 0.9 * pixels
+    pixels_uv = np.argwhere(inside.reshape(output.height_px, -1))[:, ::-1]
+    np.testing.assert_allclose(matrix[inside] @ positions, pixels_uv, rtol=0, atol=RESAMPLING_REPRODUCTION_PX)
+
+
+def test_triangles_larger_than_the_image_take_work_of_their_pixels_only():
+    """Thousands of lenses in one corner and three far away: every triangle reaching the far ones
+    covers a large part of the 1000 x 1000 px image (the all-candidates method asked for 4000 x 10^6
+    candidates). The bounded rasterisation's memory stays within resampling_bytes, every pixel is found
+    once, and its weights reproduce its coordinates."""
+    import tracemalloc
+
+    from lfrefract.synthesis.views import _linear_weights, resampling_bytes
+
+    rng = np.random.default_rng(3)
+    cluster = 5.0 + 40.0 * rng.random((2000, 2))
+    far = np.array([[-5e4, -5e4], [5e4, -4e4], [-3e4, 6e4]])
+    positions = np.concatenate([cluster, far])
+    tracemalloc.start()
+    try:
+        pixel, corners, weights = _linear_weights(positions, 1000, 1000)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < resampling_bytes(lenses=len(positions), pixels=10**6)
+    np.testing.assert_array_equal(pixel, np.arange(10**6))
+    _check_linear_reproduction(positions, pixel, corners, weights, 1000)
+
+
+def test_a_resampling_beyond_the_memory_is_refused_by_every_caller(monkeypatch):
+    """The resampling checks its own estimate, so the conventional view of ``calibrate approx`` and
+    the baselines (built without naive_view's check) refuse before allocating too."""
+    import lfrefract._memory
+    from lfrefract.methods import ConventionalView
+
+    monkeypatch.setattr(lfrefract._memory, "available_memory", lambda: (1000, "test"))
+    with pytest.raises(
+        ParameterError,
+        match=r"resampling 1907 lenses onto a 92 x 69 px image needs about .* more than the 1000 B available \(test\)",
+    ):
+        ConventionalView(TINY, virtual_camera_for(TINY))
