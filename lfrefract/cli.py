@@ -237,6 +237,24 @@ def _option_files(args: argparse.Namespace) -> list[Path]:
     return [Path(v) for v in given if v is not None and not (v in PRESETS and not Path(v).exists())]
 
 
+def _read_capture(path: str | Path, **options: Any) -> Capture:
+    """:func:`read_capture`, saying on stderr which white image developed a Lytro capture (and how far its
+    micro-images lie from the capture's), and which files of a white folder were passed over and why."""
+    capture = read_capture(path, **options)
+    lytro = (capture.sidecar or {}).get("lytro", {}) if capture.developed is not None else {}
+    white = lytro.get("white")
+    if white is not None:
+        for item in white["passed_over"]:
+            print(f"{path}: white {item['file']} not used: {item['reason']}", file=sys.stderr)
+        print(
+            f"{path}: white image {white['file']} (zoom step {white['zoom_step']}, focus step {white['focus_step']}; "
+            f"the capture's {lytro['zoom_step']}, {lytro['focus_step']}; its micro-image centres within "
+            f"{white['micro_image_shift_px']:.2f} px of the capture's)",
+            file=sys.stderr,
+        )
+    return capture
+
+
 def _capture_files(path: str | Path) -> list[Path]:
     """A raw image and the sidecar beside it: what a command reads of a capture (given as the raw
     image or as its folder, as :func:`read_capture` takes it; a Lytro ``.raw`` with its metadata)."""
@@ -312,7 +330,7 @@ def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
     out = _exr_out(args)
     depth_options = _depth_aware_options(args)
-    capture = read_capture(
+    capture = _read_capture(
         args.raw,
         camera=_given_camera(args),
         port=port_from_file(args.port) if args.port is not None else None,
@@ -573,7 +591,7 @@ def _figure(
 def naive(args: argparse.Namespace) -> int:
     """``lfrefract naive``: conventional view with no refraction handling."""
     out = _exr_out(args)
-    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
+    capture = _read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
     prepare_output_files(
         {out: ExpectedKind(exr_role=f"naive_{args.kind}")},
         inputs=[*_capture_files(args.raw), *_option_files(args)],
@@ -595,7 +613,7 @@ def naive(args: argparse.Namespace) -> int:
 
 def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
-    capture = read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
+    capture = _read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
     camera, output = _known(capture.camera, capture.raw_path), capture.output
     if isinstance(args.grid, int) and args.grid >= 3 and args.grid % 2:  # else subaperture_stack names the grid
         require_memory(
@@ -746,7 +764,7 @@ def _board_raw(
     a Lytro capture its grey mosaic (``colour`` ``"cfa"``) or its demosaiced image (``"demosaic"``,
     :meth:`DevelopedCapture.measured`), NaN where its white gives no light; None: ``command``'s
     default (:data:`DEFAULT_BOARD_COLOUR`)."""
-    capture = read_capture(path, camera=camera, white=white, nonfinite=nonfinite)
+    capture = _read_capture(path, camera=camera, white=white, nonfinite=nonfinite)
     if capture.developed is None:
         if colour is not None:
             raise ParameterError(

@@ -53,16 +53,18 @@ from lfrefract.formats.lytro import colour_from_metadata
 from lfrefract.formats.outputs import atomic_file, staged_directory
 from lfrefract.formats.paramfile import check_kind, read_camera_file, read_parameter_json, read_port_file
 from lfrefract.formats.whites import (
+    MAX_WHITE_SHIFT_PX,
     DevelopedCapture,
+    FlatField,
     WhiteImage,
     develop,
     existing_path,
     find_white_images,
     is_lytro_file,
     lens_steps,
+    micro_image_shift_px,
     read_lytro_file,
     same_file,
-    select_white_image,
 )
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -86,6 +88,7 @@ __all__ = [
     "CaptureSidecar",
     "CaptureTruth",
     "UnrecordedValues",
+    "WhiteChoice",
     "camera_from_option",
     "capture_parameters",
     "check_lens_modelled",
@@ -574,25 +577,99 @@ def read_capture(
     return Capture(raw=raw, nonfinite=nonfinite, **fields)
 
 
+@dataclass(frozen=True, kw_only=True)
+class WhiteChoice:
+    """The white image :func:`white_for` chose for a capture, and why.
+
+    Attributes
+    ----------
+    white : WhiteImage
+    field : FlatField
+        Its flat field (:meth:`WhiteImage.flat_field`).
+    shift_px : float
+        How far its micro-image centres lie from the capture's, by the two files' metadata
+        (:func:`lfrefract.formats.whites.micro_image_shift_px`), pixels.
+    passed_over : tuple of (str, str)
+        Files of the folder nearer the capture's lens setting that were not taken, and why (no white
+        image, another sensor, micro-images too far off).
+    """
+
+    white: WhiteImage
+    field: FlatField
+    shift_px: float
+    passed_over: tuple[tuple[str, str], ...] = ()
+
+
 def white_for(
-    white: str | os.PathLike | WhiteImage, *, zoom_step: int, focus_step: int, capture: Path | None = None
-) -> WhiteImage:
-    """The white image ``white`` names: a white-image file, or a folder of them (the one whose lens
-    steps are nearest ``zoom_step`` and ``focus_step``, :func:`lfrefract.formats.whites.select_white_image`;
-    the ``capture`` itself is never its own white, should it lie in the folder)."""
+    white: str | os.PathLike | WhiteImage,
+    *,
+    zoom_step: int,
+    focus_step: int,
+    camera: LightFieldCamera,
+    capture: Path | None = None,
+) -> WhiteChoice:
+    """The white image ``white`` names for a capture of ``camera`` at lens steps ``zoom_step`` and
+    ``focus_step``: a white-image file, or a folder of them.
+
+    From a folder the files are tried nearest setting first (:func:`lfrefract.formats.whites.select_white_image`'s
+    order: zoom, then focus, then name), and the first that is a white image of the capture's sensor
+    whose micro-image centres lie within :data:`lfrefract.formats.whites.MAX_WHITE_SHIFT_PX` of the
+    capture's is taken; the ones passed over are named in the result. The ``capture`` itself is never
+    its own white. A file named alone must pass the same tests.
+
+    Raises
+    ------
+    FileFormatError
+        If no file qualifies: the message names each file and why.
+    """
     if isinstance(white, WhiteImage):
-        return white
-    path = existing_path(white, "white image")
-    if path.is_dir():
-        found = find_white_images(path)
-        if capture is not None:
-            found = [w for w in found if not same_file(w.path, capture)]
-        if not found:
-            raise FileFormatError(f"white-image folder {str(path)!r} holds no white image but the capture itself")
-        return select_white_image(found, zoom_step=zoom_step, focus_step=focus_step)
-    if capture is not None and same_file(path, capture):
-        raise FileFormatError(f"{str(path)!r} is the capture itself, not its white image")
-    return WhiteImage.from_file(path)
+        candidates, folder = [white], None
+    else:
+        path = existing_path(white, "white image")
+        if path.is_dir():
+            folder = path
+            found = find_white_images(path)
+            if capture is not None:
+                found = [w for w in found if not same_file(w.path, capture)]
+            if not found:
+                raise FileFormatError(f"white-image folder {str(path)!r} holds no white image but the capture itself")
+            candidates = sorted(
+                found, key=lambda w: (abs(w.zoom_step - zoom_step), abs(w.focus_step - focus_step), w.path.name)
+            )
+        else:
+            if capture is not None and same_file(path, capture):
+                raise FileFormatError(f"{str(path)!r} is the capture itself, not its white image")
+            candidates, folder = [WhiteImage.from_file(path)], None
+    passed: list[tuple[str, str]] = []
+    sensor = (camera.sensor.height_px, camera.sensor.width_px)
+    for candidate in candidates:
+        try:
+            field, white_camera, problem = candidate.prepared()
+        except FileFormatError as exc:
+            if folder is None:
+                raise
+            passed.append((str(candidate.path), str(exc)))
+            continue
+        if problem is not None:
+            if folder is None:
+                raise FileFormatError(f"{str(candidate.path)!r} is no white image: {problem}")
+            why = f"it is no white image: {problem}"
+        elif field.shape != sensor:
+            why = f"its sensor is {field.shape[1]} x {field.shape[0]} px, the capture's {sensor[1]} x {sensor[0]} px"
+        else:
+            shift = micro_image_shift_px(camera, white_camera)
+            if shift <= MAX_WHITE_SHIFT_PX:
+                return WhiteChoice(white=candidate, field=field, shift_px=shift, passed_over=tuple(passed))
+            why = (
+                f"its micro-image centres lie up to {shift:.2f} px from the capture's (zoom step "
+                f"{candidate.zoom_step}, focus step {candidate.focus_step}; the capture's {zoom_step}, {focus_step}); "
+                f"at most {MAX_WHITE_SHIFT_PX:g} px is taken: use the white of the capture's lens setting"
+            )
+        if folder is None:
+            raise FileFormatError(f"white image {str(candidate.path)!r} does not fit the capture: {why}")
+        passed.append((str(candidate.path), why))
+    reasons = "; ".join(f"{file!r}: {why}" for file, why in passed)
+    raise FileFormatError(f"white-image folder {str(folder)!r} holds no white image for this capture: {reasons}")
 
 
 def _lytro_colour(metadata: dict, where: str) -> tuple[np.ndarray, tuple[float, float, float]]:
@@ -634,12 +711,19 @@ def read_lytro_capture(
     steps = lens_steps(lytro.metadata, repr(str(path)))
     chosen = None
     flat = None
+    choice = None
     if white is not None:
         known_steps = all(isinstance(v, int) and not isinstance(v, bool) for v in steps.values())
-        if not known_steps and not isinstance(white, WhiteImage) and Path(white).is_dir():
+        if not known_steps and not isinstance(white, WhiteImage) and existing_path(white, "white image").is_dir():
             raise FileFormatError(f"{str(path)!r} has no lens steps (devices.lens): name the white image itself")
-        chosen = white_for(white, zoom_step=steps["zoomStep"] or 0, focus_step=steps["focusStep"] or 0, capture=path)
-        flat = chosen.flat_field()
+        choice = white_for(
+            white,
+            zoom_step=steps["zoomStep"] or 0,
+            focus_step=steps["focusStep"] or 0,
+            camera=lytro.camera,
+            capture=path,
+        )
+        chosen, flat = choice.white, choice.field
     matrix, gains = _lytro_colour(lytro.metadata, repr(str(path)))
     try:
         developed = develop(lytro.mosaic, flat, white_image=chosen, color_matrix=matrix, white_balance_gain=gains)
@@ -650,8 +734,14 @@ def read_lytro_capture(
         "zoom_step": steps["zoomStep"],
         "focus_step": steps["focusStep"],
         "white": None
-        if chosen is None
-        else {"file": str(chosen.path), "zoom_step": chosen.zoom_step, "focus_step": chosen.focus_step},
+        if choice is None
+        else {
+            "file": str(choice.white.path),
+            "zoom_step": choice.white.zoom_step,
+            "focus_step": choice.white.focus_step,
+            "micro_image_shift_px": round(choice.shift_px, 3),
+            "passed_over": [{"file": file, "reason": why} for file, why in choice.passed_over],
+        },
         "saturated_pixels": int(developed.saturated.sum()),
         "bad_white_pixels": int(developed.bad.sum()),
     }

@@ -32,6 +32,7 @@ from __future__ import annotations
 import errno
 import functools
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,12 +44,17 @@ from scipy import ndimage
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.lytro import LytroCapture, colour_matrix, read_f01_raw, read_illum_raw, read_lfr
 from lfrefract.formats.mosaic import RawMosaic, cfa_channels, demosaic_values
+from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.validate import bounded_float, one_of
 
 __all__ = [
     "BAD_PIXEL_RATIO",
     "LYTRO_SUFFIXES",
+    "MAX_SATURATED_SHARE",
+    "MAX_WHITE_SHIFT_PX",
     "MIN_WHITE_FRACTION",
+    "WHITE_EVEN_SHARE",
+    "WHITE_GAP_SHARE",
     "DevelopedCapture",
     "FlatField",
     "WhiteImage",
@@ -59,9 +65,11 @@ __all__ = [
     "flat_field",
     "is_lytro_file",
     "lens_steps",
+    "micro_image_shift_px",
     "read_lytro_file",
     "same_file",
     "select_white_image",
+    "white_problem",
 ]
 
 #: File suffixes of Lytro captures and white images (case-insensitive).
@@ -92,6 +100,21 @@ BAD_PIXEL_RATIO = 4.0
 _JUDGED_FRACTION = 0.5
 #: Percentile of a colour's white values taken as its bright level.
 _BRIGHT_PERCENTILE = 99.0
+#: Most pixels of a white image that may be saturated: a white is exposed below saturation (hot pixels
+#: are a few in a million).
+MAX_SATURATED_SHARE = 0.01
+#: Least share of a white's lit field with a darker gap within one micro-image pitch (:func:`white_problem`).
+#: Measured: 100 % on the simulator's tiny whites and the test's drawn whites, 0 % on a uniform image.
+WHITE_GAP_SHARE = 0.5
+#: Least share of a white's lit field whose micro-images within 1.5 pitches are all at least half as
+#: bright as the brightest (:func:`white_problem`). Measured: 100 % on the simulator's tiny whites and the
+#: test's drawn whites; 33 % on a tiny render of the default scene, 0-34 % on boards of 1.5-6 micro-image
+#: squares. The margin is for the field's rim, where a real lens vignettes whole micro-images.
+WHITE_EVEN_SHARE = 0.8
+#: Farthest (pixels) a white's micro-image centres may lie from the capture's, by the two files'
+#: metadata (:func:`micro_image_shift_px`): beyond it a white of another zoom or focus setting would
+#: devignette a micro-image's rim by its neighbour's gap (the synthesis leaves 0.71 px of the rim out).
+MAX_WHITE_SHIFT_PX = 1.0
 
 
 def is_lytro_file(path: str | os.PathLike) -> bool:
@@ -219,6 +242,12 @@ class WhiteImage:
         """The white image of ``path``, its lens steps read from its metadata (not its mosaic)."""
         path = existing_path(path, "white image")
         where = repr(str(path))
+        if not is_lytro_file(path):
+            raise FileFormatError(
+                f"white image {where} is no Lytro file: a white image is a .raw with its .json or .txt metadata beside "
+                "it, or an .lfr, a folder of them (lfsim whites writes one); it develops a Lytro capture's mosaic, "
+                "which a render's raw.exr is not"
+            )
         if path.suffix.lower() == ".lfr":
             metadata = read_lfr(path).metadata
         else:
@@ -237,15 +266,94 @@ class WhiteImage:
 
     def flat_field(self) -> FlatField:
         """The white's :func:`flat_field`, prepared once for all the captures it develops (read again
-        only when the file changes: its size or modification time)."""
-        stat = self.path.stat()
-        return _flat_field_of_file(str(self.path.resolve()), stat.st_mtime_ns, stat.st_size)
+        only when the file changes: its size or modification time).
+
+        Raises
+        ------
+        FileFormatError
+            If the file is no white image (:func:`white_problem`), naming it and why.
+        """
+        field, _, problem = self.prepared()
+        if problem is not None:
+            raise FileFormatError(f"{str(self.path)!r} is no white image: {problem}")
+        return field
+
+    def prepared(self) -> tuple[FlatField, LightFieldCamera, str | None]:
+        """Its :func:`flat_field`, the camera of its metadata and :func:`white_problem` (why it is no
+        white image; None if it is one), read once (again only when the file changes).
+
+        Raises
+        ------
+        FileFormatError
+            If the file cannot be read.
+        """
+        stat = existing_path(self.path, "white image").stat()
+        return _white_of_file(str(self.path.resolve()), stat.st_mtime_ns, stat.st_size)
 
 
 @functools.lru_cache(maxsize=2)  # a stereo rig's two whites; an Illum's flat field is about 0.25 GB
-def _flat_field_of_file(path: str, mtime_ns: int, size: int) -> FlatField:
-    """:func:`flat_field` of the white image file ``path``; ``mtime_ns`` and ``size`` key the cache."""
-    return flat_field(read_lytro_file(path).mosaic)
+def _white_of_file(path: str, mtime_ns: int, size: int) -> tuple[FlatField, LightFieldCamera, str | None]:
+    """:meth:`WhiteImage.prepared` of the white image file ``path``; ``mtime_ns`` and ``size`` key the cache."""
+    white = read_lytro_file(path)
+    field = flat_field(white.mosaic)
+    problem = white_problem(white.mosaic, field, micro_image_pitch_px=white.camera.micro_image_pitch_px)
+    return field, white.camera, problem
+
+
+def white_problem(mosaic: RawMosaic, field: FlatField, *, micro_image_pitch_px: float) -> str | None:
+    """Why ``mosaic`` (with its :func:`flat_field`) is no white image; None if it is one.
+
+    A white image is a diffuser's uniform light through the camera: under :data:`MAX_SATURATED_SHARE`
+    of its pixels saturated, some light, micro-images separated by darker gaps (in at least
+    :data:`WHITE_GAP_SHARE` of its lit field a window of one micro-image pitch holds a pixel under half
+    its brightest), and every lit micro-image near the level of its neighbours (in at least
+    :data:`WHITE_EVEN_SHARE` of the lit field the dimmest micro-image peak within 1.5 pitches is at least
+    half the brightest). Each colour is taken relative to its bright level, bad pixels left out. A
+    capture of a scene or a board fails the last test, an image with no micro-images the gaps'.
+    """
+    saturated = float(mosaic.saturated.mean())
+    if saturated > MAX_SATURATED_SHARE:
+        return (
+            f"{100 * saturated:.1f} % of its pixels are saturated (at the white level {mosaic.white_level_dn}); "
+            f"a white image is exposed below saturation (at most {100 * MAX_SATURATED_SHARE:g} %)"
+        )
+    levels = field.lit_dn[field.usable & ~field.bad]
+    if levels.size == 0 or float(levels.max()) <= 0.0:
+        return f"it holds no light (every pixel at or below the black level {mosaic.black_level_dn})"
+    bright = _bright_levels(field.lit_dn.astype(np.float64), mosaic.channel_index())
+    relative = np.divide(field.lit_dn, bright, out=np.zeros(field.shape), where=(bright > 0.0) & ~field.bad)
+    relative = relative.astype(np.float32)
+    near = np.ones((2 * math.ceil(micro_image_pitch_px / 2) + 1,) * 2, dtype=np.uint8)
+    around = np.ones((2 * math.ceil(1.5 * micro_image_pitch_px) + 1,) * 2, dtype=np.uint8)
+    border = cv2.BORDER_REPLICATE
+    peak = cv2.dilate(relative, near, borderType=border)
+    valley = cv2.erode(relative, near, borderType=border)
+    dimmest = cv2.erode(peak, around, borderType=border)
+    brightest = cv2.dilate(peak, around, borderType=border)
+    lit = brightest >= 2.0 * MIN_WHITE_FRACTION
+    gaps = float((valley < 0.5 * peak)[lit].mean())
+    if gaps < WHITE_GAP_SHARE:
+        return (
+            f"it shows no micro-images: only {100 * gaps:.0f} % of its lit field has darker gaps within one "
+            f"micro-image pitch ({micro_image_pitch_px:.1f} px), a white image's has them nearly everywhere"
+        )
+    even = float((dimmest >= 0.5 * brightest)[lit].mean())
+    if even < WHITE_EVEN_SHARE:
+        return (
+            f"its light is not uniform: in {100 * (1 - even):.0f} % of its lit field a micro-image is under half as "
+            "bright as one within 1.5 pitches (a scene or board capture?); a white image's micro-images follow the "
+            f"lens's smooth fall-off (allowed: {100 * (1 - WHITE_EVEN_SHARE):.0f} %)"
+        )
+    return None
+
+
+def micro_image_shift_px(a: LightFieldCamera, b: LightFieldCamera) -> float:
+    """Largest distance between the micro-image centres of the same microlenses in cameras ``a`` and
+    ``b`` (over ``a``'s lenses on its sensor), pixels: how far a white of ``b`` misplaces ``a``'s micro-images."""
+    indices = a.lens_indices_on_sensor()
+    if len(indices) == 0:
+        return 0.0
+    return float(np.max(np.linalg.norm(a.micro_image_centres_px(indices) - b.micro_image_centres_px(indices), axis=1)))
 
 
 def find_white_images(folder: str | os.PathLike) -> list[WhiteImage]:

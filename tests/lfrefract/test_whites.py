@@ -6,6 +6,7 @@ into 10-bit counts and written as the Illum ships its whites (.raw with a .txt o
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -339,3 +340,88 @@ def test_malformed_lens_steps_are_named(tmp_path):
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(FileFormatError, match=r"devices.lens.zoomStep' must be an integer, got '6000'"):
         read_capture(path)
+
+
+def board_mosaic(square_px: int = 25) -> RawMosaic:
+    """A board capture through the small camera: squares of 0.1 and 1 of the white's light (3 micro-images a side)."""
+    lit = white_mosaic().counts.astype(np.float64) - BLACK
+    rows, cols = np.mgrid[: lit.shape[0], : lit.shape[1]]
+    board = np.where(((rows // square_px) + (cols // square_px)) % 2, 0.1, 1.0)
+    counts = np.rint(BLACK + board * lit).astype(np.uint16)
+    return RawMosaic(counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10)
+
+
+def test_a_capture_in_the_white_folder_is_passed_over_and_the_white_used_is_said(tmp_path, capsys):
+    """A board capture at the capture's lens steps, sorting first, was taken as the white (mean 0.81, not 0.15)."""
+    capture = lytro_capture(tmp_path, 0.15)
+    whites = tmp_path / "whites"
+    whites.mkdir()
+    board = write_white(whites, "0000-board", board_mosaic(), zoom=6000, focus=0)
+    white = write_white(whites, "white", white_mosaic(), zoom=6000, focus=0)
+    developed = read_capture(capture, white=whites)
+    used = developed.sidecar["lytro"]["white"]
+    assert used["file"] == str(white)
+    assert [item["file"] for item in used["passed_over"]] == [str(board)]
+    assert "not uniform" in used["passed_over"][0]["reason"]
+    inside = developed.developed.fully_lit
+    np.testing.assert_allclose(np.nanmean(developed.raw[inside]), 0.15, rtol=0.05)
+    # The command says which white it used, and which it passed over.
+    assert core_cli.main(["naive", str(capture), "--white", str(whites), "--out", str(tmp_path / "n.exr")]) == 0
+    err = capsys.readouterr().err
+    assert f"white image {white} (zoom step 6000, focus step 0; the capture's 6000, 0;" in err
+    assert f"white {board} not used: it is no white image: its light is not uniform" in err
+    # Alone, the board is refused.
+    (whites / "white.raw").unlink()
+    with pytest.raises(FileFormatError, match=r"holds no white image for this capture: .*0000-board.raw.*not uniform"):
+        read_capture(capture, white=whites)
+    with pytest.raises(FileFormatError, match=r"0000-board.raw' is no white image: its light is not uniform"):
+        read_capture(capture, white=board)
+
+
+def _filled(level: int) -> RawMosaic:
+    counts = np.full(white_mosaic().shape, level, dtype=np.uint16)
+    return RawMosaic(counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10)
+
+
+@pytest.mark.parametrize(
+    ("mosaic", "match"),
+    [
+        (_filled(BLACK), r"w.raw' is no white image: it holds no light"),  # it blamed the capture
+        (_filled(WHITE_LEVEL), r"w.raw' is no white image: 100.0 % of its pixels are saturated"),  # all NaN, exit 0
+        (_filled(300), r"w.raw' is no white image: it shows no micro-images"),
+    ],
+)
+def test_a_white_file_that_is_no_white_image_is_refused_naming_it(tmp_path, mosaic, match):
+    capture = lytro_capture(tmp_path)
+    white = write_white(tmp_path, "w", mosaic, zoom=6000, focus=0)
+    with pytest.raises(FileFormatError, match=match):
+        read_capture(capture, white=white)
+
+
+def test_a_white_whose_micro_images_lie_elsewhere_is_refused_and_far_steps_are_said(tmp_path, capsys):
+    capture = lytro_capture(tmp_path)
+    camera = small_camera()
+    # Another focus: the exit pupil (the thin lens) nearer the MLA moves the outer micro-images by 1.7 px.
+    other = dataclasses.replace(camera, lens_to_mla_m=4e-3, f_number=3.0)
+    far = write_illum_raw(
+        tmp_path / "far.raw", white_mosaic(), other, settings=LytroSettings(zoom_step=6000, focus_step=900)
+    )[0]
+    with pytest.raises(
+        FileFormatError, match=r"far.raw' does not fit the capture: .* up to 1.\d\d px .*focus step 900"
+    ):
+        read_capture(capture, white=far)
+    # The same optics at a zoom step far from the capture's: taken (its micro-images are the capture's), and said.
+    steps = write_white(tmp_path, "steps", white_mosaic(), zoom=99999, focus=0)
+    assert core_cli.main(["naive", str(capture), "--white", str(steps), "--out", str(tmp_path / "n.exr")]) == 0
+    err = capsys.readouterr().err
+    assert "(zoom step 99999, focus step 0; the capture's 6000, 0; its micro-image centres within 0.00 px" in err
+
+
+def test_an_exr_given_as_the_white_is_told_what_a_white_is(tmp_path):
+    """A render's raw.exr with its meta.json beside it was asked for a .json/.txt."""
+    capture = lytro_capture(tmp_path)
+    (tmp_path / "white").mkdir()
+    (tmp_path / "white" / "raw.exr").write_bytes(b"\0" * 64)
+    (tmp_path / "white" / "meta.json").write_text("{}")
+    with pytest.raises(FileFormatError, match=r"raw.exr' is no Lytro file: a white image is a .raw with its .json"):
+        read_capture(capture, white=tmp_path / "white" / "raw.exr")
