@@ -121,6 +121,7 @@ from simulator.experiments.rigstereo import (
     describe_error,
     experiment_rig,
     render_capture,
+    rig_setup,
     square_size_m,
     warp_maps,
     with_objects,
@@ -818,7 +819,15 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     write_text_atomically(out_dir / "commands.txt", "\n".join(log) + "\n")
     figures = (
         _summary_figure(out_dir, rows, scale=scale, lens=lens, sensor=setup.sensor, wall=real.wall),
-        *plane_figures(out_dir, list(by_depth), disparities, plane_depths, list(METHODS), prefix="pipeline"),
+        *plane_figures(
+            out_dir,
+            list(by_depth),
+            disparities,
+            plane_depths,
+            list(METHODS),
+            setup=f"pipeline ({scale}), {lens} lens, {setup.sensor} sensor: {rig_setup(real)}",
+            prefix="pipeline",
+        ),
     )
     return ExperimentResult(
         name="pipeline",

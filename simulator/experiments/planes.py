@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfrefract.figures import NO_VALUE_RGB, new_figure, save_figure
 from lfrefract.formats.outputs import scratch_directory
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import fit_plane_ransac
@@ -63,6 +64,7 @@ from simulator.experiments.rigstereo import (
     match,
     prepare_methods,
     render_captures,
+    rig_setup,
     warp_maps,
 )
 from simulator.rig import RigConfig
@@ -71,6 +73,8 @@ __all__ = [
     "DEPTH_MATCHER",
     "PLANE_DEPTHS_M",
     "PLANE_ROTATION_XYZ_DEG",
+    "disparity_figure",
+    "errors_figure",
     "plane_figures",
     "plane_in_left",
     "plane_measures",
@@ -88,6 +92,8 @@ PLANE_ROTATION_XYZ_DEG = (10.0, -15.0, 0.0)
 DEPTH_MATCHER = "none"
 #: Texture seed of the plane.
 PLANE_TEXTURE_SEED = 7
+#: Resolution of the figures, dots per inch.
+FIGURE_DPI = 90
 
 
 def setup_for(scale: str) -> RigSetup:
@@ -191,7 +197,7 @@ def _run(
                 for path, points, colours in clouds:
                     write_ply(path, points, colours)
             rows += new
-    figures = plane_figures(out_dir, rows, disparities, plane_depths, order)
+    figures = plane_figures(out_dir, rows, disparities, plane_depths, order, setup=rig_setup(base))
     return ExperimentResult(
         name="planes",
         scale=scale,
@@ -364,10 +370,18 @@ def _summary(rows: list[dict], plane_depths: tuple[float, ...], order: list[str]
 
 
 def plane_figures(
-    out_dir: Path, rows, disparities, plane_depths: Sequence[float], order: list[str], *, prefix: str = "planes"
+    out_dir: Path,
+    rows,
+    disparities,
+    plane_depths: Sequence[float],
+    order: list[str],
+    *,
+    setup: str,
+    prefix: str = "planes",
 ) -> tuple[Path, ...]:
-    """Write the disparity maps per matcher (``<prefix>_disparity_<matcher>.png``) and the errors by
-    depth and method (``<prefix>_errors.png``); the paths.
+    """Write the disparity maps per matcher (``<prefix>_disparity_<matcher>.png``,
+    :func:`disparity_figure`) and the errors by depth and method (``<prefix>_errors.png``,
+    :func:`errors_figure`); the paths.
 
     Parameters
     ----------
@@ -380,47 +394,122 @@ def plane_figures(
         Depths, metres, in order.
     order : list of str
         Methods, in order.
+    setup : str
+        The set-up, for the titles (:func:`~simulator.experiments.rigstereo.rig_setup`).
     prefix : str
         The files' prefix.
     """
-    import matplotlib as mpl
-
-    mpl.use("Agg")
-    import matplotlib.pyplot as plt
-
-    depths, paths = plane_depths, []
-    shown = [m for m in order if any((matcher, m, d) in disparities for matcher in MATCHERS for d in depths)]
+    paths = []
     for matcher in MATCHERS:
-        columns = max(len(shown), 1)
-        fig, axes = plt.subplots(len(depths), columns, figsize=(2.6 * columns, 2.2 * len(depths)), squeeze=False)
-        for i, depth in enumerate(depths):
-            values = [disparities.get((matcher, m, depth)) for m in shown]
-            finite = [v[np.isfinite(v)] for v in values if v is not None]
-            finite = np.concatenate(finite) if finite else np.zeros(0)
-            lo, hi = np.percentile(finite, [2, 98]) if len(finite) else (0.0, 1.0)
-            for j in range(columns):
-                ax = axes[i, j]
-                ax.set_xticks([])
-                ax.set_yticks([])
-                if j < len(shown) and values[j] is not None:
-                    ax.imshow(values[j], cmap="viridis", vmin=lo, vmax=hi)
-                if i == 0 and j < len(shown):
-                    ax.set_title(shown[j], fontsize=9)
-                if j == 0:
-                    ax.set_ylabel(f"{depth:g} m", fontsize=9)
-        fig.suptitle(f"{matcher} disparity maps (rectified left view; NaN white)", fontsize=9)
         paths.append(Path(out_dir) / f"{prefix}_disparity_{matcher}.png")
-        fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
-        plt.close(fig)
+        save_figure(disparity_figure(disparities, matcher, plane_depths, order, rows=rows, setup=setup), paths[-1])
+    paths.append(Path(out_dir) / f"{prefix}_errors.png")
+    save_figure(errors_figure(rows, plane_depths, order, setup=setup), paths[-1])
+    return tuple(paths)
 
+
+def disparity_figure(
+    disparities, matcher: str, plane_depths: Sequence[float], order: Sequence[str], *, rows=(), setup: str
+):
+    """The disparity maps of ``matcher`` as a Figure: a row per plane depth with its colour bar in
+    pixels, a column per method that has a map, pixels with no disparity grey (with a legend entry),
+    and the set-up in the title.
+
+    Parameters
+    ----------
+    disparities : dict
+        ``(matcher, method, depth) -> disparity map`` (rectified left view, px; NaN: no match).
+    matcher : str
+        The matcher shown.
+    plane_depths : sequence of float
+        Depths, metres, in order (the rows).
+    order : sequence of str
+        Methods, in order; those without a map of any matcher are left out.
+    rows : sequence of dict
+        :func:`plane_rows`'s rows: a panel with no map says whether its method failed there.
+    setup : str
+        The set-up, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib as mpl
+    from matplotlib.patches import Patch
+
+    depths = tuple(plane_depths)
+    shown = [m for m in order if any((k, m, d) in disparities for k in MATCHERS for d in depths)]
+    columns = max(len(shown), 1)
+    fig = new_figure(2.7 * columns + 1.0, 2.3 * len(depths) + 1.3, dpi=FIGURE_DPI)
+    axes = fig.subplots(len(depths), columns, squeeze=False)
+    colours = mpl.colormaps["viridis"].with_extremes(bad=NO_VALUE_RGB)
+    failed = {(r["method"], r["depth_m"]) for r in rows if r.get("status") != "ok"}
+    for i, depth in enumerate(depths):
+        values = [disparities.get((matcher, m, depth)) for m in shown]
+        finite = [v[np.isfinite(v)] for v in values if v is not None]
+        finite = np.concatenate(finite) if finite else np.zeros(0)
+        lo, hi = np.percentile(finite, [2, 98]) if len(finite) else (0.0, 1.0)
+        image = None
+        for j in range(columns):
+            ax = axes[i, j]
+            title = f"{shown[j]}, {depth:g} m" if j < len(shown) else ""
+            if j < len(shown) and values[j] is not None:
+                image = ax.imshow(values[j], cmap=colours, vmin=lo, vmax=hi, interpolation="nearest")
+                ax.set_title(title, fontsize=8)
+                ax.set_xlabel("u (px)", fontsize=8)
+                ax.set_ylabel("v (px)", fontsize=8)
+                ax.tick_params(labelsize=7)
+            else:
+                why = "failed" if j < len(shown) and (shown[j], depth) in failed else "no disparity map"
+                ax.set_title(title, fontsize=8)
+                ax.text(0.5, 0.5, why, ha="center", va="center", transform=ax.transAxes, fontsize=8)
+                ax.set_axis_off()
+        if image is not None:
+            bar = fig.colorbar(image, ax=axes[i, :], shrink=0.9, extend="both")
+            bar.set_label(f"disparity at {depth:g} m (px)", fontsize=8)
+            bar.ax.tick_params(labelsize=7)
+    no_match = Patch(facecolor=NO_VALUE_RGB, edgecolor="0.3", label="no disparity (no match)")
+    fig.legend(handles=[no_match], loc="outside lower center", fontsize=8)
+    fig.suptitle(
+        f"{matcher.upper()} disparity maps of the rectified left view, by method and plane depth\n{setup}", fontsize=9
+    )
+    return fig
+
+
+def errors_figure(rows, plane_depths: Sequence[float], order: Sequence[str], *, setup: str):
+    """The errors by plane depth and method as a Figure: bars of the plane-fit RMSE, the error against
+    the true plane and that error in the exact coverage, a row per matcher; a method with no value is
+    named in the legend; the set-up in the title.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        :func:`plane_rows`'s rows.
+    plane_depths : sequence of float
+        Depths, metres, in order.
+    order : sequence of str
+        Methods, in order.
+    setup : str
+        The set-up, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.patches import Patch
+
+    depths = tuple(plane_depths)
     keys = (
         ("plane_rmse_mm", "plane fit RMSE (paper's metric)"),
         ("truth_error_mm", "error against the true plane"),
         ("exact_truth_error_mm", "same, exact coverage only"),
     )
-    fig, axes = plt.subplots(len(MATCHERS), len(keys), figsize=(15, 3.4 * len(MATCHERS)), squeeze=False)
+    fig = new_figure(15.0, 3.2 * len(MATCHERS) + 1.3, dpi=FIGURE_DPI)
+    axes = fig.subplots(len(MATCHERS), len(keys), squeeze=False)
     width = 0.8 / max(len(order), 1)
     x = np.arange(len(depths))
+    colours = [f"C{j % 10}" for j in range(len(order))]
+    missing: dict[str, set] = {m: set() for m in order}
     for i, matcher in enumerate(MATCHERS):
         for j, method in enumerate(order):
             ours = {
@@ -429,16 +518,22 @@ def plane_figures(
                 if r["method"] == method and r["matcher"] in (matcher, DEPTH_MATCHER) and r["status"] == "ok"
             }
             for ax, (key, _) in zip(axes[i], keys, strict=True):
-                heights = [ours[d][key] if d in ours else math.nan for d in depths]
-                ax.bar(x + (j - len(order) / 2 + 0.5) * width, heights, width, label=method)
+                heights = [float(ours[d].get(key, math.nan)) if d in ours else math.nan for d in depths]
+                missing[method] |= {d for d, h in zip(depths, heights, strict=True) if not math.isfinite(h)}
+                ax.bar(x + (j - len(order) / 2 + 0.5) * width, heights, width, color=colours[j])
         for ax, (_, title) in zip(axes[i], keys, strict=True):
-            ax.set(xticks=x, xticklabels=[f"{d:g} m" for d in depths], ylabel="mm", title=f"{matcher}: {title}")
+            ax.set(xticks=x, xticklabels=[f"{d:g}" for d in depths], title=f"{matcher.upper()}: {title}")
+            ax.set_xlabel("plane depth (m)")
+            ax.set_ylabel("error (mm)")
             ax.grid(alpha=0.3, axis="y")
-    axes[0, 0].legend(fontsize=8)
-    paths.append(Path(out_dir) / f"{prefix}_errors.png")
-    fig.savefig(paths[-1], dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return tuple(paths)
+    handles = []
+    for method, colour in zip(order, colours, strict=True):
+        gaps = sorted(missing[method])
+        label = method if not gaps else f"{method} (no value at {', '.join(f'{d:g}' for d in gaps)} m)"
+        handles.append(Patch(facecolor=colour, label=label))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4) or 1, fontsize=8)
+    fig.suptitle(f"plane reconstruction errors by method and plane depth\n{setup}", fontsize=10)
+    return fig
 
 
 @register("planes", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"), keeps_renders=True)

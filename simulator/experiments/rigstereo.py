@@ -67,6 +67,7 @@ __all__ = [
     "prepare_methods",
     "render_capture",
     "render_captures",
+    "rig_setup",
     "square_size_m",
     "warp_maps",
     "with_objects",
@@ -116,6 +117,36 @@ class RigSetup:
     calibration_depths_m: tuple[float, float]
     px_per_square: float
     spp: int
+
+
+def rig_setup(rig: RigConfig) -> str:
+    """The set-up of a rig figure in one line: the cameras, their baseline and the wall (tilt from the
+    world's +z, glass, distance from the world origin, water).
+
+    Parameters
+    ----------
+    rig : RigConfig
+
+    Returns
+    -------
+    str
+        E.g. ``"default-rig: two tiny-2x cameras 60 mm apart behind a wall tilted 20 deg (4 mm glass,
+        15 mm from the rig's origin, water n = 1.333)"``.
+    """
+    names = [camera.scene.camera.name for camera in rig.cameras]
+    counts = {1: "one", 2: "two", 3: "three", 4: "four"}
+    if len(set(names)) == 1:
+        cameras = f"{counts.get(len(names), len(names))} {names[0]} camera{'s' if len(names) > 1 else ''}"
+    else:
+        cameras = " and ".join(f"{camera.name} ({name})" for camera, name in zip(rig.cameras, names, strict=True))
+    if len(rig.cameras) > 1:
+        cameras += f" {np.linalg.norm(rig.relative_pose(1)[1]) * 1e3:.3g} mm apart"
+    wall = rig.wall
+    tilt = np.degrees(np.arccos(np.clip(wall.normal[2], -1.0, 1.0)))
+    return (
+        f"{rig.name}: {cameras} behind a wall tilted {tilt:.3g} deg ({wall.thickness_m * 1e3:.3g} mm glass, "
+        f"{wall.distance_m * 1e3:.3g} mm from the rig's origin, water n = {wall.n_water:.4g})"
+    )
 
 
 def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) -> RigConfig:

@@ -1,0 +1,113 @@
+"""The figures of the experiments and of the demo follow the project's figure rule (tests/figure_rules.py):
+each image has a colour bar naming its quantity and unit, the axes are labelled, the set-up (camera,
+wall or port, depth) is in the title, and pixels with no value are drawn grey (NaN was white) with a
+legend entry saying what grey means. Built on small synthetic inputs: no render."""
+
+from __future__ import annotations
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from lfrefract.figures import NO_VALUE_RGB
+from simulator.experiments.planes import disparity_figure, errors_figure, plane_figures, setup_for
+from simulator.experiments.rigstereo import MATCHERS, experiment_rig, rig_setup
+from tests.figure_rules import assert_follows_the_figure_rules, image_pixels_in_png
+
+#: A PNG stores 8-bit colours: a saved grey is within one step of NO_VALUE_RGB.
+PNG_STEP = 1.5 / 255
+
+DEPTHS = (0.3, 0.45, 0.6)
+METHODS = ["approx near", "proposed", "ideal"]
+
+
+def _legend_texts(fig) -> list[str]:
+    return [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+
+
+def _colour_bar_labels(fig) -> list[str]:
+    return [ax.get_ylabel() for ax in fig.axes if hasattr(ax, "_colorbar")]
+
+
+@pytest.fixture(scope="module")
+def rig_title() -> str:
+    return rig_setup(experiment_rig(setup_for("tiny")))
+
+
+def _disparities() -> dict:
+    """Disparity maps (px) of every matcher, method and depth, NaN (no match) in the top eighth."""
+    rng = np.random.default_rng(0)
+    maps = {}
+    for matcher in MATCHERS:
+        for method in METHODS:
+            for depth in DEPTHS:
+                disparity = rng.uniform(10.0, 20.0, (30, 40)) / depth
+                disparity[:4] = np.nan
+                maps[(matcher, method, depth)] = disparity
+    return maps
+
+
+def _rows(failed: str | None = None) -> list[dict]:
+    rows = []
+    for matcher in MATCHERS:
+        for method in METHODS:
+            for depth in DEPTHS:
+                if method == failed:
+                    rows.append({"matcher": matcher, "method": method, "depth_m": depth, "status": "failed"})
+                    continue
+                measures = {"plane_rmse_mm": 1.0 + depth, "truth_error_mm": 2.0, "exact_truth_error_mm": 1.5}
+                rows.append({"matcher": matcher, "method": method, "depth_m": depth, "status": "ok", **measures})
+    return rows
+
+
+def test_the_rig_set_up_names_the_cameras_their_baseline_and_the_wall(rig_title):
+    assert rig_title.startswith("experiment-default: two tiny-2x cameras 60 mm apart")
+    assert "wall tilted 20 deg (4 mm glass, 15 mm from the rig's origin, water n = 1.333)" in rig_title
+
+
+@pytest.mark.parametrize("matcher", MATCHERS)
+def test_the_disparity_figures_follow_the_figure_rules(matcher, rig_title):
+    fig = disparity_figure(_disparities(), matcher, DEPTHS, METHODS, rows=_rows(), setup=rig_title)
+    assert_follows_the_figure_rules(fig)
+    labels = _colour_bar_labels(fig)
+    assert labels == [f"disparity at {d:g} m (px)" for d in DEPTHS]  # one per depth: each has its range
+    assert "no disparity (no match)" in _legend_texts(fig)
+    assert rig_title in fig.get_suptitle()
+    assert matcher.upper() in fig.get_suptitle()
+
+
+def test_the_disparity_figures_draw_pixels_with_no_match_grey(tmp_path, rig_title):
+    disparities = _disparities()
+    paths = plane_figures(tmp_path, _rows(), disparities, DEPTHS, METHODS, setup=rig_title)
+    assert [p.name for p in paths] == ["planes_disparity_zncc.png", "planes_disparity_sgbm.png", "planes_errors.png"]
+    png = matplotlib.image.imread(paths[0])
+    fig = disparity_figure(disparities, "zncc", DEPTHS, METHODS, rows=_rows(), setup=rig_title)
+    panels = [(fig.axes[4 * i], ("zncc", METHODS[i], d)) for i, d in enumerate(DEPTHS)]  # the diagonal
+    for ax, key in panels:
+        disparity = disparities[key]
+        shown = image_pixels_in_png(fig, ax, png, disparity.shape)
+        none = ~np.isfinite(disparity).ravel()
+        assert np.abs(shown[none] - NO_VALUE_RGB).max() <= PNG_STEP, key
+        assert np.abs(shown[~none] - NO_VALUE_RGB).max(axis=1).min() > PNG_STEP, key  # the rest in colour
+
+
+def test_a_failed_method_is_said_in_the_disparity_figure(rig_title):
+    disparities = {k: v for k, v in _disparities().items() if not (k[1] == "proposed" and k[2] == 0.45)}
+    rows = [r for r in _rows() if not (r["method"] == "proposed" and r["depth_m"] == 0.45)]
+    rows += [{"matcher": m, "method": "proposed", "depth_m": 0.45, "status": "failed"} for m in MATCHERS]
+    fig = disparity_figure(disparities, "zncc", DEPTHS, METHODS, rows=rows, setup=rig_title)
+    assert_follows_the_figure_rules(fig)
+    panel = fig.axes[3 + 1]  # second row (0.45 m), second column (proposed)
+    assert [t.get_text() for t in panel.texts] == ["failed"]
+    assert not panel.images
+
+
+def test_the_errors_figure_follows_the_figure_rules_and_names_a_method_with_no_value(rig_title):
+    fig = errors_figure(_rows(failed="approx near"), DEPTHS, METHODS, setup=rig_title)
+    assert_follows_the_figure_rules(fig)
+    assert rig_title in fig.get_suptitle()
+    texts = _legend_texts(fig)
+    assert "approx near (no value at 0.3, 0.45, 0.6 m)" in texts
+    assert {"proposed", "ideal"} <= set(texts)
+    plots = [ax for ax in fig.axes if not hasattr(ax, "_colorbar")]
+    assert all(ax.get_ylabel() == "error (mm)" and ax.get_xlabel() == "plane depth (m)" for ax in plots)
