@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -35,6 +36,12 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
     -------
     Path
         The written path.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written (a full disk, a read-only folder), naming ``path`` and the cause;
+        OpenEXR's own failures (``RuntimeError``) become this too. Nothing is left at ``path``.
     """
     path = Path(path)
     arr = np.asarray(image)
@@ -58,8 +65,20 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, *, role: str) -> Path:
         _SCHEMA_KEY: str(SCHEMA_VERSION),
     }
     with atomic_file(path) as tmp, OpenEXR.File(header, channels) as exr:
-        exr.write(str(tmp))
+        try:
+            exr.write(str(tmp))
+        except RuntimeError as exc:  # OpenEXR reports a failed write (a full disk: ENOSPC) in words only
+            raise _write_error(path, str(exc)) from None
     return path
+
+
+def _write_error(path: Path, message: str) -> OSError:
+    """An OSError naming ``path`` for OpenEXR's failure ``message``: with the errno whose text it quotes
+    (``No space left on device``), else with the message itself."""
+    for code in sorted(errno.errorcode):
+        if os.strerror(code) in message:
+            return OSError(code, os.strerror(code), str(path))
+    return OSError(f"could not write the OpenEXR file {str(path)!r}: {message}")
 
 
 def read_exr(path: str | os.PathLike, *, role: str | None = None) -> np.ndarray:

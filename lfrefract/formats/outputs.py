@@ -18,7 +18,7 @@ The rules (``docs/conventions.md``, "Outputs and --overwrite"):
   the current directory (or one of its parents) as an output directory;
 * staging directories left by a killed process (no live process holds their lock) are removed
   by the next output into the same parent; an earlier output moved aside for replacement is put
-  back if the new one never took its place; SIGTERM is turned into a clean exit by the CLIs
+  back if the new one never took its place; SIGTERM and Ctrl-C are turned into a clean exit by the CLIs
   (:func:`terminate_cleanly`), which also removes the scratch folders of :func:`scratch_directory`
   (the temporary working folders of the simulator's experiments).
 """
@@ -44,6 +44,7 @@ __all__ = [
     "ExpectedKind",
     "atomic_file",
     "current_umask",
+    "on_termination",
     "output_manifest",
     "prepare_output_files",
     "refuse_own_inputs",
@@ -124,11 +125,36 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         _apply_umask(tmp, directory=False)
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        named = _naming(exc, tmp, path)
+        if named is exc:
+            raise
+        raise named from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     finally:
         _PENDING.pop(tmp, None)
+
+
+def _naming(exc: OSError, written: Path, shown: str | os.PathLike) -> OSError:
+    """``exc`` naming ``shown`` where it names no file or only ``written`` (a temporary name) or a path inside it.
+
+    Python's low-level writes (``write``, ``flush``, ``close``) raise with ``filename`` unset, so a full
+    disk said ``[Errno 28] No space left on device`` and no more; the user needs to know which output failed.
+    Returns ``exc`` itself when it already names another path, or has no errno (its message says all).
+    """
+    if exc.errno is None:
+        return exc
+    name = exc.filename
+    if name is None or name == str(written):
+        name = str(shown)
+    elif isinstance(name, str) and name.startswith(str(written) + os.sep):
+        name = str(shown) + name[len(str(written)) :]
+    else:
+        return exc
+    return OSError(exc.errno, exc.strerror, name, None, exc.filename2)
 
 
 @contextlib.contextmanager
@@ -538,6 +564,12 @@ def staged_directory(
         _write_manifest(stage, kind)
         _apply_umask(stage, directory=True)
         _commit(stage, out)
+    except OSError as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        named = _naming(exc, stage, out_dir)
+        if named is exc:
+            raise
+        raise named from exc
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
@@ -578,33 +610,73 @@ def _commit(stage: Path, out: Path) -> None:
 
 
 @contextlib.contextmanager
-def terminate_cleanly(prog: str) -> Iterator[None]:
-    """Make SIGTERM remove this process's unfinished outputs before it ends (exit status 143).
+def terminate_cleanly(prog: str, *, resumable: bool = False) -> Iterator[None]:
+    """Make SIGTERM and SIGINT (Ctrl-C) remove this process's unfinished outputs before it ends.
 
     Python's default for SIGTERM ends the process with no cleanup, leaving staging directories and
-    temporary files. Raising an exception from the handler instead is unsafe: it can surface inside
-    native code (Dr.Jit, OpenEXR) and abort the process. So the handler deletes what
-    :func:`staged_directory` and :func:`atomic_file` have not finished, says so on standard error
-    and ends the process at once. An earlier output caught between the two renames of a replacement
-    is put back by the next run (:func:`remove_stale_staging`).
+    temporary files; its default for SIGINT raises KeyboardInterrupt wherever the main thread is, which
+    can be inside native code or a module's import (Dr.Jit, OpenEXR) and then ends in a traceback of
+    unrelated errors. So the handler runs the callbacks registered with :func:`on_termination` (the
+    newest first: a dataset run stops its worker processes there), deletes what
+    :func:`staged_directory`, :func:`atomic_file` and :func:`scratch_directory` have not finished, says
+    so in one line on standard error and ends the process at once: exit status 143 for SIGTERM, 130 for
+    SIGINT. An earlier output caught between the two renames of a replacement is put back by the next
+    run (:func:`remove_stale_staging`).
+
+    Parameters
+    ----------
+    prog : str
+        The command's name, which starts the line.
+    resumable : bool
+        The command resumes where it stopped when run again (the line says so).
 
     Only the main thread can install signal handlers; elsewhere the block runs unchanged. The
-    previous handler is restored afterwards.
+    previous handlers are restored afterwards.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def _terminate(signum, frame):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C does not cut the cleanup short
+        for callback in _ON_TERMINATION[::-1]:
+            with contextlib.suppress(Exception):
+                callback()
         for path, directory in list(_PENDING.items())[::-1]:
             with contextlib.suppress(OSError):
                 shutil.rmtree(path) if directory else path.unlink()
+        if signum == signal.SIGINT:
+            line = f"{prog}: interrupted; unfinished outputs removed" + ("; run again to resume" if resumable else "")
+        else:
+            line = f"{prog}: terminated (signal {signum}); unfinished outputs removed"
         with contextlib.suppress(OSError):
-            os.write(2, f"{prog}: terminated (signal {signum}); unfinished outputs removed\n".encode())
+            os.write(2, f"{line}\n".encode())
         os._exit(128 + signum)
 
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = {signum: signal.signal(signum, _terminate) for signum in (signal.SIGTERM, signal.SIGINT)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+# Callbacks terminate_cleanly runs before it removes the unfinished outputs (see on_termination).
+_ON_TERMINATION: list = []
+
+
+@contextlib.contextmanager
+def on_termination(callback) -> Iterator[None]:
+    """While the block runs, :func:`terminate_cleanly`'s handler calls ``callback()`` before it removes
+    the unfinished outputs (a dataset run stops its worker processes there, so none writes on).
+
+    Parameters
+    ----------
+    callback : callable
+        Takes no arguments; its exceptions are ignored (the process is ending).
+    """
+    _ON_TERMINATION.append(callback)
+    try:
+        yield
+    finally:
+        _ON_TERMINATION.remove(callback)

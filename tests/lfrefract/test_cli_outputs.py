@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import errno
 import os
+import resource
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +20,7 @@ import pytest
 from lfrefract.cli import main
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
+from lfrefract.formats.outputs import MANIFEST_NAME
 from tests.lfrefract.test_cli import commands, make_capture, refused
 
 
@@ -159,6 +165,60 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, captu
     argv[argv.index("--out") + 1] = str(blocker / "n.exr")
     err = refused(capsys, argv)
     assert "a-file" in err
+
+
+def run_with_file_size_limit(argv: list[str], limit_bytes: int, *, cli: str) -> subprocess.CompletedProcess:
+    """Run ``cli`` (``"lfrefract"`` or ``"simulator"``) with ``argv`` in a subprocess whose files may not
+    grow past ``limit_bytes`` (RLIMIT_FSIZE, SIGXFSZ ignored): every write beyond it really fails,
+    as on a full disk (EFBIG instead of ENOSPC), inside OpenEXR, numpy or Python alike."""
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    code = f"import sys; from {cli}.cli import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.run(
+        [sys.executable, "-c", code, *argv], capture_output=True, text=True, preexec_fn=limit, timeout=600
+    )
+
+
+def test_a_write_that_fails_inside_openexr_is_one_line_naming_the_file(tmp_path, capture):
+    """A full disk while OpenEXR wrote gave a traceback and exit 1 (OpenEXR raises RuntimeError); the
+    failure is now an OSError naming the output, one line, exit 2, with nothing half-written left."""
+    out = tmp_path / "out"
+    for command in ("naive", "synth"):
+        argv = commands(capture, out)[command]
+        target = argv[argv.index("--out") + 1]
+        done = run_with_file_size_limit(argv, 4096, cli="lfrefract")
+        assert done.returncode == 2, done.stderr
+        assert "Traceback" not in done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1, done.stderr
+        assert lines[0].startswith("lfrefract: error: "), lines[0]
+        assert target in lines[0], lines[0]
+        assert os.strerror(errno.EFBIG) in lines[0]
+        assert not out.exists() or list(out.iterdir()) == [], sorted(p.name for p in out.iterdir())
+
+
+def test_ctrl_c_ends_a_command_in_one_line_with_status_130(tmp_path, capture):
+    """Ctrl-C used to print a KeyboardInterrupt traceback; now one line, exit 130, the staged output removed."""
+    out = tmp_path / "out"
+    argv = commands(capture, out)["views"]
+    argv[argv.index("--grid") + 1] = "9"  # writing 81 views keeps the output staged for about a second
+    code = "import sys; from lfrefract.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (out.is_dir() and any(p.name.endswith(".partial") for p in out.iterdir())):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["lfrefract: interrupted; unfinished outputs removed"], err
+    left = sorted(p.name for p in out.iterdir())
+    # Nothing, or (when the signal came as the last rename was done) the complete output.
+    assert left == [] or (left == ["v"] and (out / "v" / MANIFEST_NAME).is_file()), left
 
 
 def test_synth_takes_the_flat_port_txt_that_calibrate_port_writes(tmp_path, capsys):

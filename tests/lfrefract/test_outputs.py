@@ -438,3 +438,41 @@ def test_an_empty_output_folder_keeps_its_identity_and_nested_staging_works(tmp_
     assert out.stat().st_ino == inode
     assert entries(out) == [MANIFEST_NAME, "a.txt", "sub"]
     assert entries(tmp_path) == ["made-by-me", "outer"]
+
+
+# =============================================================================== failed writes
+_WRITE_UNDER_A_SIZE_LIMIT = """
+import resource, signal, sys
+from pathlib import Path
+from lfrefract.formats.outputs import atomic_file, staged_directory
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (1024, 1024))
+target, how = Path(sys.argv[1]), sys.argv[2]
+try:
+    if how == "file":
+        with atomic_file(target) as tmp:
+            tmp.write_bytes(b"x" * 4096)
+    else:
+        with staged_directory(target, kind="test.output") as stage:
+            (stage / "big.bin").write_bytes(b"x" * 4096)
+except OSError as exc:
+    print(type(exc).__name__, exc.errno, exc.filename, "|", exc)
+"""
+
+
+@pytest.mark.parametrize("how", ["file", "directory"])
+def test_a_failed_low_level_write_names_the_output(tmp_path, how):
+    """A write refused by the system (a full disk; here a real EFBIG under RLIMIT_FSIZE) raised
+    ``[Errno 28] No space left on device`` with no path: Python's file writes leave ``filename`` unset.
+    The error now names the output (the file, or the output directory for a file written into its stage)."""
+    target = tmp_path / ("out.bin" if how == "file" else "out")
+    done = subprocess.run(
+        [sys.executable, "-c", _WRITE_UNDER_A_SIZE_LIMIT, str(target), how], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    name, code, filename, message = done.stdout.replace(" | ", " ", 1).split(" ", 3)
+    assert name == "OSError", done.stdout
+    assert int(code) == 27, done.stdout  # EFBIG
+    assert filename == str(target), done.stdout
+    assert str(target) in message, done.stdout
+    assert entries(tmp_path) == []

@@ -16,8 +16,10 @@ from pathlib import Path
 import pytest
 
 from lfrefract import cli as core_cli
+from lfrefract.formats.capture import RAW_NAME
 from lfrefract.formats.outputs import MANIFEST_NAME
 from simulator import cli
+from tests.lfrefract.test_cli_outputs import run_with_file_size_limit
 
 pytestmark = pytest.mark.render
 
@@ -156,9 +158,24 @@ def test_write_failures_are_one_line_and_keep_the_earlier_output(tmp_path, outpu
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "render"]
 
 
-def _terminate_lfsim(args: list[str], ready, *, env: dict | None = None) -> None:
-    """Run ``lfsim ARGS``, send it SIGTERM once ``ready()`` holds (within 60 s), and check that it
-    ended by the signal (status 128 + 15)."""
+def test_a_full_disk_during_a_render_is_one_line_naming_the_file(tmp_path):
+    """OpenEXR's failed write (RuntimeError) came out of ``lfsim render`` as a traceback with exit 1.
+    A real failing write (files limited to 20 kB: the raw image is 115 kB) ends in one line naming the
+    file, exit 2, and neither the output nor its staging folder is left."""
+    out = tmp_path / "render"
+    done = run_with_file_size_limit(["render", "white", "--out", str(out), *QUICK], 20_000, cli="simulator")
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith("lfsim: error: "), lines[0]
+    assert str(out / RAW_NAME) in lines[0], lines[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def _terminate_lfsim(args: list[str], ready, *, env: dict | None = None, signum: int = signal.SIGTERM) -> str:
+    """Run ``lfsim ARGS``, send it ``signum`` (SIGTERM) once ``ready()`` holds (within 60 s), check that it
+    ended by the signal (status 128 + signum) with one line and no traceback; return the line."""
     code = "import sys; from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
     proc = subprocess.Popen(
         [sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
@@ -168,9 +185,12 @@ def _terminate_lfsim(args: list[str], ready, *, env: dict | None = None) -> None
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.02)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
+    assert proc.returncode == 128 + signum, err.decode()
+    lines = err.decode().strip().splitlines()
+    assert len(lines) == 1, err.decode()
+    return lines[0]
 
 
 def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
@@ -181,6 +201,37 @@ def test_sigterm_during_a_render_leaves_nothing_behind(tmp_path):
         lambda: any(p.name.endswith(".partial") for p in tmp_path.iterdir()),
     )
     assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_during_a_render_is_one_line_and_leaves_nothing_behind(tmp_path):
+    """Ctrl-C raised KeyboardInterrupt wherever the main thread was: once inside Dr.Jit's import, which
+    ended in a traceback of an ImportError and a NameError, exit 1. Now: one line, exit 130, no staging."""
+    out = tmp_path / "render"
+    for delay_s in (0.0, 0.5):  # while loading the renderer, and while rendering
+        started = time.monotonic()
+        line = _terminate_lfsim(
+            ["render", "--out", str(out), "--spp", "64", "--quiet", "--no-previews"],
+            lambda started=started, delay_s=delay_s: (
+                any(p.name.endswith(".partial") for p in tmp_path.iterdir()) and time.monotonic() - started > delay_s
+            ),
+            signum=signal.SIGINT,
+        )
+        assert line == "lfsim: interrupted; unfinished outputs removed"
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_during_an_experiment_with_kept_renders_says_it_resumes(tmp_path):
+    scratch, out, renders = tmp_path / "tmp", tmp_path / "out", tmp_path / "renders"
+    scratch.mkdir()
+    line = _terminate_lfsim(
+        ["experiment", "planes", "--scale", "tiny", "--out", str(out), "--renders", str(renders), "--quiet"],
+        lambda: renders.is_dir() and any(p.name.endswith(".partial") for p in renders.rglob("*")),
+        env={**os.environ, "TMPDIR": str(scratch)},
+        signum=signal.SIGINT,
+    )
+    assert line == "lfsim: interrupted; unfinished outputs removed; run again to resume"
+    assert list(scratch.iterdir()) == []
+    assert not [p for p in renders.rglob("*") if p.name.endswith((".partial", ".tmp"))]
 
 
 def test_sigterm_during_an_experiment_removes_its_temporary_folder(tmp_path):
