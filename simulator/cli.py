@@ -432,7 +432,8 @@ def _lenses() -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = _parser().parse_args(argv)
-    with terminate_cleanly("lfsim"):
+    resumable = getattr(args, "dataset_command", None) == "run" or getattr(args, "renders", None) is not None
+    with terminate_cleanly("lfsim", resumable=resumable):
         return _run(args)
 
 

@@ -40,6 +40,7 @@ from tqdm.auto import tqdm
 import lfrefract
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.jsonio import write_json
+from lfrefract.formats.outputs import on_termination
 from lfrefract.validate import one_of, positive_int
 from simulator.backend import VARIANTS
 from simulator.dataset.check import verify_folder
@@ -63,6 +64,8 @@ __all__ = ["RESUME_HASH_MAX_BYTES", "DatasetBusyError", "DatasetMismatchError", 
 
 #: How long to try to reach a scheduler given by address before giving up.
 SCHEDULER_TIMEOUT = "30s"
+#: Seconds a Ctrl-C or SIGTERM waits for the local cluster's workers to stop before the process ends.
+STOP_TIMEOUT_S = 10
 
 #: A resumed run re-hashes (SHA-256) the files of done samples up to this size and checks larger
 #: ones by size. Measured on the 2-core CI machine (files in the page cache, SHA-256 at about
@@ -296,18 +299,70 @@ def _dask_client(workers: int, scheduler: str | None) -> Iterator:
         with client:
             yield client
         return
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=logging.CRITICAL,  # task errors reach the manifest and the report; no worker log noise
-    )
+    with _ignoring_sigint():  # the workers inherit it: Ctrl-C reaches them too, and the driver stops them
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.CRITICAL,  # task errors reach the manifest and the report; no worker log noise
+        )
     try:
-        with Client(cluster) as client:
+        with Client(cluster) as client, on_termination(lambda: _stop_cluster(client, cluster)):
             yield client
     finally:
         cluster.close()
+
+
+@contextlib.contextmanager
+def _ignoring_sigint() -> Iterator[None]:
+    """SIGINT ignored while the block runs (in the main thread; elsewhere the block runs unchanged).
+
+    A Ctrl-C in a terminal goes to every process of the foreground group: the local cluster's worker
+    processes, started in this block, inherit the ignoring (Python keeps an inherited SIG_IGN), so they
+    print no KeyboardInterrupt traceback of their own; the driver's handler (terminate_cleanly) stops them.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_cluster(client, cluster) -> None:
+    """Stop the local cluster's workers from a signal handler (Ctrl-C, SIGTERM), so that none writes on
+    once the handler removes the unfinished samples. The cluster runs its own event loop in a thread,
+    which does the closing; after STOP_TIMEOUT_S the process ends anyway (its workers follow it)."""
+    import threading
+
+    def close() -> None:
+        with contextlib.suppress(Exception):
+            client.close(timeout=STOP_TIMEOUT_S)
+        with contextlib.suppress(Exception):
+            cluster.close(timeout=STOP_TIMEOUT_S)
+
+    closer = threading.Thread(target=close, daemon=True)
+    closer.start()
+    closer.join(STOP_TIMEOUT_S)
+    # The process ends with os._exit, which skips the exit handlers: release multiprocessing's named
+    # semaphores as a normal exit would (else its resource tracker warns of them on standard error).
+    from multiprocessing import util
+
+    with contextlib.suppress(Exception):
+        util._run_finalizers(0)
+
+
+def _remove_leftovers(out: Path) -> None:
+    """Remove the half-written entries of ``out`` (the staging folders of samples being rendered)."""
+    for leftover in staging_leftovers(out):
+        with contextlib.suppress(OSError):
+            remove(leftover)
 
 
 def run_dataset(
@@ -384,6 +439,11 @@ def run_dataset(
         # started only if there is work.
         client = None if scheduler is None else stack.enter_context(_dask_client(workers, scheduler))
         stack.enter_context(_locked(out))  # one run at a time: a second one would delete this one's work
+        if scheduler is None:
+            # Ctrl-C or SIGTERM (terminate_cleanly): after the local workers stop (registered later, so run
+            # first), the samples they left half-written go. A scheduler's workers are not ours to stop:
+            # what they leave, the next run removes.
+            stack.enter_context(on_termination(lambda: _remove_leftovers(out)))
         _check_target(out, spec, planned, inputs)  # again, under the lock
         done, damaged, verification = _prepare(out, spec, planned, inputs)
         pending = [r for r in planned if r["id"] not in done]

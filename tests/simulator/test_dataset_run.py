@@ -276,6 +276,40 @@ def test_resume_after_a_kill_completes_the_same_dataset(tilt_run, tmp_path):
 GOOD_OBJ = "v -0.05 -0.05 0\nv 0.05 -0.05 0\nv 0 0.05 0\nf 1 2 3\n"
 
 
+def test_ctrl_c_ends_a_dataset_run_in_one_line_and_leaves_nothing_half_written(tilt_run, tmp_path):
+    """Ctrl-C on ``lfsim dataset run`` gave a KeyboardInterrupt traceback (and the workers' own). Now,
+    with SIGINT sent to the whole process group as a terminal does: one line, exit 130, the workers
+    stopped, no sample's staging folder left; the next run completes the dataset."""
+    root = tmp_path / "interrupted"
+    manifest = root / "manifest.jsonl"
+    proc = _lfsim("dataset", "run", "tilt", "--out", str(root), "--workers", "1", "--quiet", start_new_session=True)
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline and proc.poll() is None:
+        if manifest.is_file() and manifest.read_bytes().count(b"\n") >= 1:
+            os.killpg(proc.pid, signal.SIGINT)
+            break
+        time.sleep(0.01)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["lfsim: interrupted; unfinished outputs removed; run again to resume"], err
+    assert _live_in_group(proc.pid) == []
+    assert sorted(p.name for p in root.iterdir() if p.name.startswith(".")) == []
+    assert check_dataset(root).leftovers == ()
+
+    again = _lfsim("dataset", "run", "tilt", "--out", str(root), "--workers", "1", "--quiet")
+    _, err = again.communicate(timeout=WAIT_S)
+    assert again.returncode == 0, err
+    report = check_dataset(root)
+    assert report.ok, report.problems
+    assert sorted(r["id"] for r in latest_done(root)) == ["s000000", "s000001", "s000002", "s000003"]
+
+
+def latest_done(root: Path) -> list[dict]:
+    """The done records of ``root``'s manifest, one per sample (the latest)."""
+    latest = {r["id"]: r for r in _records(root)}
+    return [r for r in latest.values() if r["status"] == "done"]
+
+
 def test_failed_samples_are_recorded_then_retried_by_the_next_run(tmp_path, scheduler):
     """A mesh file that exists but cannot be read passes the spec checks and fails at render time:
     retried, then recorded as failed, reported, and tried again by a later run (on an existing
