@@ -831,6 +831,10 @@ def _read_bytes(path: Path, what: str) -> bytes:
 def _sections(data: bytes, where: str) -> list[tuple[bytes, str, memoryview, int]]:
     """(magic, name, data, offset) of every section after the LFP header, each hash checked."""
     view = memoryview(data)
+    if len(data) < 16 and len(data) > 0 and LFP_MAGIC.startswith(bytes(data[:12])):
+        raise FileFormatError(
+            f"{where} is truncated: {len(data)} bytes, too short for the 16-byte LFP header its first bytes begin"
+        )
     if len(data) < 16 or data[:12] != LFP_MAGIC:
         raise FileFormatError(f"{where} is not a Lytro LFP/LFR file (it begins {bytes(data[:12])!r})")
     if data[12:16] != b"\0\0\0\0":
@@ -838,9 +842,18 @@ def _sections(data: bytes, where: str) -> list[tuple[bytes, str, memoryview, int
     out = []
     pos = 16
     while pos < len(data):
-        if len(data) - pos < _SECTION_HEADER:
-            raise FileFormatError(f"{where} is truncated: {len(data) - pos} bytes at byte {pos} are no section header")
         magic = data[pos : pos + 12]
+        begins_a_section = any(m.startswith(magic) for m in (LFC_MAGIC, LFM_MAGIC))
+        if out and not begins_a_section:
+            raise FileFormatError(
+                f"{where}: {len(data) - pos} bytes after the last section (from byte {pos}) are no section; "
+                "data appended to the file?"
+            )
+        if len(data) - pos < _SECTION_HEADER:
+            raise FileFormatError(
+                f"{where} is truncated: {len(data) - pos} bytes at byte {pos} are too few for a "
+                f"{_SECTION_HEADER}-byte section header"
+            )
         if magic not in (LFC_MAGIC, LFM_MAGIC):
             raise FileFormatError(f"{where}: the section at byte {pos} has magic {magic!r}, neither LFC nor LFM")
         size = int.from_bytes(data[pos + 12 : pos + 16], "big", signed=True)

@@ -591,3 +591,15 @@ def test_colour_keys_are_read_and_their_absence_named(tmp_path):
 def test_settings_refuse_a_colour_matrix_that_loses_light(matrix):
     with pytest.raises(ParameterError, match="color_matrix"):
         LytroSettings(color_matrix=matrix)
+
+
+def test_a_short_or_extended_lfr_says_what_is_wrong(tmp_path):
+    """10 bytes of the magic were 'not a Lytro file', trailing garbage 'truncated'."""
+    path, _ = small_lfr(tmp_path)
+    data = path.read_bytes()
+    (tmp_path / "ten.lfr").write_bytes(data[:10])
+    refused(tmp_path / "ten.lfr", r"truncated: 10 bytes, too short for the 16-byte LFP header")
+    (tmp_path / "tail.lfr").write_bytes(data + b"garbage!" * 5)
+    refused(tmp_path / "tail.lfr", rf"40 bytes after the last section \(from byte {len(data)}\) are no section")
+    (tmp_path / "cut.lfr").write_bytes(data + lytro.LFC_MAGIC + b"\0\0")
+    refused(tmp_path / "cut.lfr", r"truncated: 14 bytes .* too few for a 96-byte section header")
