@@ -839,7 +839,7 @@ def _sections(data: bytes, where: str) -> list[tuple[bytes, str, memoryview, int
         raise FileFormatError(f"{where} is not a Lytro LFP/LFR file (it begins {bytes(data[:12])!r})")
     if data[12:16] != b"\0\0\0\0":
         raise FileFormatError(f"{where}: header length {int.from_bytes(data[12:16], 'big')} is not 0")
-    out = []
+    out: list[tuple[bytes, str, memoryview, int]] = []
     pos = 16
     while pos < len(data):
         magic = data[pos : pos + 12]
