@@ -194,6 +194,11 @@ def render_chunks() -> int:
     return max(1, min(numba.get_num_threads(), RENDER_CHUNKS_MAX))
 
 
+def _depth_range(options: DepthAwareOptions) -> str:
+    """The options' depth range as a message names it, with its command-line option."""
+    return f"depth_min_m={options.depth_min_m!r}, depth_max_m={options.depth_max_m!r} (--depth-range)"
+
+
 def depth_planes_m(options: DepthAwareOptions) -> np.ndarray:
     """The depth planes searched, camera-frame z, metres, near to far, uniform in ``1 / z``, shape (D,)."""
     inverse = np.linspace(1.0 / options.depth_min_m, 1.0 / options.depth_max_m, options.depth_steps)
@@ -597,6 +602,12 @@ class DepthAwareSynthesis:
             )
         if not isinstance(self.options, DepthAwareOptions):
             raise ParameterError(f"options must be DepthAwareOptions, got {self.options!r}")
+        nearest = float(np.min(self.rays.origins_cam[:, 2])) if len(self.rays.origins_cam) else math.inf
+        if self.options.depth_max_m <= nearest:
+            raise ParameterError(
+                f"{_depth_range(self.options)} lies in front of the water, where no ray is: the rays leave the "
+                f"port's water face at z = {nearest:.4g} m and beyond; choose the depths of the scene behind the port"
+            )
 
     @classmethod
     def build(
@@ -674,6 +685,11 @@ class DepthAwareSynthesis:
         values, keep = self.rays.values(raw, recorded=recorded)
         rays = self.rays.kept(keep)  # once for the sweep and the render
         depth = estimate_depth(rays, values, self.output, self.options)
+        if not np.any(np.isfinite(depth.depth_m)):
+            raise ParameterError(
+                f"no output pixel has a depth: no plane of {_depth_range(self.options)} gathered "
+                f"min_rays={self.options.min_rays} rays for any pixel; choose the depths of the scene behind the port"
+            )
         rendered, used = render_given_depth(rays, values, self.output, depth.depth_m, self.options)
         classic = self.warp.apply(raw)
         grey = np.ndim(raw) == 2

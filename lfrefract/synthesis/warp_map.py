@@ -203,9 +203,11 @@ class SynthesisOptions:
             raise ParameterError(f"ray_correction must be a RayCorrection or None, got {self.ray_correction!r}")
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
+            most = lenses * (2 * self.window + 1) ** 2
             raise ParameterError(
-                f"k={self.k!r} exceeds the candidates searched ({lenses} lenses x {(2 * self.window + 1) ** 2} "
-                "pixels): raise lens_rings or window"
+                f"k={self.k!r} exceeds the {most} candidates searched ({lenses} lenses x {(2 * self.window + 1) ** 2} "
+                f"pixels): choose k at most {most} (--k on the command line), or raise lens_rings or window "
+                "(SynthesisOptions, in Python)"
             )
 
     def to_dict(self) -> dict:
@@ -736,7 +738,7 @@ def _build_block(search: _Search, first: int, stop: int) -> _Block:
         raise ParameterError(
             "the port's air-side face is conjugate to the MLA through the main lens "
             f"(f={f!r}, lens_to_mla_m={f_prime!r}): the analytic candidate search is undefined there; "
-            "use search='auto' or 'kdtree'"
+            "use search='auto' or 'kdtree' (--search auto or kdtree on the command line)"
         )
     n = stop - first
     sel_index = np.empty((len(uv), options.k), dtype=np.int64)

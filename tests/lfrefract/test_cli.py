@@ -625,3 +625,14 @@ def test_every_command_in_the_tables_is_dispatched(capsys, tmp_path):
     for name in ("naive", "views", "calibrate-mla"):
         err = refused(capsys, [*commands(raw, tmp_path / "out")[name], "--camera", "nope"])
         assert_says(err, "nope")
+
+
+def test_a_k_beyond_the_search_names_what_the_command_line_can_change(tmp_path, capsys):
+    """``synth --k 1000000000`` advised lens_rings and window, which the command line does not set: the
+    message gives the largest --k, and the Python options as such."""
+    raw = make_capture(tmp_path / "cap")
+    err = refused(capsys, [*commands(raw, tmp_path / "out")["synth"], "--k", "1000000000"])
+    assert_says(
+        err, "k=1000000000 exceeds the 175 candidates searched", "choose k at most 175 (--k on the command line)"
+    )
+    assert "(SynthesisOptions, in Python)" in err

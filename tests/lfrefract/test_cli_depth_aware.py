@@ -298,3 +298,11 @@ def test_overwrite_replaces_only_depth_aware_outputs(tmp_path, synthesized, caps
     foreign = (out / "s.confidence.exr").read_bytes()
     assert "refusing to replace it" in refused(capsys, [*argv, *DEPTH_AWARE, "--overwrite"])
     assert (out / "s.confidence.exr").read_bytes() == foreign
+
+
+def test_a_depth_range_in_front_of_the_water_is_refused_and_writes_nothing(tmp_path, capsys):
+    """``--depth-range 1e-9 1e-8`` gave an all-NaN depth with exit status 0; it is refused, naming the option."""
+    raw = make_capture(tmp_path / "R", plane_capture_raw())
+    err = refused(capsys, [*commands(raw, tmp_path / "out")["synth"], *DEPTH_AWARE, "--depth-range", "1e-9", "1e-8"])
+    assert "depth_min_m=1e-09, depth_max_m=1e-08 (--depth-range) lies in front of the water" in err, err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())

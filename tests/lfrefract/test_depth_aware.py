@@ -307,3 +307,23 @@ def test_build_refuses_a_warp_map_of_another_camera():
         DepthAwareSynthesis(warp=synthesis.warp, rays=trace_scene_rays(other, FlatPort.from_degrees(**PORT)))
     with pytest.raises(ParameterError, match="traced through the port"):
         DepthAwareSynthesis(warp=synthesis.warp, rays=trace_scene_rays(camera_preset(CAMERA), None))
+
+
+@pytest.mark.parametrize(("near", "far"), [(1e-9, 1e-8), (1e-3, 0.035)], ids=["nanometres", "before-the-water"])
+def test_a_depth_range_in_front_of_the_water_is_refused_naming_it(near, far):
+    """Every ray enters the water beyond the port's water face (z >= 0.0399 m here): planes all in front
+    of it hold no ray, and the sweep gave an all-NaN depth without a word."""
+    synthesis = setup()
+    options = DepthAwareOptions(depth_min_m=near, depth_max_m=far)
+    with pytest.raises(ParameterError, match=rf"depth_min_m={near!r}, depth_max_m={far!r} \(--depth-range\).*water"):
+        DepthAwareSynthesis(warp=synthesis.warp, rays=synthesis.rays, options=options)
+
+
+def test_a_frame_where_no_pixel_finds_a_depth_is_refused():
+    """A depth range the rays reach but where no pixel gathers min_rays rays on any plane: the depth
+    would be NaN everywhere, which is refused rather than returned as a result."""
+    synthesis = setup()
+    options = DepthAwareOptions(min_rays=10**6)
+    many = DepthAwareSynthesis(warp=synthesis.warp, rays=synthesis.rays, options=options)
+    with pytest.raises(ParameterError, match=r"no output pixel has a depth: .*min_rays=1000000"):
+        many.apply(plane_raw(synthesis))

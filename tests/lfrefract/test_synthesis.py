@@ -213,7 +213,10 @@ def test_apply_accepts_rgb_grey_and_integers(warp):
         ({"lambda_m_per_rad": float("nan")}, "lambda_m_per_rad must be finite, got nan"),
         ({"lambda_m_per_rad": -1.0}, "lambda_m_per_rad must be non-negative, got -1.0"),
         ({"window": -1}, "window must be a non-negative integer, got -1"),
-        ({"k": 500, "window": 1}, "k=500 exceeds the candidates searched"),
+        (
+            {"k": 500, "window": 1},
+            "k=500 exceeds the 63 candidates searched (7 lenses x 9 pixels): choose k at most 63 (--k",
+        ),
         ({"compensate_port": "yes"}, "compensate_port must be True or False, got 'yes'"),
         ({"search": "brute"}, "search must be one of"),
     ],
