@@ -68,7 +68,7 @@ def format_bytes(nbytes: float) -> str:
     raise AssertionError("unreachable")
 
 
-def require_memory(what: str, nbytes: int) -> None:
+def require_memory(what: str, nbytes: int, *, reduce: str = "a smaller size") -> None:
     """Refuse an operation whose estimated peak memory exceeds what the machine has available.
 
     Parameters
@@ -77,6 +77,8 @@ def require_memory(what: str, nbytes: int) -> None:
         The operation, for the message (e.g. ``"views: a 1001 x 1001 stack of 92 x 69 px views"``).
     nbytes : int
         Its estimated peak memory, bytes (an estimate from this module or the caller's own).
+    reduce : str
+        What the user can lower, for the message (e.g. ``"--depth-steps"``, the command line's option).
 
     Raises
     ------
@@ -87,7 +89,7 @@ def require_memory(what: str, nbytes: int) -> None:
     if nbytes > available:
         raise ParameterError(
             f"{what} needs about {format_bytes(nbytes)} of memory ({int(nbytes)} bytes, estimated), more than the "
-            f"{format_bytes(available)} available ({source}); choose a smaller size"
+            f"{format_bytes(available)} available ({source}); choose {reduce}"
         )
 
 

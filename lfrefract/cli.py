@@ -69,7 +69,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -292,6 +292,9 @@ def synth_outputs(out: Path, method: str = SYNTH_METHODS[0]) -> dict[Path, Expec
     }
 
 
+_Options = TypeVar("_Options")
+
+
 def _depth_aware_options(args: argparse.Namespace) -> DepthAwareOptions | None:
     """The :class:`DepthAwareOptions` of ``synth --method depth-aware`` (None for another method).
 
@@ -316,20 +319,50 @@ def _depth_aware_options(args: argparse.Namespace) -> DepthAwareOptions | None:
                 f"(--method is {args.method})"
             )
         return None
+    return _options_by_flag(DepthAwareOptions, given)
+
+
+def _options_by_flag(kind: type[_Options], given: dict[str, dict[str, Any]]) -> _Options:
+    """``kind(**fields)`` of the options given on the command line, each flag's fields checked alone
+    (the others at their defaults), so that an invalid value's error names its flag (``--k: k must be
+    positive, got 0``), not only the Python field.
+
+    Parameters
+    ----------
+    kind : type
+        The options' frozen dataclass (:class:`SynthesisOptions`, :class:`DepthAwareOptions`).
+    given : dict
+        Flag -> the fields of ``kind`` it sets.
+    """
     values: dict[str, Any] = {}
-    for flag, fields in given.items():  # each checked alone, the others at their defaults: the error names it
+    for flag, fields in given.items():
         try:
-            DepthAwareOptions(**fields)
+            kind(**fields)
         except ParameterError as exc:
             raise ParameterError(f"{flag}: {exc}") from None
         values.update(fields)
-    return DepthAwareOptions(**values)
+    return kind(**values)
+
+
+def _synthesis_options(args: argparse.Namespace) -> SynthesisOptions:
+    """The :class:`SynthesisOptions` of ``synth``'s flags (without the ray model), each value checked
+    against its flag before anything is read."""
+    return _options_by_flag(
+        SynthesisOptions,
+        {
+            "--k": {"k": args.k},
+            "--supersample": {"supersample": args.supersample},
+            "--lambda": {"lambda_m_per_rad": args.lam},
+            "--search": {"search": args.search},
+        },
+    )
 
 
 def synth(args: argparse.Namespace) -> int:
     """``lfrefract synth``: refraction-free image of a raw capture."""
     out = _exr_out(args)
     depth_options = _depth_aware_options(args)
+    flag_options = _synthesis_options(args)
     capture = _read_capture(
         args.raw,
         camera=_given_camera(args),
@@ -354,13 +387,7 @@ def synth(args: argparse.Namespace) -> int:
         _depth_aware_takes(args, by_cfa, ray_correction is not None)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
     prepare_output_files(synth_outputs(out, args.method), inputs=inputs, overwrite=args.overwrite)  # before the map
-    options = SynthesisOptions(
-        k=args.k,
-        supersample=args.supersample,
-        lambda_m_per_rad=args.lam,
-        search=args.search,
-        ray_correction=ray_correction,
-    )
+    options = dataclasses.replace(flag_options, ray_correction=ray_correction)
     output = capture.output
     developed = capture.developed
     result: DepthAwareResult | None = None
@@ -398,6 +425,7 @@ def synth(args: argparse.Namespace) -> int:
                     threads=available_cpus(),
                     render_chunks=render_chunks(),
                 ),
+                reduce="fewer --depth-steps (or a smaller image: --supersample)",
             )
         start = time.perf_counter()
         warp, how = _synth_map(args, camera, port, output, options, capture.channels)
@@ -554,6 +582,7 @@ def _synth_map(
             workers=available_cpus() if building else 0,
             block_pixels=BLOCK_PIXELS,
         ),
+        reduce="a smaller --supersample or --k",
     )
     if cached is not None and cached.is_file():
         return WarpMap.load(cached, expected_key=key), f"loaded {cached}"
@@ -620,6 +649,7 @@ def views(args: argparse.Namespace) -> int:
             f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
             f"with {capture.channels} channel(s), and its export",
             view_stack_bytes(camera, output, grid=args.grid, channels=capture.channels, exported=True),
+            reduce="a smaller --grid",
         )
     stack = subaperture_stack(
         camera,

@@ -636,3 +636,29 @@ def test_a_k_beyond_the_search_names_what_the_command_line_can_change(tmp_path, 
         err, "k=1000000000 exceeds the 175 candidates searched", "choose k at most 175 (--k on the command line)"
     )
     assert "(SynthesisOptions, in Python)" in err
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "field"),
+    [
+        ("--k", "0", "k must be positive"),
+        ("--k", "-1", "k must be positive"),
+        ("--supersample", "0", "supersample must be positive"),
+        ("--lambda", "-1", "lambda_m_per_rad must be non-negative"),
+        ("--lambda", "nan", "lambda_m_per_rad must be finite"),
+        ("--lambda", "inf", "lambda_m_per_rad must be finite"),
+    ],
+)
+def test_an_invalid_synthesis_option_is_refused_naming_its_flag_before_reading(tmp_path, capsys, option, value, field):
+    """A bad --k, --supersample or --lambda is named by its flag (the audit found 'k must be positive' alone,
+    which names a Python field the command line does not have), before the capture is read: the raw
+    here does not exist."""
+    err = refused(capsys, ["synth", str(tmp_path / "none.exr"), "--out", str(tmp_path / "s.exr"), option, value])
+    assert_says(err, f"{option}: ", field)
+    assert not (tmp_path / "s.exr").exists()
+
+
+def test_a_warp_map_beyond_the_memory_names_the_options_that_shrink_it(tmp_path, capsys):
+    raw = make_capture(tmp_path)
+    err = refused(capsys, ["synth", str(raw), "--out", str(tmp_path / "s.exr"), "--supersample", "100000"])
+    assert_says(err, "needs about", "choose a smaller --supersample or --k")
