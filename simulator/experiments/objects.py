@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfrefract.figures import NO_VALUE_RGB, new_figure, save_figure
 from lfrefract.formats.outputs import scratch_directory
 from lfrefract.formats.ply import write_ply
 from lfrefract.metrics import depth_errors, disparity_errors
@@ -63,16 +64,31 @@ from simulator.experiments.rigstereo import (
     match,
     prepare_methods,
     render_captures,
+    rig_setup,
     warp_maps,
 )
 from simulator.rig import RigConfig
 
-__all__ = ["BAD_PIXEL_THRESHOLDS_PX", "DEPTH_MATCHER", "ObjectsSetup", "run_objects", "scene_objects", "setup_for"]
+__all__ = [
+    "BACKDROP_RGB",
+    "BAD_PIXEL_THRESHOLDS_PX",
+    "DEPTH_MATCHER",
+    "ObjectsSetup",
+    "objects_error_figure",
+    "run_objects",
+    "scene_objects",
+    "setup_for",
+]
 
 #: Disparity error thresholds of the bad-pixel rates, pixels (Middlebury's usual ones).
 BAD_PIXEL_THRESHOLDS_PX = (0.5, 1.0, 2.0)
 #: The ``matcher`` of the rows of a method that estimates depth itself (no stereo matching).
 DEPTH_MATCHER = "none"
+#: Colour of the backdrop's pixels (not scored) in the error figure, RGB in 0..1: a pale blue, outside
+#: the error colour map and unlike the grey of pixels with no estimate.
+BACKDROP_RGB = (0.78, 0.86, 0.94)
+#: Resolution of the figures, dots per inch.
+FIGURE_DPI = 90
 
 
 @dataclass(frozen=True)
@@ -180,7 +196,9 @@ def run_objects(
                 rows += new
                 for path, points in clouds:
                     write_ply(path, points)
-    figure = _figure(Path(out_dir), errors, order)
+    figure = Path(out_dir) / "objects_depth_error.png"
+    objects_at = f"bowl {0.31 * objects_setup.size:.3g} m, figurine {0.34 * objects_setup.size:.3g} m away"
+    save_figure(objects_error_figure(errors, order, mask=mask, setup=f"{rig_setup(base)}; {objects_at}"), figure)
     summary = "\n".join(
         f"- {r['matcher']}, {r['method']}: {r['median_abs_mm']:.2f} mm median, {r['mean_abs_mm']:.2f} mm mean, "
         f"{r['rms_mm']:.2f} mm RMS, bad 1 px {r['bad_1px']:.2f}, completeness {r['completeness']:.2f}; "
@@ -282,37 +300,69 @@ def _splat(points_cam: np.ndarray, view) -> np.ndarray:
     return depth
 
 
-def _figure(out_dir: Path, errors: dict[tuple[str, str], np.ndarray], order: list[str]) -> Path:
+def objects_error_figure(errors: dict[tuple[str, str], np.ndarray], order: list[str], *, mask: np.ndarray, setup: str):
+    """The depth error maps as a Figure: a row per matcher, a column per method (a method that
+    estimates depth itself in every row), one colour bar in mm, the objects' pixels with no estimate
+    grey and the backdrop (not scored) in :data:`BACKDROP_RGB`, each with a legend entry, and the
+    set-up in the title.
+
+    Parameters
+    ----------
+    errors : dict
+        ``(matcher, method) -> |depth error|`` (H, W), metres, NaN where not scored or no estimate.
+    order : list of str
+        Methods, in order (a method with no map, failed, gets a panel that says so).
+    mask : ndarray, shape (H, W)
+        The objects' pixels (the others are the backdrop).
+    setup : str
+        The set-up, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     import matplotlib as mpl
+    from matplotlib.patches import Patch
 
-    mpl.use("Agg")
-    import matplotlib.pyplot as plt
-
-    shown = [m for m in order if any((matcher, m) in errors for matcher in (*MATCHERS, DEPTH_MATCHER))]
-    columns = max(len(shown), 1)
-    fig, axes = plt.subplots(len(MATCHERS), columns, figsize=(2.8 * columns, 2.4 * len(MATCHERS)), squeeze=False)
-    top = max((float(np.nanpercentile(e, 95)) for e in errors.values() if np.isfinite(e).any()), default=1.0)
+    mask = np.asarray(mask, dtype=bool)
+    columns = max(len(order), 1)
+    height, width = mask.shape
+    fig = new_figure(2.9 * columns + 1.2, (2.9 * height / width + 0.6) * len(MATCHERS) + 1.3, dpi=FIGURE_DPI)
+    axes = fig.subplots(len(MATCHERS), columns, squeeze=False)
+    top = max((float(np.nanpercentile(e, 95)) for e in errors.values() if np.isfinite(e).any()), default=1e-3)
+    colours = mpl.colormaps["magma"].with_extremes(bad=NO_VALUE_RGB)
+    backdrop = np.zeros((height, width, 4))
+    backdrop[~mask] = (*BACKDROP_RGB, 1.0)
     image = None
     for i, matcher in enumerate(MATCHERS):
         for j in range(columns):
             ax = axes[i, j]
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if j >= len(shown):
+            if j >= len(order):
+                ax.set_axis_off()
                 continue
-            error = errors.get((matcher, shown[j]), errors.get((DEPTH_MATCHER, shown[j])))
-            if error is not None:
-                image = ax.imshow(error * 1e3, cmap="magma", vmin=0, vmax=top * 1e3)
-            if i == 0:
-                ax.set_title(shown[j], fontsize=9)
-        axes[i, 0].set_ylabel(matcher, fontsize=9)
+            error = errors.get((matcher, order[j]))
+            own_depth = error is None and (DEPTH_MATCHER, order[j]) in errors
+            error = errors.get((DEPTH_MATCHER, order[j])) if own_depth else error
+            title = f"{order[j]}, {'its own depth' if own_depth else matcher.upper()}"
+            if error is None:  # said in the middle: an empty axes' title would sit above the row's
+                ax.text(0.5, 0.5, f"{title}:\nno depth map (failed)", ha="center", va="center", transform=ax.transAxes)
+                ax.set_axis_off()
+                continue
+            ax.set_title(title, fontsize=8)
+            image = ax.imshow(error * 1e3, cmap=colours, vmin=0.0, vmax=top * 1e3, interpolation="nearest")
+            ax.imshow(backdrop, interpolation="nearest")
+            ax.set_xlabel("u (px)", fontsize=8)
+            ax.set_ylabel("v (px)", fontsize=8)
+            ax.tick_params(labelsize=7)
     if image is not None:
-        fig.colorbar(image, ax=axes, shrink=0.8, label="|depth error| [mm]")
-    fig.suptitle("depth error on the objects (left ideal view; no estimate: white)", fontsize=9)
-    path = out_dir / "objects_depth_error.png"
-    fig.savefig(path, dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return path
+        fig.colorbar(image, ax=axes, shrink=0.8, extend="max").set_label("|depth error| (mm)")
+    handles = [
+        Patch(facecolor=NO_VALUE_RGB, edgecolor="0.3", label="no estimate"),
+        Patch(facecolor=BACKDROP_RGB, edgecolor="0.3", label="backdrop (not scored)"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize=8)
+    fig.suptitle(f"depth error on the bowl and the figurine (left ideal view), by method\n{setup}", fontsize=9)
+    return fig
 
 
 @register("objects", options=("methods", "camera", "lens", "port_distance_m", "thickness_m"))

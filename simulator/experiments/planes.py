@@ -459,10 +459,11 @@ def disparity_figure(
                 ax.set_xlabel("u (px)", fontsize=8)
                 ax.set_ylabel("v (px)", fontsize=8)
                 ax.tick_params(labelsize=7)
-            else:
+            else:  # said in the middle: an empty axes' title would sit above the row's
                 why = "failed" if j < len(shown) and (shown[j], depth) in failed else "no disparity map"
-                ax.set_title(title, fontsize=8)
-                ax.text(0.5, 0.5, why, ha="center", va="center", transform=ax.transAxes, fontsize=8)
+                ax.text(
+                    0.5, 0.5, f"{title}:\n{why}" if title else why, ha="center", va="center", transform=ax.transAxes
+                )
                 ax.set_axis_off()
         if image is not None:
             bar = fig.colorbar(image, ax=axes[i, :], shrink=0.9, extend="both")

@@ -9,7 +9,8 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from lfrefract.figures import NO_VALUE_RGB
+from lfrefract.figures import NO_VALUE_RGB, save_figure
+from simulator.experiments.objects import BACKDROP_RGB, objects_error_figure
 from simulator.experiments.planes import disparity_figure, errors_figure, plane_figures, setup_for
 from simulator.experiments.rigstereo import MATCHERS, experiment_rig, rig_setup
 from tests.figure_rules import assert_follows_the_figure_rules, image_pixels_in_png
@@ -98,7 +99,7 @@ def test_a_failed_method_is_said_in_the_disparity_figure(rig_title):
     fig = disparity_figure(disparities, "zncc", DEPTHS, METHODS, rows=rows, setup=rig_title)
     assert_follows_the_figure_rules(fig)
     panel = fig.axes[3 + 1]  # second row (0.45 m), second column (proposed)
-    assert [t.get_text() for t in panel.texts] == ["failed"]
+    assert [t.get_text() for t in panel.texts] == ["proposed, 0.45 m:\nfailed"]
     assert not panel.images
 
 
@@ -111,3 +112,53 @@ def test_the_errors_figure_follows_the_figure_rules_and_names_a_method_with_no_v
     assert {"proposed", "ideal"} <= set(texts)
     plots = [ax for ax in fig.axes if not hasattr(ax, "_colorbar")]
     assert all(ax.get_ylabel() == "error (mm)" and ax.get_xlabel() == "plane depth (m)" for ax in plots)
+
+
+# ----------------------------------------------------------------------------------------- objects
+def _object_errors() -> tuple[dict, np.ndarray]:
+    """Depth error maps (m) of every matcher and method, and the objects' pixels (the rest is backdrop):
+    the objects fill the middle columns; the top five of their rows have no estimate."""
+    mask = np.zeros((30, 40), dtype=bool)
+    mask[:, 10:30] = True
+    rng = np.random.default_rng(1)
+    errors = {}
+    for matcher in MATCHERS:
+        for method in METHODS:
+            error = np.where(mask, rng.uniform(0.0, 0.01, mask.shape), np.nan)
+            error[:5] = np.nan
+            errors[(matcher, method)] = error
+    return errors, mask
+
+
+def test_the_objects_error_figure_follows_the_figure_rules(rig_title):
+    errors, mask = _object_errors()
+    fig = objects_error_figure(errors, METHODS, mask=mask, setup=rig_title)
+    assert_follows_the_figure_rules(fig)
+    assert _colour_bar_labels(fig) == ["|depth error| (mm)"]
+    assert {"no estimate", "backdrop (not scored)"} <= set(_legend_texts(fig))
+    assert rig_title in fig.get_suptitle()
+
+
+def test_the_objects_error_figure_draws_pixels_with_no_estimate_grey(tmp_path, rig_title):
+    errors, mask = _object_errors()
+    fig = objects_error_figure(errors, METHODS, mask=mask, setup=rig_title)
+    save_figure(fig, tmp_path / "objects.png")
+    png = matplotlib.image.imread(tmp_path / "objects.png")
+    error = errors[("zncc", METHODS[0])]
+    shown = image_pixels_in_png(fig, fig.axes[0], png, error.shape)
+    none = (mask & ~np.isfinite(error)).ravel()
+    backdrop = ~mask.ravel()
+    assert np.abs(shown[none] - NO_VALUE_RGB).max() <= PNG_STEP
+    assert np.abs(shown[backdrop] - BACKDROP_RGB).max() <= PNG_STEP  # not the grey of no estimate
+    assert np.abs(shown[~none & ~backdrop] - NO_VALUE_RGB).max(axis=1).min() > PNG_STEP
+
+
+def test_a_failed_method_is_said_in_the_objects_error_figure(rig_title):
+    errors, mask = _object_errors()
+    errors = {k: v for k, v in errors.items() if k[1] != "proposed"}
+    fig = objects_error_figure(errors, METHODS, mask=mask, setup=rig_title)
+    assert_follows_the_figure_rules(fig)
+    panels = [ax for ax in fig.axes if not hasattr(ax, "_colorbar") and not ax.images]
+    assert len(panels) == len(MATCHERS)
+    said = [[t.get_text() for t in ax.texts] for ax in panels]
+    assert said == [[f"proposed, {m.upper()}:\nno depth map (failed)"] for m in MATCHERS]
