@@ -64,7 +64,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
-import json
 import math
 import shlex
 import shutil
@@ -80,7 +79,7 @@ from lfrefract import cli as core_cli
 from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import RAW_NAME, camera_from_option, port_from_file, ray_correction_from_option
 from lfrefract.formats.exr import read_exr
-from lfrefract.formats.jsonio import read_json, write_json, write_text_atomically
+from lfrefract.formats.jsonio import read_json, write_text_atomically
 from lfrefract.formats.outputs import scratch_directory
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
@@ -101,6 +100,7 @@ from simulator.config import (
     sensor_model,
 )
 from simulator.experiments import ExperimentOptions, ExperimentResult, complete_rows, register, write_table
+from simulator.experiments.kept import kept_render
 from simulator.experiments.methods import CentralImages
 from simulator.experiments.planes import (
     PLANE_DEPTHS_M,
@@ -517,20 +517,10 @@ def _render_and_deliver(config: SceneConfig, folder: Path, delivered: Path) -> N
     shutil.copyfile(folder / LFR_NAME, delivered / f"{folder.name}.lfr")
 
 
-def _signature(data) -> object:
-    """``data`` as plain JSON data (tuples become lists), to compare with what a file recorded."""
-    return json.loads(json.dumps(data))
-
-
 def _once(folder: Path, signature, render) -> None:
-    """Call ``render()`` to (re)make ``folder`` unless it was made for the same ``signature`` (kept
-    beside it, ``<folder>.signature.json``)."""
-    record = folder.parent / f"{folder.name}.signature.json"
-    signature = _signature(signature)
-    if folder.is_dir() and record.is_file() and read_json(record).get("signature") == signature:
-        return
-    render()
-    write_json(record, {"signature": signature})
+    """Call ``render()`` to (re)make ``folder`` unless it was made for the same ``signature`` and its
+    files are as they were rendered (:func:`simulator.experiments.kept.kept_render`)."""
+    kept_render(folder, signature, render)
 
 
 def _synth_all(core: _Core, captures: dict[str, Path], model_args: Sequence[str], out: Path, maps: Path) -> None:

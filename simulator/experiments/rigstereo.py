@@ -24,9 +24,8 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract.errors import ParameterError
-from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, RAW_NAME, SIDECAR_NAME
+from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, RAW_NAME
 from lfrefract.formats.exr import read_exr
-from lfrefract.formats.jsonio import read_json
 from lfrefract.methods import CalibrationViews
 from lfrefract.optics.pinhole import virtual_camera_for
 from lfrefract.stereo.geometry import Rectification, StereoCalibration, calibrate_stereo, rectify
@@ -35,6 +34,7 @@ from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, bui
 from simulator.boards import CALIBRATION_ROTATIONS_DEG, PATTERN, SQUARES, chessboard_corners_world, find_corners
 from simulator.config import Chessboard, Placement, PointLight, RenderSettings, SceneObject, main_lens
 from simulator.experiments import ExperimentOptions
+from simulator.experiments.kept import kept_render
 from simulator.experiments.methods import (
     BUILTIN_METHODS,
     CentralImages,
@@ -263,12 +263,14 @@ def _signature(rig: RigConfig) -> list:
 
 def render_capture(rig: RigConfig, folder: Path, *, write_lfr: bool = False) -> Capture:
     """Render ``rig`` into ``folder``, kept if it already holds a render of this very rig (the same
-    wall and scenes: cameras, ports, objects, lights, render settings, sensors) with the same files.
+    wall and scenes: cameras, ports, objects, lights, render settings, sensors) with its files as they
+    were rendered (:func:`simulator.experiments.kept.kept_render`: sizes and SHA-256s).
     ``write_lfr``: every camera also writes its Lytro file (its scene needs a ``[sensor]``)."""
     signature = {"rig": _signature(rig), "lfr": write_lfr}
-    meta = folder / SIDECAR_NAME
-    if not (meta.is_file() and read_json(meta).get("experiment_rig") == signature):
-        render_rig(
+    kept_render(
+        folder,
+        signature,
+        lambda: render_rig(
             rig,
             folder,
             progress=False,
@@ -276,7 +278,8 @@ def render_capture(rig: RigConfig, folder: Path, *, write_lfr: bool = False) -> 
             overwrite=True,
             metadata={"experiment_rig": signature},
             write_lfr=write_lfr,
-        )
+        ),
+    )
     return Capture(folder)
 
 
