@@ -63,6 +63,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lfrefract import FlatPort, LightFieldCamera, ParameterError, PinholeCamera, camera_preset, virtual_camera_for
+from lfrefract.figures import new_figure, pixel_axes, save_figure
 from lfrefract.optics.lens import trace_lens
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.optics.seen_by import pixels_seeing_points
@@ -75,8 +76,11 @@ __all__ = [
     "REFERENCE_NORMAL",
     "FovSetup",
     "exact_mask",
+    "exact_share_figure",
     "fov_measures",
+    "masks_figure",
     "original_fov",
+    "perfect_fov_figure",
     "reference_port",
     "required_aperture_radius",
     "run",
@@ -84,6 +88,8 @@ __all__ = [
     "setup_for",
 ]
 
+#: Resolution of the figures, dots per inch.
+FIGURE_DPI = 110
 #: Necessary rays per block of the trace (memory: about 1 kB per ray).
 BLOCK_RAYS = 1 << 18
 
@@ -530,21 +536,48 @@ def _radius_for_fov(radius: np.ndarray, output: PinholeCamera, fov_deg: float) -
 
 
 def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, reference_mask, output) -> list[Path]:
-    from matplotlib.colors import ListedColormap
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
-
-    tilt_rows = [r for r in rows if r["series"] == "tilt"]
-    colours = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:olive", "tab:cyan", "tab:pink"]
-    colours = (colours * (len(setup.f_numbers) // len(colours) + 1))[: len(setup.f_numbers)]
-    n0 = setup.f_numbers[0]
+    """Write ``fov_exact_share.png``, ``fov_perfect_fov.png`` and ``fov_masks.png``; the paths."""
+    figures = (
+        ("fov_exact_share.png", exact_share_figure(setup, rows)),
+        ("fov_perfect_fov.png", perfect_fov_figure(setup, rows)),
+        ("fov_masks.png", masks_figure(setup, masks, reference_mask, output)),
+    )
     paths = []
-    first = min(tilt_rows, key=lambda r: abs(r["tilt_deg"]))
-    ref = [r for r in rows if r["series"] == "reference" and r["f_number"] == n0]
+    for name, fig in figures:
+        paths.append(out_dir / name)
+        save_figure(fig, paths[-1])
+    return paths
 
-    fig = Figure(figsize=(6.4, 4.2))
-    ax = fig.add_subplot()
-    for colour, n in zip(colours, setup.f_numbers, strict=True):
+
+def _figure_setup(setup: FovSetup) -> str:
+    """The set-up line of the figures' titles: camera, port distance and glass, water."""
+    return f"{setup.title}, water n = {setup.n_water:.4g}"
+
+
+def _colours(setup: FovSetup) -> list[str]:
+    """A colour per f-number (cycled)."""
+    colours = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:olive", "tab:cyan", "tab:pink"]
+    return (colours * (len(setup.f_numbers) // len(colours) + 1))[: len(setup.f_numbers)]
+
+
+def exact_share_figure(setup: FovSetup, rows: list[dict]):
+    """The exact share and the share recorded at a given depth against port tilt, a line per f-number,
+    as a Figure (the set-up in the title).
+
+    Parameters
+    ----------
+    setup : FovSetup
+    rows : list of dict
+        The experiment's rows (those of the ``tilt`` series are drawn).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    tilt_rows = [r for r in rows if r["series"] == "tilt"]
+    fig = new_figure(8.4, 4.6, dpi=FIGURE_DPI)
+    ax = fig.subplots()
+    for colour, n in zip(_colours(setup), setup.f_numbers, strict=True):
         sel = [r for r in tilt_rows if r["f_number"] == n]
         for column, style, what in (
             ("exact_share", "o-", "exact"),
@@ -552,15 +585,35 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
         ):
             tilts = [r["tilt_deg"] for r in sel]
             ax.plot(tilts, [100 * r[column] for r in sel], style, ms=3, color=colour, label=f"f/{n:g}, {what}")
-    ax.set_xlabel("port tilt about x [deg]")
-    ax.set_ylabel("pixels [% of the refraction-free image]")
-    ax.set_title(f"exact share (paper's method) and recorded share (depth-aware): {setup.title}", fontsize=8)
+    ax.set_xlabel("port tilt about x (deg)")
+    ax.set_ylabel("pixels (% of the refraction-free image)")
+    ax.set_title("exact share (paper's method) and recorded share (depth-aware)", fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(title="main lens", fontsize=7)
-    paths.append(out_dir / "fov_exact_share.png")
-    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    fig.legend(title="main lens", fontsize=7, loc="outside lower center", ncols=min(len(setup.f_numbers), 4))
+    fig.suptitle(_figure_setup(setup), fontsize=9)
+    return fig
 
-    fig = Figure(figsize=(11.5, 4.6))
+
+def perfect_fov_figure(setup: FovSetup, rows: list[dict]):
+    """The perfect field of view (every pixel exact) against port tilt and against port distance, with
+    the original field of view, as a Figure (the set-up in the title).
+
+    Parameters
+    ----------
+    setup : FovSetup
+    rows : list of dict
+        The experiment's rows (``tilt``, ``distance`` and ``reference`` series).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    tilt_rows = [r for r in rows if r["series"] == "tilt"]
+    colours = _colours(setup)
+    n0 = setup.f_numbers[0]
+    first = min(tilt_rows, key=lambda r: abs(r["tilt_deg"]))
+    ref = [r for r in rows if r["series"] == "reference" and r["f_number"] == n0]
+    fig = new_figure(11.5, 6.4, dpi=FIGURE_DPI)
     ax, bx = fig.subplots(1, 2)
     for colour, n in zip(colours, setup.f_numbers, strict=True):
         sel = [r for r in tilt_rows if r["f_number"] == n]
@@ -579,8 +632,8 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
     if ref:
         ax.axhline(PAPER_PERFECT_FOV_DEG, color="tab:brown", lw=2, alpha=0.4, label="paper: perfect FOV, about 30 deg")
         ax.plot([ref[0]["tilt_deg"]], [ref[0]["perfect_fov_h_deg"]], "k*", ms=10, label=f"reference port, f/{n0:g} (h)")
-    ax.set_xlabel("port tilt about x [deg]")
-    ax.set_ylabel("field of view [deg]")
+    ax.set_xlabel("port tilt about x (deg)")
+    ax.set_ylabel("field of view (deg)")
     ax.set_title("perfect (all pixels exact) against original field of view", fontsize=9)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
@@ -619,44 +672,66 @@ def _figures(out_dir: Path, setup: FovSetup, rows: list[dict], masks: dict, refe
     bx.axvline(
         setup.distance_m * 1e3, color="k", lw=0.5, ls="-.", label=f"this set-up's port: {setup.distance_m * 1e3:.4g} mm"
     )
-    bx.set_xlabel("port distance [mm] (untilted port, perpendicular)")
-    bx.set_ylabel("field of view [deg]")
+    bx.set_xlabel("port distance (mm; untilted port, perpendicular)")
+    bx.set_ylabel("field of view (deg)")
     bx.set_title(f"untilted port, f/{n0:g}", fontsize=9)
     bx.set_ylim(bottom=0)
     bx.grid(alpha=0.3)
     bx.legend(fontsize=7, ncol=1, loc="upper center", bbox_to_anchor=(0.5, -0.14))
-    fig.suptitle(f"perfect field of view: {setup.title}", fontsize=10)
-    paths.append(out_dir / "fov_perfect_fov.png")
-    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
+    fig.suptitle(f"perfect field of view: {_figure_setup(setup)}", fontsize=10)
+    return fig
 
+
+def masks_figure(setup: FovSetup, masks: dict, reference_mask, output: PinholeCamera):
+    """The exact pixels at the drawn tilts (and the reference port's), nested by f-number, as a
+    Figure: a colour bar naming the largest f-number at which each pixel is exact, pixel axes, the
+    principal point in the legend and the set-up in the title.
+
+    Parameters
+    ----------
+    setup : FovSetup
+    masks : dict
+        ``tilt -> {f-number -> exact mask (H, W)}`` of :attr:`FovSetup.mask_tilts_deg`.
+    reference_mask : dict or None
+        ``{f-number -> exact mask}`` of the reference port, or None.
+    output : PinholeCamera
+        The refraction-free image.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.lines import Line2D
+
+    colours = _colours(setup)
+    n0 = setup.f_numbers[0]
     panels = [(f"tilt {t:g} deg", masks[t]) for t in setup.mask_tilts_deg]
     if reference_mask is not None:
         tilt = math.degrees(setup.reference_port.total_tilt_rad)
         way = "up" if setup.reference_port.normal[1] < 0 else "down"
         panels.append((f"reference port ({tilt:.1f} deg, {way})", reference_mask))
     aspect = output.height_px / output.width_px
-    fig = Figure(figsize=(3.6 * len(panels), 3.6 * aspect + 0.9))
+    fig = new_figure(3.8 * len(panels) + 1.6, 3.8 * aspect + 1.8, dpi=FIGURE_DPI)
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    levels = len(setup.f_numbers)
     cmap = ListedColormap(["0.85", *colours])
+    norm = BoundaryNorm(np.arange(-0.5, levels + 1.0), cmap.N)
+    image = None
     for ax, (title, by_n) in zip(axes, panels, strict=True):
         level = sum(by_n[n].astype(int) for n in setup.f_numbers)  # nested: exact up to the level-th f-number
-        ax.imshow(level, cmap=cmap, vmin=-0.5, vmax=len(setup.f_numbers) + 0.5, interpolation="nearest")
+        image = ax.imshow(level, cmap=cmap, norm=norm, interpolation="nearest")
         ax.plot([output.cx_px], [output.cy_px], "k+", ms=8)
         share = 100 * by_n[n0].mean()
         ax.set_title(f"{title}: {share:.{1 if share >= 1 else 2}f} % exact at f/{n0:g}", fontsize=8)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    handles = [
-        Patch(color="0.85", label="not exact"),
-        *[Patch(color=colours[i], label=f"exact up to f/{n:g}") for i, n in enumerate(setup.f_numbers)],
-    ]
-    fig.legend(
-        handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.08), ncol=len(handles), fontsize=7, frameon=False
-    )
-    fig.suptitle(f"exact pixels (+: principal point): {setup.title}", fontsize=9)
-    paths.append(out_dir / "fov_masks.png")
-    fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
-    return paths
+        pixel_axes(ax)
+    bar = fig.colorbar(image, ax=axes, shrink=0.9, ticks=np.arange(levels + 1))
+    bar.ax.set_yticklabels(["not exact", *(f"f/{n:g}" for n in setup.f_numbers)])
+    bar.set_label("largest main-lens f-number at which the pixel is exact")
+    principal = Line2D([], [], color="k", marker="+", ls="", ms=8, label="principal point")
+    fig.legend(handles=[principal], loc="outside lower center", fontsize=8)
+    fig.suptitle(f"exact pixels by main-lens f-number: {_figure_setup(setup)}", fontsize=9)
+    return fig
 
 
 @register("fov", options=("camera", "port_distance_m", "thickness_m", "tilts_deg", "f_numbers"))

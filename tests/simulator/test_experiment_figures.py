@@ -9,7 +9,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 
+from lfrefract import virtual_camera_for
 from lfrefract.figures import NO_VALUE_RGB, save_figure
+from simulator.experiments import fov
 from simulator.experiments.objects import BACKDROP_RGB, objects_error_figure
 from simulator.experiments.planes import disparity_figure, errors_figure, plane_figures, setup_for
 from simulator.experiments.rigstereo import MATCHERS, experiment_rig, rig_setup
@@ -162,3 +164,51 @@ def test_a_failed_method_is_said_in_the_objects_error_figure(rig_title):
     assert len(panels) == len(MATCHERS)
     said = [[t.get_text() for t in ax.texts] for ax in panels]
     assert said == [[f"proposed, {m.upper()}:\nno depth map (failed)"] for m in MATCHERS]
+
+
+# --------------------------------------------------------------------------------------------- fov
+def _fov_inputs(scale: str = "tiny"):
+    """A set-up, rows of every series (invented measures of the right shape), the masks of the drawn
+    tilts (and of the reference port at ``illum``) and the output camera: what the fov figures draw."""
+    setup = fov.setup_for(scale)
+    output = virtual_camera_for(setup.camera)
+    rows = []
+    original = {"original_fov_h_deg": 56.0, "original_fov_v_deg": 41.0, "original_fov_water_h_deg": 42.0}
+    for tilt in setup.tilts_deg:
+        for i, n in enumerate(setup.f_numbers):
+            share = max(0.9 - tilt / 50.0, 0.0) * (1.0 - 0.1 * i)
+            fov_deg = {"perfect_fov_h_deg": 40.0 * share, "perfect_fov_v_deg": 30.0 * share}
+            rows.append({"series": "tilt", "tilt_deg": tilt, "f_number": n, "aperture": "usable"} | original)
+            rows[-1] |= {"exact_share": share, "given_depth_share": min(1.0, share + 0.1), **fov_deg}
+    for aperture in fov.APERTURES:
+        for d in setup.distances_m:
+            fov_deg = {"perfect_fov_h_deg": 30.0 - 200.0 * d, "perfect_fov_v_deg": 25.0 - 200.0 * d}
+            rows.append({"series": "distance", "tilt_deg": 0.0, "distance_mm": d * 1e3, "aperture": aperture})
+            rows[-1] |= {"f_number": setup.f_numbers[0], "usable_aperture_radius_mm": 1.2, **fov_deg, **original}
+    if setup.reference_port is not None:
+        fov_deg = {"perfect_fov_h_deg": 26.0, "perfect_fov_v_deg": 20.0}
+        rows += [{"series": "reference", "tilt_deg": 26.6, "f_number": n, **fov_deg} for n in setup.f_numbers]
+    v, u = np.mgrid[0 : output.height_px, 0 : output.width_px]
+    radius = np.hypot(u - output.cx_px, v - output.cy_px) / output.width_px
+    masks = {
+        t: {n: radius < 0.5 / (1 + i + t / 10) for i, n in enumerate(setup.f_numbers)} for t in setup.mask_tilts_deg
+    }
+    reference = None if setup.reference_port is None else masks[setup.mask_tilts_deg[-1]]
+    return setup, rows, masks, reference, output
+
+
+@pytest.mark.parametrize("scale", ["tiny", "illum"])
+def test_the_fov_figures_follow_the_figure_rules(scale):
+    setup, rows, masks, reference, output = _fov_inputs(scale)
+    water = f"water n = {setup.n_water:.4g}"
+    for fig in (
+        fov.exact_share_figure(setup, rows),
+        fov.perfect_fov_figure(setup, rows),
+        fov.masks_figure(setup, masks, reference, output),
+    ):
+        assert_follows_the_figure_rules(fig)
+        title = fig.get_suptitle()
+        assert setup.camera.name in title, title
+        assert water in title, title
+    bar = _colour_bar_labels(fov.masks_figure(setup, masks, reference, output))
+    assert bar == ["largest main-lens f-number at which the pixel is exact"]
