@@ -47,16 +47,22 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib as mpl
 import numpy as np
 
 from lfrefract import camera_preset, virtual_camera_for
+from lfrefract.figures import (
+    DISPLAY_GAMMA,
+    EXACT_EDGE_COLOUR,
+    NO_VALUE_RGB,
+    display_image,
+    new_figure,
+    pixel_axes,
+    port_setup,
+    save_figure,
+)
 from lfrefract.metrics import psnr, ssim
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
-
-mpl.use("Agg")
-import matplotlib.pyplot as plt
 
 __all__ = [
     "FIGURE_K",
@@ -65,6 +71,8 @@ __all__ = [
     "SETUPS",
     "Setup",
     "crop_window",
+    "crops_figure",
+    "curves_figure",
     "gradient_energy",
     "noise_free_psnr",
     "noise_rel",
@@ -80,8 +88,8 @@ FIGURE_K = (1, 8, 64)
 SEEDS = (0, 1)
 #: Largest crop shown in the side-by-side figure, output pixels (height, width).
 MAX_CROP_PX = (150, 220)
-#: Grey for output pixels that have no value.
-NO_VALUE_RGB = np.array([150, 150, 150], dtype=np.uint8)
+#: Resolution of the figures, dots per inch.
+FIGURE_DPI = 90
 
 
 @dataclass(frozen=True)
@@ -175,13 +183,13 @@ def crop_window(
 
 
 # ------------------------------------------------------------------------------------ figures
-def _save(fig, path: Path, *, dpi: int) -> Path:
-    """Save ``fig`` as a palette PNG (much smaller than RGB, no visible loss)."""
+def _save(fig, path: Path) -> Path:
+    """Save ``fig`` (:func:`lfrefract.figures.save_figure`) as a palette PNG (much smaller than RGB, no
+    visible loss)."""
     from PIL import Image
 
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, buffer)
     buffer.seek(0)
     image = Image.open(buffer).convert("RGB")
     palette = image.quantize(colors=256, method=Image.Quantize.FASTOCTREE)
@@ -189,74 +197,130 @@ def _save(fig, path: Path, *, dpi: int) -> Path:
     return path
 
 
-def _shown(image: np.ndarray, valid: np.ndarray, white: float) -> np.ndarray:
-    from simulator.previews import display_rgb
-
-    rgb = display_rgb(np.where(valid[..., None], image, 0.0), white=white)
-    rgb[~valid] = NO_VALUE_RGB
-    return rgb
-
-
-def _crops_figure(
+def crops_figure(
     images: dict[int, tuple[np.ndarray, np.ndarray]],
     ideal: np.ndarray,
     exact: np.ndarray,
     rows: list[dict],
     peak: float,
+    *,
+    setup: str,
 ):
-    """Side by side: each k's image (and its filled mask) over the crop, then the ideal image; (figure, crop)."""
+    """Side by side over the crop (:func:`crop_window`): each k's image, then the ideal image, with the
+    edge of the exact coverage, a colour bar of the display scale, pixel axes (the output image's),
+    pixels with no captured ray grey (legend) and the set-up in the title.
+
+    Parameters
+    ----------
+    images : dict
+        ``k -> (image (H, W, 3), filled (H, W))``: the synthesized image and where it has a value.
+    ideal : ndarray, shape (H, W, 3)
+        The ideal image.
+    exact : ndarray, shape (H, W)
+        The exact coverage.
+    rows : list of dict
+        The rows (their scores go into the panels' titles).
+    peak : float
+        The radiance shown as white.
+    setup : str
+        The set-up, for the title.
+
+    Returns
+    -------
+    (matplotlib.figure.Figure, (slice, slice))
+        The figure and the crop (rows, columns).
+    """
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import PowerNorm
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     crop = crop_window(exact, ideal)
     by_k = {row["k"]: row for row in rows}
     panels = [
         (
-            image,
-            filled,
+            np.where(filled[..., None], image, np.nan),
             f"k = {k}\nPSNR {by_k[k]['psnr_db']:.1f} dB, SSIM {by_k[k]['ssim']:.3f}\n"
             f"sharpness {by_k[k]['sharpness_ratio']:.2f}, noise {by_k[k]['noise_rel']:.3f}",
         )
         for k, (image, filled) in images.items()
     ]
-    panels.append((ideal, np.ones(exact.shape, dtype=bool), "ideal image\n(no port, pinhole)\n"))
-    height, width = crop[0].stop - crop[0].start, crop[1].stop - crop[1].start
+    panels.append((ideal, "ideal image\n(no port, pinhole)\n"))
+    (r0, r1), (c0, c1) = (crop[0].start, crop[0].stop), (crop[1].start, crop[1].stop)
     panel_w = 4.0
-    fig, axes = plt.subplots(
-        1, len(panels), figsize=(panel_w * len(panels), panel_w * height / width + 1.5), layout="constrained"
-    )
-    for ax, (image, valid, title) in zip(axes, panels, strict=True):
-        ax.imshow(_shown(image, valid, peak)[crop], interpolation="nearest")
-        ax.contour(exact[crop].astype(float), [0.5], colors="white", linewidths=0.8, linestyles="dashed")
+    fig = new_figure(panel_w * len(panels) + 1.2, panel_w * (r1 - r0) / (c1 - c0) + 2.6, dpi=FIGURE_DPI)
+    axes = fig.subplots(1, len(panels))
+    extent = (c0 - 0.5, c1 - 0.5, r1 - 0.5, r0 - 0.5)  # the output image's pixel coordinates
+    for ax, (image, title) in zip(axes, panels, strict=True):
+        ax.imshow(display_image(image, white=peak)[crop], extent=extent, interpolation="nearest")
+        ax.contour(
+            np.arange(c0, c1),
+            np.arange(r0, r1),
+            exact[crop].astype(float),
+            [0.5],
+            colors=EXACT_EDGE_COLOUR,
+            linewidths=0.8,
+            linestyles="dashed",
+        )
         ax.set_title(title, fontsize=10)
-        ax.set_xticks([])
-        ax.set_yticks([])
+        pixel_axes(ax)
+    scale = ScalarMappable(norm=PowerNorm(1.0 / DISPLAY_GAMMA, vmin=0.0, vmax=peak), cmap="gray")
+    fig.colorbar(scale, ax=axes, shrink=0.9).set_label("radiance per channel (the render's units)")
+    handles = [
+        Line2D([], [], color=EXACT_EDGE_COLOUR, ls="--", label="edge of the exact coverage"),
+        Patch(facecolor=NO_VALUE_RGB, edgecolor="0.3", label="no captured ray"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize=9)
+    fig.suptitle(
+        f"k nearest captured rays averaged (paper Fig. 9): {setup}\n"
+        f"crop rows {r0}-{r1 - 1}, columns {c0}-{c1 - 1}; scores over the whole exact coverage",
+        fontsize=10,
+    )
     return fig, crop
 
 
-def _curves_figure(rows: list[dict], label: str):
-    """PSNR (with and without render noise), sharpness ratio and render noise against k."""
+def curves_figure(rows: list[dict], *, setup: str):
+    """PSNR (with and without render noise), sharpness ratio and render noise against k, as a Figure
+    (a legend in every panel, the set-up in the title).
+
+    Parameters
+    ----------
+    rows : list of dict
+        The rows, one per k.
+    setup : str
+        The set-up, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     k = np.array([row["k"] for row in rows], dtype=float)
 
     def column(name: str) -> np.ndarray:
         return np.array([row[name] for row in rows], dtype=float)
 
-    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13.5, 4.0), layout="constrained")
+    fig = new_figure(13.5, 4.4, dpi=FIGURE_DPI)
+    a, b, c = fig.subplots(1, 3)
     a.plot(k, column("psnr_db"), "o-", label="PSNR (render noise included)")
     a.plot(k, column("psnr_noise_free_db"), "s--", label="PSNR of the noise-free error")
-    a.set_ylabel("PSNR against the ideal image [dB]")
-    a.legend(fontsize=8)
-    b.plot(k, column("sharpness_ratio"), "o-", color="C2")
-    b.axhline(1.0, color="grey", lw=0.8, ls=":")
+    a.set_ylabel("PSNR against the ideal image (dB)")
+    a.set_title("PSNR", fontsize=10)
+    b.plot(k, column("sharpness_ratio"), "o-", color="C2", label="measured")
+    b.axhline(1.0, color="grey", lw=0.8, ls=":", label="as sharp as the ideal image")
     b.set_ylabel("sharpness ratio (gradient amplitude / ideal's)")
+    b.set_title("sharpness", fontsize=10)
     c.plot(k, column("noise_rel"), "o-", color="C3", label="measured")
     c.plot(k, column("noise_rel")[0] / np.sqrt(k), ":", color="grey", label="k = 1 value / sqrt(k)")
     c.set_yscale("log")
     c.set_ylabel("render noise (std / data range)")
-    c.legend(fontsize=8)
+    c.set_title("render noise", fontsize=10)
     for ax in (a, b, c):
         ax.set_xscale("log", base=2)
         ax.set_xticks(k, [str(int(v)) for v in k])
         ax.set_xlabel("k (captured rays averaged per necessary ray)")
         ax.grid(alpha=0.3)
-    fig.suptitle(f"averaging k rays: {label}; inside the exact coverage", fontsize=10)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"averaging k rays: {setup}; inside the exact coverage", fontsize=10)
     return fig
 
 
@@ -359,22 +423,17 @@ def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> Experim
             }
         )
 
-    label = f"default scene, {camera.name} camera, {setup.spp} spp (ideal {2 * setup.ideal_spp} spp)"
-    fig, crop = _crops_figure(
+    label = f"{scene.name!r} scene, {port_setup(camera, port)}, {setup.spp} spp (ideal {2 * setup.ideal_spp} spp)"
+    fig, crop = crops_figure(
         {k: (results[k][0], results[k][2]) for k in FIGURE_K},
         ideal,
         exact,
         rows,
         peak,
+        setup=label,
     )
-    fig.suptitle(
-        f"k nearest captured rays averaged (paper Fig. 9): {label}\n"
-        f"crop rows {crop[0].start}-{crop[0].stop - 1}, columns {crop[1].start}-{crop[1].stop - 1}; "
-        "dashed: edge of the exact coverage; scores over the whole exact coverage",
-        fontsize=10,
-    )
-    crops_png = _save(fig, out / "averaging_crops.png", dpi=90)
-    curves_png = _save(_curves_figure(rows, label), out / "averaging_curves.png", dpi=90)
+    crops_png = _save(fig, out / "averaging_crops.png")
+    curves_png = _save(curves_figure(rows, setup=label), out / "averaging_curves.png")
 
     parameters = {
         "scene": scene.name,

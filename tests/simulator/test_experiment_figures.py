@@ -11,7 +11,7 @@ import pytest
 
 from lfrefract import virtual_camera_for
 from lfrefract.figures import NO_VALUE_RGB, save_figure
-from simulator.experiments import fov
+from simulator.experiments import averaging, fov
 from simulator.experiments.objects import BACKDROP_RGB, objects_error_figure
 from simulator.experiments.planes import disparity_figure, errors_figure, plane_figures, setup_for
 from simulator.experiments.rigstereo import MATCHERS, experiment_rig, rig_setup
@@ -212,3 +212,57 @@ def test_the_fov_figures_follow_the_figure_rules(scale):
         assert water in title, title
     bar = _colour_bar_labels(fov.masks_figure(setup, masks, reference, output))
     assert bar == ["largest main-lens f-number at which the pixel is exact"]
+
+
+# --------------------------------------------------------------------------------------- averaging
+AVERAGING_SETUP = "default scene, tiny camera behind a port tilted 20 deg, 16 spp (ideal 2048 spp)"
+
+
+def _averaging_inputs():
+    """Each shown k's image and filled mask, the ideal image, the exact coverage, the rows and the
+    data range: a 40 x 60 px output, exact in its middle, with no captured ray in its left fifth."""
+    rng = np.random.default_rng(2)
+    ideal = rng.uniform(0.2, 1.0, (40, 60, 3))
+    exact = np.zeros((40, 60), dtype=bool)
+    exact[8:32, 10:50] = True
+    filled = np.ones((40, 60), dtype=bool)
+    filled[:, :12] = False
+    images = {
+        k: np.where(filled[..., None], ideal + rng.normal(0.0, 0.05 / k, ideal.shape), np.nan) for k in (1, 8, 64)
+    }
+    keys = ("psnr_db", "ssim", "sharpness_ratio", "noise_rel", "psnr_noise_free_db")
+    rows = [
+        {"k": k, **dict(zip(keys, (30.0 + k / 8, 0.9, 1.0 - k / 100, 0.05 / k, 35.0), strict=True))}
+        for k in averaging.K_VALUES
+    ]
+    return {k: (image, filled) for k, image in images.items()}, ideal, exact, rows, float(np.percentile(ideal, 99.5))
+
+
+def test_the_averaging_crops_follow_the_figure_rules(tmp_path):
+    images, ideal, exact, rows, peak = _averaging_inputs()
+    fig, crop = averaging.crops_figure(images, ideal, exact, rows, peak, setup=AVERAGING_SETUP)
+    assert_follows_the_figure_rules(fig)
+    assert AVERAGING_SETUP in fig.get_suptitle()
+    assert _colour_bar_labels(fig) == ["radiance per channel (the render's units)"]
+    assert {"no captured ray", "edge of the exact coverage"} <= set(_legend_texts(fig))
+    save_figure(fig, tmp_path / "crops.png")
+    png = matplotlib.image.imread(tmp_path / "crops.png")
+    filled = images[1][1][crop]
+    box = fig.axes[0].get_window_extent(fig.canvas.get_renderer())  # laid out as saved
+    (x0, x1), (y1, y0) = fig.axes[0].get_xlim(), fig.axes[0].get_ylim()  # the output image's pixels
+    v, u = np.mgrid[crop]
+    cols = (box.x0 + (u - x0) / (x1 - x0) * box.width).astype(int)
+    rows = (png.shape[0] - (box.y1 - (v - y0) / (y1 - y0) * box.height)).astype(int)
+    shown = png[rows, cols, :3]
+    assert (~filled).sum() > 0
+    assert np.abs(shown[~filled] - NO_VALUE_RGB).max() <= PNG_STEP  # grey where no ray was captured
+    assert np.abs(shown[filled] - NO_VALUE_RGB).max(axis=1).min() > 0  # the rest is the image
+
+
+def test_the_averaging_curves_follow_the_figure_rules():
+    _, _, _, rows, _ = _averaging_inputs()
+    fig = averaging.curves_figure(rows, setup=AVERAGING_SETUP)
+    assert_follows_the_figure_rules(fig)
+    assert AVERAGING_SETUP in fig.get_suptitle()
+    plots = [ax for ax in fig.axes if ax.lines]
+    assert all(ax.get_legend() is not None for ax in plots)  # every line is named
