@@ -77,6 +77,7 @@ from tqdm import tqdm
 
 from lfrefract import cli as core_cli
 from lfrefract.errors import ParameterError
+from lfrefract.figures import new_figure, save_figure
 from lfrefract.formats.capture import RAW_NAME, camera_from_option, port_from_file, ray_correction_from_option
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json, write_text_atomically
@@ -140,6 +141,7 @@ __all__ = [
     "PipelineSetup",
     "run_pipeline",
     "setup_for_pipeline",
+    "summary_figure",
 ]
 
 #: The rows of the table, in order.
@@ -807,18 +809,14 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     rows = list(complete_rows(rows))
     write_table(complete_rows(by_depth), out_dir, stem="planes")
     write_text_atomically(out_dir / "commands.txt", "\n".join(log) + "\n")
+    title = f"pipeline ({scale}), {lens} lens, {setup.sensor} sensor: {rig_setup(real)}"
     figures = (
-        _summary_figure(out_dir, rows, scale=scale, lens=lens, sensor=setup.sensor, wall=real.wall),
+        out_dir / "pipeline_summary.png",
         *plane_figures(
-            out_dir,
-            list(by_depth),
-            disparities,
-            plane_depths,
-            list(METHODS),
-            setup=f"pipeline ({scale}), {lens} lens, {setup.sensor} sensor: {rig_setup(real)}",
-            prefix="pipeline",
+            out_dir, list(by_depth), disparities, plane_depths, list(METHODS), setup=title, prefix="pipeline"
         ),
     )
+    save_figure(summary_figure(rows, setup=title), figures[0])
     return ExperimentResult(
         name="pipeline",
         scale=scale,
@@ -856,41 +854,45 @@ def _summary(rows: Sequence[dict]) -> str:
     return "\n".join(lines + (["", "failed:", *failed] if failed else []))
 
 
-def _summary_figure(out_dir: Path, rows: Sequence[dict], *, scale: str, lens: str, sensor: str, wall) -> Path:
-    """Bars of the table's measures by method."""
-    import matplotlib as mpl
+def summary_figure(rows: Sequence[dict], *, setup: str):
+    """Bars of the table's measures by method, as a Figure: a panel per measure with its unit on the
+    y axis, a method with no value there marked "no value" at its place, the set-up in the title.
 
-    mpl.use("Agg")
-    import matplotlib.pyplot as plt
+    Parameters
+    ----------
+    rows : sequence of dict
+        The experiment's rows, one per method.
+    setup : str
+        The set-up, for the title.
 
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     panels = (
-        ("corner_rms_px", "test-board corners, px RMS"),
-        ("plane_rmse_mm", "plane fit RMSE (ZNCC), mm"),
-        ("truth_error_mm", "error against the true plane, mm"),
-        ("port_normal_err_deg", "port normal error, deg"),
-        ("port_distance_err_mm", "port distance error, mm"),
-        ("ray_rms_mm", "ray error at the port, mm RMS"),
+        ("corner_rms_px", "test-board corners", "RMS error (px)"),
+        ("plane_rmse_mm", "plane fit RMSE (ZNCC)", "RMSE (mm)"),
+        ("truth_error_mm", "error against the true plane", "mean error (mm)"),
+        ("port_normal_err_deg", "port normal error", "angle (deg)"),
+        ("port_distance_err_mm", "port distance error", "error (mm)"),
+        ("ray_rms_mm", "ray error at the port", "RMS error (mm)"),
     )
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 3.4))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, (key, title) in zip(axes, panels, strict=True):
-        values = [float(r[key]) if isinstance(r[key], (int, float)) else math.nan for r in rows]
-        x = np.arange(len(rows))
-        ax.bar(x, values, color=[colours[i % len(colours)] for i in range(len(rows))])
+    fig = new_figure(3.0 * len(panels), 4.2, dpi=90)
+    axes = fig.subplots(1, len(panels))
+    x = np.arange(len(rows))
+    for ax, (key, title, unit) in zip(axes, panels, strict=True):
+        values = np.array([float(r[key]) if isinstance(r[key], (int, float)) else math.nan for r in rows])
+        ax.bar(x, values, color=[f"C{i % 10}" for i in range(len(rows))])
+        for i in np.flatnonzero(~np.isfinite(values)):
+            ax.text(i, 0.0, "no value", rotation=90, ha="center", va="bottom", fontsize=7, color="0.3")
         ax.set_xticks(x, [r["method"] for r in rows], rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel(unit, fontsize=8)
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3, axis="y")
-    tilt = math.degrees(math.acos(float(np.clip(wall.normal[2] / np.linalg.norm(wall.normal), -1.0, 1.0))))
-    fig.suptitle(
-        f"pipeline ({scale}): {lens} lens, {sensor} sensor, wall tilted {tilt:.0f} deg, "
-        f"{wall.thickness_m * 1e3:g} mm glass; oracle = thin lens, true camera and port",
-        fontsize=9,
-    )
-    fig.tight_layout()
-    path = out_dir / "pipeline_summary.png"
-    fig.savefig(path, dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return path
+        if not np.isfinite(values).any():
+            ax.set_ylim(0.0, 1.0)
+    fig.suptitle(f"{setup}\noracle = thin lens, true camera and port", fontsize=9)
+    return fig
 
 
 @register("pipeline", options=("lens", "port_distance_m", "thickness_m"), keeps_renders=True)

@@ -11,7 +11,7 @@ import pytest
 
 from lfrefract import virtual_camera_for
 from lfrefract.figures import NO_VALUE_RGB, save_figure
-from simulator.experiments import averaging, fov
+from simulator.experiments import averaging, fov, pipeline
 from simulator.experiments.objects import BACKDROP_RGB, objects_error_figure
 from simulator.experiments.planes import disparity_figure, errors_figure, plane_figures, setup_for
 from simulator.experiments.rigstereo import MATCHERS, experiment_rig, rig_setup
@@ -266,3 +266,21 @@ def test_the_averaging_curves_follow_the_figure_rules():
     assert AVERAGING_SETUP in fig.get_suptitle()
     plots = [ax for ax in fig.axes if ax.lines]
     assert all(ax.get_legend() is not None for ax in plots)  # every line is named
+
+
+# ---------------------------------------------------------------------------------------- pipeline
+def test_the_pipeline_summary_follows_the_figure_rules_and_marks_a_missing_value():
+    measures = ("corner_rms_px", "plane_rmse_mm", "truth_error_mm", "port_normal_err_deg")
+    measures += ("port_distance_err_mm", "ray_rms_mm")
+    rows = [{"method": m, **dict.fromkeys(measures, 1.0)} for m in pipeline.METHODS]
+    rows[-1] = {"method": pipeline.METHODS[-1], **dict.fromkeys(measures, float("nan"))}  # failed
+    setup = "pipeline (tiny), double-gauss lens, tiny sensor: " + "experiment-default: two tiny-2x cameras"
+    fig = pipeline.summary_figure(rows, setup=setup)
+    assert_follows_the_figure_rules(fig)
+    assert setup in fig.get_suptitle()
+    panels = [ax for ax in fig.axes if ax.patches]
+    assert len(panels) == len(measures)
+    for ax in panels:
+        assert ax.get_ylabel().endswith(")"), ax.get_ylabel()  # the unit
+        assert [t.get_text() for t in ax.texts] == ["no value"]  # the failed method's bar
+        assert ax.texts[0].get_position()[0] == len(rows) - 1
