@@ -66,6 +66,7 @@ from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.synthesis._depth_kernels import render_at_depth, sweep_cost
+from lfrefract.synthesis.empty import masked_reason, require_a_value
 from lfrefract.synthesis.warp_map import (
     FILLED_APPROXIMATED,
     FILLED_EMPTY,
@@ -681,8 +682,22 @@ class DepthAwareSynthesis:
         Returns
         -------
         DepthAwareResult
+
+        Raises
+        ------
+        ParameterError
+            For a raw image of another shape, and for an image with no value anywhere: every ray masked as
+            unrecorded (named before the depth search), or no pixel finding a depth in the range.
         """
         values, keep = self.rays.values(raw, recorded=recorded)
+        unrecorded = 0 if recorded is None else int(np.size(recorded) - np.count_nonzero(recorded))
+
+        def why() -> str:
+            if unrecorded:
+                return masked_reason(unrecorded, self.rays.raw_shape[0] * self.rays.raw_shape[1])
+            return "no captured ray of the camera reaches the water through the port, or none gave a pixel a value"
+
+        require_a_value(keep, what="the depth-aware image", because=why)  # before the sweep: it would blame the depths
         rays = self.rays.kept(keep)  # once for the sweep and the render
         depth = estimate_depth(rays, values, self.output, self.options)
         if not np.any(np.isfinite(depth.depth_m)):
@@ -691,8 +706,12 @@ class DepthAwareSynthesis:
                 f"min_rays={self.options.min_rays} rays for any pixel; choose the depths of the scene behind the port"
             )
         rendered, used = render_given_depth(rays, values, self.output, depth.depth_m, self.options)
-        classic = self.warp.apply(raw)
         grey = np.ndim(raw) == 2
+        if self.warp.indptr[-1] > 0:
+            classic = self.warp.apply(raw)
+        else:  # every row masked (WarpMap.apply refuses it): the depth-aware pixels may still have values
+            shape = (self.output.height_px, self.output.width_px)
+            classic = np.zeros(shape if grey else (*shape, values.shape[1]), dtype=np.float32)
         classes = self.warp.filled_classes.astype(np.uint8)
         given = (
             (classes != FILLED_EXACT)
@@ -703,4 +722,5 @@ class DepthAwareSynthesis:
         classes[given] = FILLED_EXACT_GIVEN_DEPTH
         image = image.astype(np.float32, copy=False)
         image[classes == FILLED_EMPTY] = math.nan
+        require_a_value(classes != FILLED_EMPTY, what="the depth-aware image", because=why)
         return DepthAwareResult(image=image, depth=depth, classes=classes, rays_used=used)

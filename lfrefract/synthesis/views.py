@@ -59,6 +59,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.synthesis.empty import masked_reason, output_geometry, require_a_value
 from lfrefract.validate import finite_vector, one_of, positive_float
 
 __all__ = [
@@ -397,13 +398,41 @@ def apply_resampling(
     """Per-lens values (M, C) through a :func:`resampling_matrix` onto the pinhole image, float32,
     NaN outside the lenses' hull; ``grey`` drops the channel axis. ``masked``: lenses without a value
     (NaN in any channel, as :func:`micro_image_samples` gives where no recorded pixel contributes)
-    are skipped, each pixel's weights renormalised over the others."""
+    are skipped, each pixel's weights renormalised over the others.
+
+    Raises
+    ------
+    ParameterError
+        If the image would have no value anywhere (:func:`lfrefract.synthesis.empty.require_a_value`),
+        naming why: no pixel of ``output`` lies among the lenses, or every lens it needs lacks a value
+        (its raw pixels masked as unrecorded).
+    """
     if masked:
-        return _apply_resampling_masked(matrix, inside, values, output, grey=grey)
-    out = np.asarray(matrix @ values.astype(np.float64), dtype=np.float32)
-    out[~inside] = np.nan
-    out = out.reshape(output.height_px, output.width_px, -1)
-    return out[..., 0] if grey else out
+        out = _apply_resampling_masked(matrix, inside, values, output, grey=grey)
+    else:
+        out = np.asarray(matrix @ values.astype(np.float64), dtype=np.float32)
+        out[~inside] = np.nan
+        out = out.reshape(output.height_px, output.width_px, -1)
+        out = out[..., 0] if grey else out
+    require_a_value(
+        ~np.isnan(out),
+        what=f"the {output.width_px} x {output.height_px} px view",
+        because=lambda: _why_no_view(inside, output, masked=masked),
+    )
+    return out
+
+
+def _why_no_view(inside: np.ndarray, output: PinholeCamera, *, masked: bool) -> str:
+    """Why a resampled view has no value: no output pixel lies within the lenses' triangulation, or the
+    lenses its pixels need have no value (masked, or not finite in the raw image)."""
+    if not np.any(inside):
+        return (
+            f"no pixel of {output_geometry(output)} lies among the lenses' positions (their triangulation): it "
+            "looks outside the camera's field; give an output geometry that sees it (the capture's ideal camera)"
+        )
+    if masked:
+        return masked_reason()
+    return "the raw values of every lens its pixels need are not finite (NaN or inf)"
 
 
 def _apply_resampling_masked(
@@ -968,10 +997,7 @@ def subaperture_stack(
                 )[1:]
                 cached_shift = shift
             values = _bilinear(planes, centres_px + np.asarray((du, dv)), weight)
-            if weight is None:
-                views[r, c] = apply_resampling(*cached, values, output, grey=grey)
-            else:
-                views[r, c] = _apply_resampling_masked(*cached, values, output, grey=grey)
+            views[r, c] = apply_resampling(*cached, values, output, grey=grey, masked=weight is not None)
             centres[r, c] = subaperture_centre_m(camera, (du, dv), ray_correction=ray_correction)
     return ViewStack(
         views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera, ray_correction=ray_correction

@@ -34,6 +34,7 @@ import hashlib
 import json
 import math
 import os
+import time
 import zipfile
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -66,6 +67,7 @@ from lfrefract.synthesis._kernels import (
     sensor_to_plane_scale,
 )
 from lfrefract.synthesis._raytree import LazyRayTree
+from lfrefract.synthesis.empty import masked_reason, output_geometry, require_a_value
 from lfrefract.validate import non_negative_float, one_of, positive_int
 
 __all__ = [
@@ -383,17 +385,17 @@ class WarpMap:
             Zero where :attr:`filled` is False, which image-processing code (OpenCV's matchers and
             corner finders) takes as it is; files mark those pixels NaN, the project's "no value"
             (``lfrefract synth``, datasets), with :attr:`filled_classes`.
+
+        Raises
+        ------
+        ParameterError
+            For a raw image of another shape or type, and for a map with no entry (every row emptied by
+            :func:`lfrefract.formats.capture.mask_warp_map`): an image with no value anywhere is refused,
+            naming the masked pixels.
         """
-        arr = np.asarray(raw)
-        if arr.shape[:2] != tuple(self.raw_shape):
-            raise ParameterError(f"raw must have shape {tuple(self.raw_shape)} (+ channels), got {arr.shape}")
-        if arr.ndim not in (2, 3) or not (
-            np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
-        ):
-            raise ParameterError(f"raw must be a real (H, W) or (H, W, C) image, got shape {arr.shape}, {arr.dtype}")
-        flat = arr.reshape(arr.shape[0] * arr.shape[1], -1)
-        if not np.issubdtype(flat.dtype, np.floating):
-            flat = flat.astype(np.float32)
+        arr = self._checked_raw(raw)
+        require_a_value(self.indptr[-1] > 0, what="the refraction-free image", because=self._why_empty)
+        flat = self._flat(arr)
         out = np.empty((len(self.indptr) - 1, flat.shape[1]), dtype=np.float32)
         # Blocks of rows with equal shares of the entries, several per thread for balance.
         shares = np.linspace(0, self.indptr[-1], 16 * numba.get_num_threads() + 1)
@@ -402,6 +404,64 @@ class WarpMap:
         gather(np.unique(chunks), self.indptr, self.indices, self.weights, self.gain, flat, out)
         shape = (self.output.height_px, self.output.width_px)
         return out.reshape(shape) if arr.ndim == 2 else out.reshape(*shape, flat.shape[1])
+
+    def compile_for(self, raw: np.ndarray) -> float:
+        """Compile the gather of :meth:`apply` for ``raw``'s type and channels, on one pixel; seconds taken.
+
+        numba compiles the gather on its first call for each type of raw image (a few seconds; then it
+        loads it from its cache, in later processes too). Called before :meth:`apply`, it keeps that time
+        out of the apply's, so that the two can be reported apart (``lfrefract synth``). ``raw`` is
+        checked as :meth:`apply` checks it; only its first pixel is read.
+
+        Parameters
+        ----------
+        raw : ndarray, shape (H, W) or (H, W, C)
+            A raw image as :meth:`apply` takes it.
+
+        Returns
+        -------
+        float
+            Seconds the one-pixel gather took: the compilation (or the load from numba's cache) and a
+            negligible gather.
+        """
+        arr = self._checked_raw(raw)
+        one = self._flat(arr[:1, :1])  # the type the gather sees in apply, of one pixel
+        start = time.perf_counter()
+        gather(
+            np.array([0, 1], dtype=np.intp),
+            np.array([0, 1], dtype=self.indptr.dtype),
+            np.zeros(1, dtype=self.indices.dtype),
+            np.ones(1, dtype=self.weights.dtype),
+            np.ones(1, dtype=self.gain.dtype),
+            one,
+            np.empty((1, one.shape[1]), dtype=np.float32),
+        )
+        return time.perf_counter() - start
+
+    def _checked_raw(self, raw: np.ndarray) -> np.ndarray:
+        """``raw`` as an array, checked against the map's raw shape and for a real type."""
+        arr = np.asarray(raw)
+        if arr.shape[:2] != tuple(self.raw_shape):
+            raise ParameterError(f"raw must have shape {tuple(self.raw_shape)} (+ channels), got {arr.shape}")
+        if arr.ndim not in (2, 3) or not (
+            np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+        ):
+            raise ParameterError(f"raw must be a real (H, W) or (H, W, C) image, got shape {arr.shape}, {arr.dtype}")
+        return arr
+
+    @staticmethod
+    def _flat(arr: np.ndarray) -> np.ndarray:
+        """A checked raw image as the gather reads it: (H * W, C), float (integers as float32)."""
+        flat = arr.reshape(arr.shape[0] * arr.shape[1], -1)
+        return flat if np.issubdtype(flat.dtype, np.floating) else flat.astype(np.float32)
+
+    def _why_empty(self) -> str:
+        """Why the map has no entry: :func:`build_warp_map` refuses such a map, so its raw pixels were
+        masked (:func:`lfrefract.formats.capture.mask_warp_map`), or it was made by other means."""
+        unrecorded = self.meta.get("unrecorded_raw_pixels")
+        if isinstance(unrecorded, int) and unrecorded > 0:
+            return masked_reason(unrecorded, self.raw_shape[0] * self.raw_shape[1])
+        return "the warp map has no entry (build it with build_warp_map, which says why a map would have none)"
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> Path:
@@ -800,6 +860,13 @@ def build_warp_map(
     Returns
     -------
     WarpMap
+
+    Raises
+    ------
+    ParameterError
+        For arguments of the wrong type, a port that cuts the aperture, and a map that would give no
+        output pixel a captured ray (an image with no value anywhere), naming why: the lines of sight miss
+        the port, or the port reflects their light totally.
     """
     if not isinstance(camera, LightFieldCamera):
         raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
@@ -845,6 +912,7 @@ def build_warp_map(
 
     indptr = np.zeros(n_pixels + 1, dtype=np.int64)
     np.cumsum(np.concatenate([b.counts for b in blocks]), out=indptr[1:])
+    require_a_value(indptr[-1] > 0, what="the refraction-free image", because=lambda: _why_no_ray(camera, port, output))
     mean_factor = np.concatenate([b.factor for b in blocks])
     gain = np.ones(n_pixels, dtype=np.float32)
     if options.compensate_port:
@@ -869,6 +937,27 @@ def build_warp_map(
         key=warp_map_key(camera, port, output, options),
         meta=meta,
     )
+
+
+def _why_no_ray(camera: LightFieldCamera, port: FlatPort, output: PinholeCamera) -> str:
+    """Why no output pixel of a warp map got a captured ray: its lines of sight miss the port, or the
+    port reflects their light totally, or (neither) no captured ray lies near any of them."""
+    v, u = np.indices((output.height_px, output.width_px))
+    directions = output.pixel_directions(np.column_stack([u.ravel(), v.ravel()]).astype(np.float64))
+    geometry = output_geometry(output)
+    tilt = f"tilt {math.degrees(port.total_tilt_rad):.3g} deg"
+    if not np.any(directions @ port.normal > 0.0):
+        return (
+            f"no line of sight of {geometry} reaches the port ({tilt}): they all point away from it; give an "
+            "output geometry that looks through the port (the capture's ideal camera)"
+        )
+    if not np.any(necessary_air_rays(port, directions)[3]):
+        return (
+            f"the light of every line of sight of {geometry} is totally internally reflected at the port ({tilt}, "
+            f"n_water {port.n_water:.4g}): none reaches the camera; give a port of less tilt, or an output geometry "
+            "that looks through the port (the capture's ideal camera)"
+        )
+    return f"no captured ray of {camera.name!r} lies near the necessary ray of any pixel of {geometry}"
 
 
 def build_cfa_warp_maps(

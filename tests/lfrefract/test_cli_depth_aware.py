@@ -93,7 +93,7 @@ def test_depth_aware_writes_every_listed_file(synthesized):
     assert meta["filled_classes"] == CLASSES
     assert set(np.unique(classes)) == set(CLASSES.values())
     assert meta["depth_options"] == DepthAwareOptions().to_dict()
-    assert set(meta["seconds"]) == {"map", "rays", "apply"}
+    assert set(meta["seconds"]) == {"map", "rays", "compile", "apply"}
     stats = meta["coverage"]
     assert stats["exact_fraction"] == np.mean(classes == FILLED_EXACT)
     assert stats["exact_given_depth_fraction"] == np.mean(classes == FILLED_EXACT_GIVEN_DEPTH)

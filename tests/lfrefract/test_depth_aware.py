@@ -327,3 +327,41 @@ def test_a_frame_where_no_pixel_finds_a_depth_is_refused():
     many = DepthAwareSynthesis(warp=synthesis.warp, rays=synthesis.rays, options=options)
     with pytest.raises(ParameterError, match=r"no output pixel has a depth: .*min_rays=1000000"):
         many.apply(plane_raw(synthesis))
+
+
+def test_a_frame_whose_every_ray_is_masked_is_refused_naming_the_mask():
+    """Every raw pixel masked as unrecorded (``--nonfinite mask`` on an all-NaN raw): the refusal blamed the
+    depth range (no pixel finds a depth); it names the masked pixels instead, before the sweep."""
+    from lfrefract.formats.capture import mask_warp_map
+
+    synthesis = setup()
+    raw = plane_raw(synthesis)
+    nothing = np.zeros(raw.shape[:2], dtype=bool)
+    masked = DepthAwareSynthesis(
+        warp=mask_warp_map(synthesis.warp, nothing), rays=synthesis.rays, options=synthesis.options
+    )
+    with pytest.raises(
+        ParameterError, match=r"no value anywhere: every ray it needs lies on the .* raw pixels masked"
+    ) as err:
+        masked.apply(raw, recorded=nothing)
+    assert "--depth-range" not in str(err.value)
+
+
+def test_a_masked_warp_map_leaves_the_depth_aware_pixels_their_values():
+    """The warp map emptied by the mask (its rows gather none of the recorded rays) while the rays that see
+    the scene keep theirs: the depth-aware pixels are a result, not refused with the warp map."""
+    from lfrefract.formats.capture import mask_warp_map
+
+    synthesis = setup()
+    raw = plane_raw(synthesis)
+    recorded = np.ones(raw.shape[:2], dtype=bool)
+    recorded.ravel()[synthesis.warp.indices] = False  # every raw pixel the warp map gathers
+    emptied = mask_warp_map(synthesis.warp, recorded)
+    assert not emptied.filled.any()
+    result = DepthAwareSynthesis(warp=emptied, rays=synthesis.rays, options=synthesis.options).apply(
+        raw, recorded=recorded
+    )
+    given = result.classes == FILLED_EXACT_GIVEN_DEPTH
+    assert given.any()
+    assert np.isfinite(result.image[given]).all()
+    assert np.isnan(result.image[result.classes == FILLED_EMPTY]).all()

@@ -563,3 +563,45 @@ def test_cfa_maps_gather_each_colour_from_its_own_sites_only():
     with pytest.raises(ParameterError, match="cfa_colour"):
         SynthesisOptions(cfa_pattern="BGGR", cfa_colour="Y")
     assert "cfa_pattern" not in SynthesisOptions().to_dict()  # the maps of every pixel keep their keys
+
+
+# ---------------------------------------------------------------------------- results with no value (issue 36)
+def _looking_away(output: PinholeCamera, shift_px: float) -> PinholeCamera:
+    """``output`` with its principal point ``shift_px`` to the right: its lines of sight point far left."""
+    data = output.to_dict()
+    K = np.array(data["K"])
+    K[0, 2] += shift_px
+    return PinholeCamera.from_dict({**data, "K": K.tolist()})
+
+
+def test_a_port_that_reflects_every_line_of_sight_is_refused_naming_it():
+    """A 70 deg port reflects the light of every line of sight of tiny's image totally: the map had no entry,
+    and ``synth`` wrote an image of NaN with exit status 0."""
+    port = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.005, tilt_x_deg=70.0)
+    with pytest.raises(ParameterError, match=r"no value anywhere: .*totally internally reflected.*tilt 70 deg"):
+        build_warp_map(TINY, port)
+
+
+def test_an_output_that_looks_away_from_the_port_is_refused_naming_its_geometry():
+    """An output whose principal point lies 10 000 px off (a K typed wrong) sees nothing through the port."""
+    output = _looking_away(virtual_camera_for(TINY), 1e4)
+    with pytest.raises(ParameterError, match=r"no value anywhere: .*92 x 69 px output.*cx 1\.005e\+04"):
+        build_warp_map(TINY, PORT, output=output)
+
+
+def test_a_map_whose_every_ray_is_masked_is_refused_when_applied(warp):
+    """Masking every raw pixel as unrecorded empties every row (``--nonfinite mask`` on an all-NaN raw): the
+    image would have no value anywhere, which is refused naming the masked pixels, not returned as zeros."""
+    from lfrefract.formats.capture import mask_warp_map
+
+    raw = np.ones(warp.raw_shape, dtype=np.float32)
+    emptied = mask_warp_map(warp, np.zeros(warp.raw_shape, dtype=bool))
+    with pytest.raises(
+        ParameterError,
+        match=r"no value anywhere: every ray it needs lies on the 172800 of 172800 raw pixels masked as unrecorded "
+        r".*--nonfinite mask",
+    ):
+        emptied.apply(raw)
+    some = np.zeros(warp.raw_shape, dtype=bool)
+    some[::2] = True
+    assert np.count_nonzero(mask_warp_map(warp, some).apply(raw)) > 0  # some rows left: a result

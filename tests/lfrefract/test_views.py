@@ -263,3 +263,62 @@ def test_a_resampling_beyond_the_memory_is_refused_by_every_caller(monkeypatch):
         match=r"resampling 1907 lenses onto a 92 x 69 px image needs about .* more than the 1000 B available \(test\)",
     ):
         ConventionalView(TINY, virtual_camera_for(TINY))
+
+
+# =============================================================================== results with no value (issue 36)
+def _looking_away(shift_px: float = 1e4):
+    """tiny's default view with its principal point ``shift_px`` off: no lens lands in it."""
+    from lfrefract import PinholeCamera
+
+    output = virtual_camera_for(TINY)
+    return PinholeCamera(
+        focal_px=output.focal_px,
+        cx_px=output.cx_px + shift_px,
+        cy_px=output.cy_px,
+        width_px=output.width_px,
+        height_px=output.height_px,
+    )
+
+
+def _every_view(raw, recorded=None, output=None):
+    """Each way the core makes a view, as a callable."""
+    from lfrefract.methods import ConventionalView
+    from lfrefract.synthesis.views import subaperture_stack
+
+    return {
+        "central": lambda: naive_view(TINY, raw, output=output, recorded=recorded),
+        "full": lambda: naive_view(TINY, raw, output=output, kind="full", recorded=recorded),
+        "subaperture": lambda: subaperture_view(TINY, raw, (1.5, -1.0), output=output, recorded=recorded),
+        "stack": lambda: subaperture_stack(TINY, raw, grid=3, output=output, recorded=recorded),
+        "conventional": lambda: ConventionalView(TINY, output or virtual_camera_for(TINY)).apply(
+            raw, recorded=recorded
+        ),
+    }
+
+
+@pytest.mark.parametrize("view", ["central", "full", "subaperture", "stack", "conventional"])
+def test_a_view_whose_output_sees_no_lens_is_refused_naming_its_geometry(view):
+    """An output geometry whose principal point is 10 000 px off holds no lens: every pixel was NaN, and
+    ``naive`` and ``views`` wrote such images with exit status 0."""
+    raw, _ = _holed(0.0)
+    with pytest.raises(
+        ParameterError, match=r"no value anywhere: no pixel of the 92 x 69 px output .*cx 1\.005e\+04.* lenses"
+    ):
+        _every_view(raw, output=_looking_away())[view]()
+
+
+@pytest.mark.parametrize("view", ["central", "full", "subaperture", "stack", "conventional"])
+def test_a_view_whose_every_raw_pixel_is_masked_is_refused_naming_the_mask(view):
+    """``--nonfinite mask`` on an all-NaN raw image left every lens without a recorded pixel: all NaN, exit 0."""
+    raw = np.full((TINY.sensor.height_px, TINY.sensor.width_px, 3), np.nan, dtype=np.float32)
+    recorded = np.zeros(raw.shape[:2], dtype=bool)
+    with pytest.raises(
+        ParameterError, match=r"no value anywhere: .*raw pixels masked as unrecorded .*--nonfinite mask"
+    ):
+        _every_view(raw, recorded)[view]()
+    # One recorded micro-image is a result (NaN elsewhere), not refused.
+    centre = np.round(TINY.micro_image_centres_px(TINY.lens_indices_on_sensor()[900:901])[0]).astype(int)
+    raw[centre[1] - 4 : centre[1] + 5, centre[0] - 4 : centre[0] + 5] = 0.5
+    recorded = np.isfinite(raw).all(axis=2)
+    result = _every_view(raw, recorded)[view]()
+    assert np.isfinite(getattr(result, "views", result)).any()
