@@ -85,7 +85,8 @@ from lfrefract._memory import require_memory
 from lfrefract.errors import ParameterError
 from lfrefract.optics.forward import project_through_port
 from lfrefract.synthesis.views import (
-    RESAMPLING_BYTES_PER_PIXEL,
+    lens_count,
+    resampling_bytes,
     resampling_matrix,
     subaperture_centre_m,
     subaperture_limit_px,
@@ -161,19 +162,21 @@ class ViewDisparity:
         return float(self.centres_m[0, 1, 0] - self.centres_m[0, 0, 0])
 
 
-def view_disparity_bytes(output: PinholeCamera, grid: int) -> int:
+def view_disparity_bytes(camera: LightFieldCamera, output: PinholeCamera, grid: int) -> int:
     """Estimated peak memory of :func:`view_stack_disparity`, bytes (see :mod:`lfrefract._memory`).
 
     The result, ``8 * grid^2`` bytes per output pixel (two float32 maps per view); the pixels'
     unit directions (24 B) and a view's hull mask (9 B); the larger of: the views' resampling that
-    decides the hull (:data:`~lfrefract.synthesis.views.RESAMPLING_BYTES_PER_PIXEL` per pixel, times 1.5
-    for its fixed costs on small images, freed before the tracing) and one chunk's work
+    decides the hull (:func:`~lfrefract.synthesis.views.resampling_bytes` over ``camera``'s lenses: per
+    pixel, per lens and one chunk; freed before the tracing) and one chunk's work
     (:data:`WORK_BYTES_PER_PIXEL` per pixel of at most :data:`CHUNK_PIXELS`). :func:`view_disparity`
     (one view) needs the same with ``grid = 1``. Measured with tracemalloc on the tiny camera behind a
-    tilted port (3 x 3 stacks of 6 348 and 25 392 px views): 0.6-0.85 of the estimate.
+    tilted port (3 x 3 stacks of 6 348 and 25 392 px views): 0.55-0.8 of the estimate, 0.88-0.91 with
+    qhull's 950 B per lens, which tracemalloc does not see.
     """
     pixels = output.width_px * output.height_px
-    work = max(3 * RESAMPLING_BYTES_PER_PIXEL * pixels // 2, WORK_BYTES_PER_PIXEL * min(pixels, CHUNK_PIXELS))
+    resampling = resampling_bytes(lenses=lens_count(camera), pixels=pixels)
+    work = max(resampling, WORK_BYTES_PER_PIXEL * min(pixels, CHUNK_PIXELS))
     return int(8 * grid * grid * pixels + 24 * pixels + 9 * pixels + work)
 
 
@@ -358,7 +361,8 @@ def view_disparity(
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value < grid:
             raise ParameterError(f"{name} must be an integer in [0, {grid}), got {value!r}")
     require_memory(
-        f"the disparity of a {output.width_px} x {output.height_px} px view", view_disparity_bytes(output, 1)
+        f"the disparity of a {output.width_px} x {output.height_px} px view",
+        view_disparity_bytes(config.camera, output, 1),
     )
     offsets, centres = _geometry(config.camera, grid, spacing)
     recorded = _recorded(config.camera, output, offsets[row, column])
@@ -412,7 +416,7 @@ def view_stack_disparity(
     spacing = stack_spacing_px(config.camera, grid, spacing_px)
     require_memory(
         f"the disparity of a {grid} x {grid} stack of {output.width_px} x {output.height_px} px views",
-        view_disparity_bytes(output, grid),
+        view_disparity_bytes(config.camera, output, grid),
     )
     offsets, centres = _geometry(config.camera, grid, spacing)
     baseline = float(centres[0, 1, 0] - centres[0, 0, 0])

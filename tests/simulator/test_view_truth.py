@@ -243,3 +243,24 @@ def test_bad_requests_are_refused(mi):
 def port_far() -> FlatPort:
     """The tests' port, 40 mm away: clear of a real main lens."""
     return FlatPort.from_dict({**port(20.0), "distance_m": 0.04})
+
+
+def test_the_memory_estimate_covers_the_lenses_of_the_resampling(monkeypatch):
+    """The estimate took 1.5 x the resampling's bytes per pixel and nothing per lens: the Illum's 233 000
+    lenses (350 MB of triangulation) onto a 10 x 10 px view passed it, and the stack's result was allocated
+    before the resampling refused. The estimate is lfrefract's resampling_bytes, its lens term included."""
+    import lfrefract._memory
+    from lfrefract.synthesis.views import lens_count, resampling_bytes
+    from simulator.view_truth import view_disparity_bytes
+
+    config = scene(port=port(20.0), objects=[_plane()], camera="illum")
+    small = PinholeCamera(focal_px=10.0, cx_px=4.5, cy_px=4.5, width_px=10, height_px=10)
+    lenses = resampling_bytes(lenses=lens_count(config.camera), pixels=100)
+    assert view_disparity_bytes(config.camera, small, 3) >= lenses > 3e8
+    monkeypatch.setattr(lfrefract._memory, "available_memory", lambda: (2 * 10**8, "test"))
+    for call in (
+        lambda: view_stack_disparity(None, None, config, small, grid=3),
+        lambda: view_disparity(None, None, config, small, row=0, column=0, grid=3),
+    ):
+        with pytest.raises(ParameterError, match=r"the disparity of a (3 x 3 stack of )?10 x 10 px views? needs about"):
+            call()
