@@ -8,6 +8,7 @@ numbers, or an integer of a million digits, is abbreviated rather than printed).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import reprlib
@@ -25,6 +26,7 @@ __all__ = [
     "as_table",
     "bounded_float",
     "bounded_int",
+    "file_problem",
     "finite_float",
     "finite_vector",
     "non_negative_float",
@@ -235,6 +237,44 @@ _KINDS = (
     (stat.S_ISCHR, "a character device"),
     (stat.S_ISBLK, "a block device"),
 )
+
+
+def file_problem(path: str | os.PathLike[str]) -> str | None:
+    """What stops ``path`` from being read as a file, for a message; None if it is a regular file.
+
+    ``Path.is_file()`` answers False alike for a missing path, a folder, a symbolic link loop and a
+    link to nothing; a reader that says "no such file" for all of them sends the user looking for
+    the wrong mistake. Symbolic links are followed.
+
+    Returns
+    -------
+    str or None
+        ``"no such file: 'x'"``, ``"'x' is a symbolic link loop ..."``, ``"'x' is a symbolic link
+        to nothing ..."``, ``"'x' is a directory, not a regular file"`` (or another kind), the system's
+        reason it cannot be examined, or None.
+
+    Examples
+    --------
+    >>> file_problem("/nonexistent/raw.exr")
+    "no such file: '/nonexistent/raw.exr'"
+    >>> file_problem("/")
+    "'/' is a directory, not a regular file"
+    """
+    p = str(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        if os.path.islink(p):
+            return f"{p!r} is a symbolic link to nothing ({os.readlink(p)!r})"
+        return f"no such file: {p!r}"
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"{p!r} is a symbolic link loop (it never reaches a file): point it at a file"
+        return f"{p!r} cannot be examined: {exc.strerror or exc}"
+    for test, kind in _KINDS:
+        if test(st.st_mode):
+            return f"{p!r} is {kind}, not a regular file"
+    return None if stat.S_ISREG(st.st_mode) else f"{p!r} is not a regular file"
 
 
 def regular_file(name: str, path: str | os.PathLike[str], *, max_bytes: int) -> int:

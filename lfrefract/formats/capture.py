@@ -72,7 +72,7 @@ from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
 from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection
-from lfrefract.validate import one_of
+from lfrefract.validate import file_problem, one_of
 
 __all__ = [
     "CAPTURE_KIND",
@@ -497,8 +497,8 @@ def capture_parameters(
                 "camera was given (--camera PRESET|FILE)"
             )
         if sidecar is None:
-            if not raw_path.is_file():
-                raise FileFormatError(f"no such file: {str(raw_path)!r}")
+            if (problem := file_problem(raw_path)) is not None:
+                raise FileFormatError(problem)
             raise FileFormatError(
                 f"{str(raw_path)!r} has no {SIDECAR_NAME} beside it ({str(sidecar_path)!r}) and no camera was given "
                 "(--camera PRESET|FILE)"

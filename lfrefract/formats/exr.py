@@ -12,6 +12,7 @@ import OpenEXR
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.jsonio import SCHEMA_VERSION
 from lfrefract.formats.outputs import atomic_file
+from lfrefract.validate import file_problem
 
 _ROLE_KEY = "lfrefract_role"
 _SCHEMA_KEY = "lfrefract_schema_version"
@@ -101,8 +102,8 @@ def read_exr(path: str | os.PathLike, *, role: str | None = None) -> np.ndarray:
         If the file is missing, not an OpenEXR file, or holds other channels or another role.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"no such file: {str(path)!r}")
+    if (problem := file_problem(path)) is not None:
+        raise FileFormatError(problem)
     with path.open("rb") as fh:
         magic = fh.read(4)
     if magic != b"\x76\x2f\x31\x01":

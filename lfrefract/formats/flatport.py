@@ -10,6 +10,7 @@ import numpy as np
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.jsonio import write_text_atomically
 from lfrefract.optics.port import FlatPort
+from lfrefract.validate import file_problem
 
 #: Largest flat-port file read, bytes: the format is one line of eight numbers and a comment.
 MAX_FLAT_PORT_BYTES = 65536
@@ -45,8 +46,8 @@ def read_flat_port(path: str | os.PathLike) -> FlatPort:
         normal not a unit vector, a value outside :class:`FlatPort`'s ranges).
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"no such file: {str(path)!r}")
+    if (problem := file_problem(path)) is not None:
+        raise FileFormatError(problem)
     if path.stat().st_size > MAX_FLAT_PORT_BYTES:
         raise FileFormatError(
             f"{str(path)!r} is {path.stat().st_size} bytes: not a flat port (at most {MAX_FLAT_PORT_BYTES} bytes)"

@@ -12,6 +12,7 @@ import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.outputs import atomic_file
+from lfrefract.validate import file_problem
 
 #: Version of the sidecar and directory layout written by this package.
 SCHEMA_VERSION = 1
@@ -78,8 +79,8 @@ def read_json(path: str | os.PathLike) -> dict:
         parse), or not of this schema version; the message names the file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"no such file: {str(path)!r}")
+    if (problem := file_problem(path)) is not None:
+        raise FileFormatError(problem)
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -26,6 +26,7 @@ The rules (``docs/conventions.md``, "Outputs and --overwrite"):
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -190,7 +191,12 @@ def scratch_directory(*, prefix: str) -> Iterator[Path]:
 
 # =============================================================================== inputs
 def _resolved(path: str | os.PathLike) -> Path:
-    return Path(os.path.abspath(Path(path).expanduser())).resolve()
+    """``path`` absolute with its links followed; a symbolic link loop is an :class:`OSError` naming
+    it (``Path.resolve`` raises RuntimeError there, which would escape the commands as a traceback)."""
+    try:
+        return Path(os.path.abspath(Path(path).expanduser())).resolve()
+    except RuntimeError:
+        raise OSError(errno.ELOOP, "a symbolic link loop (the link points back to itself)", str(path)) from None
 
 
 def refuse_own_inputs(outputs: Iterable[str | os.PathLike], inputs: Iterable[str | os.PathLike]) -> None:

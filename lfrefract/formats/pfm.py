@@ -31,6 +31,7 @@ import numpy as np
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.outputs import atomic_file
+from lfrefract.validate import file_problem
 
 __all__ = ["read_pfm", "write_pfm"]
 
@@ -119,10 +120,8 @@ def read_pfm(path: str | os.PathLike) -> np.ndarray:
     """
     path = Path(path)
     name = str(path)
-    if not path.exists():
-        raise FileFormatError(f"no such file: {name!r}")
-    if not path.is_file():
-        raise FileFormatError(f"{name!r} is not a regular file")
+    if (problem := file_problem(path)) is not None:
+        raise FileFormatError(problem)
     try:
         with path.open("rb") as fh:
             head = fh.read(_MAX_HEADER_BYTES)

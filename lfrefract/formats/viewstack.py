@@ -21,7 +21,7 @@ from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis.views import ViewStack
-from lfrefract.validate import one_of, positive_float, positive_int
+from lfrefract.validate import file_problem, one_of, positive_float, positive_int
 
 #: Image formats of :func:`write_view_stack`.
 VIEW_STACK_FORMATS = ("png", "exr")
@@ -359,8 +359,8 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
     """
     path = Path(path)
     file = path / _STACK_ARRAYS if path.is_dir() else path
-    if not file.is_file():
-        raise FileFormatError(f"no such file: {str(file)!r}")
+    if (problem := file_problem(file)) is not None:
+        raise FileFormatError(problem)
     try:
         # Our own handle: np.load leaks the one it opens when the zip directory is unreadable.
         with file.open("rb") as fh, np.load(fh, allow_pickle=False) as data:

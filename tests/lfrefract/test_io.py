@@ -78,8 +78,8 @@ def test_exr_missing_file(tmp_path):
     path = tmp_path / "nope.exr"
     with pytest.raises(FileFormatError, match=re.escape(f"no such file: {str(path)!r}")):
         read_exr(path)
-    # A directory is not a file either.
-    with pytest.raises(FileFormatError, match="no such file"):
+    # A directory is not a file either, and is named as what it is.
+    with pytest.raises(FileFormatError, match="is a directory, not a regular file"):
         read_exr(tmp_path)
 
 

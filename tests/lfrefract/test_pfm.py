@@ -150,7 +150,7 @@ def test_missing_file_and_directory(tmp_path):
     path = tmp_path / "nope.pfm"
     with pytest.raises(FileFormatError, match=re.escape(f"no such file: {str(path)!r}")):
         read_pfm(path)
-    with pytest.raises(FileFormatError, match=re.escape(f"{str(tmp_path)!r} is not a regular file")):
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(tmp_path)!r} is a directory, not a regular file")):
         read_pfm(tmp_path)
 
 
