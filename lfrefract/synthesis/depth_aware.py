@@ -195,6 +195,12 @@ def render_chunks() -> int:
     return max(1, min(numba.get_num_threads(), RENDER_CHUNKS_MAX))
 
 
+def sweep_planes_per_call() -> int:
+    """Depth planes :func:`estimate_depth` sweeps in one call of the kernel: one per thread
+    (:func:`numba.get_num_threads`), so that signals are handled between calls."""
+    return max(1, numba.get_num_threads())
+
+
 def _depth_range(options: DepthAwareOptions) -> str:
     """The options' depth range as a message names it, with its command-line option."""
     return f"depth_min_m={options.depth_min_m!r}, depth_max_m={options.depth_max_m!r} (--depth-range)"
@@ -453,10 +459,16 @@ def estimate_depth(
     fx, cx, cy, width, height = _intrinsics(output)
     origins, directions, quadrant = _kept(rays, keep, values)
     depths = depth_planes_m(options)
-    cost = sweep_cost(
-        origins, directions, values, quadrant, depths, fx, cx, cy, width, height,
-        options.min_rays, options.occlusion_aware,
-    )  # fmt: skip
+    cost = np.empty((len(depths), height, width), dtype=np.float32)
+    # Each plane is swept alone, so sweeping the planes in groups gives the same costs bit for bit; a group
+    # of one plane per thread keeps the threads busy, and between groups Python runs its signal handlers
+    # (SIGTERM, Ctrl-C: one call over every plane held them for the whole sweep, 39 s an Illum frame).
+    per_call = sweep_planes_per_call()
+    for first in range(0, len(depths), per_call):
+        cost[first : first + per_call] = sweep_cost(
+            origins, directions, values, quadrant, depths[first : first + per_call], fx, cx, cy, width, height,
+            options.min_rays, options.occlusion_aware,
+        )  # fmt: skip
     cost = _aggregate(cost, options.aggregation_radius_px)
     has = np.any(np.isfinite(cost), axis=0)
     filled = np.where(np.isfinite(cost), cost, np.inf)

@@ -306,3 +306,51 @@ def test_a_depth_range_in_front_of_the_water_is_refused_and_writes_nothing(tmp_p
     err = refused(capsys, [*commands(raw, tmp_path / "out")["synth"], *DEPTH_AWARE, "--depth-range", "1e-9", "1e-8"])
     assert "depth_min_m=1e-09, depth_max_m=1e-08 (--depth-range) lies in front of the water" in err, err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+# SIGTERM must end a depth-aware synth within this many seconds once the sweep runs: the sweep is split into
+# calls of one plane per thread (20 ms a plane on tiny here); the rest is the cleanup and the exit, on a loaded
+# 2-core machine. The sweep of this test takes about 20 s whole (1000 planes), which one call held to its end.
+SIGTERM_WITHIN_S = 3.0
+
+
+def test_sigterm_ends_a_depth_aware_synth_during_its_sweep(tmp_path):
+    """The depth sweep was one numba call over every plane, so SIGTERM waited for all of it (39 s an Illum
+    frame). The subprocess announces the sweep's first call on stderr (the real kernel runs); SIGTERM then ends
+    it within SIGTERM_WITHIN_S, exit 143, its outputs removed."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    raw = make_capture(tmp_path / "R", plane_capture_raw())
+    out = tmp_path / "out"
+    argv = [*commands(raw, out)["synth"], *DEPTH_AWARE, "--depth-steps", "1000"]
+    code = (
+        "import sys\n"
+        "import lfrefract.synthesis.depth_aware as d\n"
+        "kernel = d.sweep_cost\n"
+        "def announced(*args):\n"
+        "    if not getattr(announced, 'said', False):\n"
+        "        announced.said = True\n"
+        "        sys.stderr.write('sweeping\\n')\n"
+        "        sys.stderr.flush()\n"
+        "    return kernel(*args)\n"
+        "d.sweep_cost = announced\n"
+        "from lfrefract.cli import main\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    line = proc.stderr.readline()  # blocks until the sweep starts (or the process ends)
+    assert line == "sweeping\n", line + proc.communicate()[1]
+    time.sleep(0.5)  # well inside the sweep
+    assert proc.poll() is None
+    start = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    took = time.monotonic() - start
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert took < SIGTERM_WITHIN_S, f"SIGTERM took {took:.1f} s"
+    assert "terminated (signal 15); unfinished outputs removed" in err, err
+    assert not out.exists() or list(out.iterdir()) == [], sorted(p.name for p in out.iterdir())

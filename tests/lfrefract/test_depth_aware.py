@@ -365,3 +365,22 @@ def test_a_masked_warp_map_leaves_the_depth_aware_pixels_their_values():
     assert given.any()
     assert np.isfinite(result.image[given]).all()
     assert np.isnan(result.image[result.classes == FILLED_EMPTY]).all()
+
+
+@pytest.mark.parametrize("per_call", [1, 2, 5])
+def test_the_sweep_in_groups_of_planes_gives_the_single_calls_depth_bit_for_bit(monkeypatch, per_call):
+    """The sweep runs in groups of planes (so that SIGTERM is handled between them); each plane is swept
+    alone, so the depth, its confidence and its plane are those of one call over every plane, bit for bit."""
+    import lfrefract.synthesis.depth_aware as depth_aware
+
+    synthesis = setup()
+    values, keep = synthesis.rays.values(plane_raw(synthesis))
+    rays = synthesis.rays.kept(keep)
+    options = DepthAwareOptions(depth_steps=11)
+    monkeypatch.setattr(depth_aware, "sweep_planes_per_call", lambda: options.depth_steps)
+    whole = estimate_depth(rays, values, synthesis.output, options)
+    monkeypatch.setattr(depth_aware, "sweep_planes_per_call", lambda: per_call)
+    grouped = estimate_depth(rays, values, synthesis.output, options)
+    assert np.isfinite(whole.depth_m).any()
+    for name in ("depth_m", "confidence", "plane_index", "depths_m"):
+        np.testing.assert_array_equal(getattr(grouped, name), getattr(whole, name))
