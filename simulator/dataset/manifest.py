@@ -60,14 +60,19 @@ def file_digest(path: Path) -> tuple[int, str]:
 
 
 class DigestCache:
-    """Sizes and SHA-256s of files, each file read once while its path, size and modification
-    time (ns) stay the same: a mesh that many samples of a run use is hashed once.
+    """Sizes and SHA-256s of files, each file read once while it stays the same file, unchanged: a
+    mesh that many samples of a run use is hashed once.
 
-    An edit that keeps a file's size and modification time to the nanosecond is not seen.
+    A file counts as unchanged while its path, device, inode, size, modification time and status
+    change time (ns) all stay the same. Path, size and mtime alone are not enough: a same-size file
+    copied over it with ``cp -p`` (or ``touch -d``) keeps the mtime, and one renamed into place keeps
+    its own. The status change time (ctime) is set by the kernel on every write, rename and
+    ``utime`` and cannot be set by a user, so such an edit is seen; a rename also changes the inode.
+    The cache lives in one process (one run); nothing is kept between runs.
     """
 
     def __init__(self) -> None:
-        self._known: dict[tuple[str, int, int], tuple[int, str]] = {}
+        self._known: dict[tuple[str, int, int, int, int, int], tuple[int, str]] = {}
 
     def digest(self, path: str | os.PathLike) -> tuple[int, str]:
         """Size in bytes and SHA-256 (hex) of the file at ``path`` (:func:`file_digest`).
@@ -78,11 +83,18 @@ class DigestCache:
             If it cannot be read.
         """
         path = Path(path)
+        key = self._key(path)
+        if key in self._known:
+            return self._known[key]
+        digest = file_digest(path)
+        if self._key(path) == key:  # not kept if the file changed while it was read
+            self._known[key] = digest
+        return digest
+
+    @staticmethod
+    def _key(path: Path) -> tuple[str, int, int, int, int, int]:
         stat = path.stat()
-        key = (str(path), stat.st_size, stat.st_mtime_ns)
-        if key not in self._known:
-            self._known[key] = file_digest(path)
-        return self._known[key]
+        return (str(path), stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
 
 
 def folder_files(folder: Path) -> dict[str, dict]:

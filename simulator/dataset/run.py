@@ -6,8 +6,9 @@ or, if the folder holds an earlier run of the same spec with the same samples (i
 included), resumes it. It holds a lock on the folder (``flock``) for the whole run, so a second run
 on the same folder is refused instead of deleting the first one's work. On resume it drops an
 unterminated last manifest line, removes staging leftovers, re-renders done samples whose files
-went missing, changed size or, for files of at most :data:`RESUME_HASH_MAX_BYTES`, changed their
-SHA-256, removes the folders of samples that are not recorded as done, and skips the done ones.
+went missing, changed size or changed their SHA-256 (every file is read to its end, on every resume:
+see :func:`simulator.dataset.check.verify_folders`), removes the folders of samples that are not
+recorded as done, and skips the done ones.
 Each remaining sample is one Dask task that renders it into its folder
 (:func:`simulator.dataset.sample.render_sample`) and returns its manifest record; the driver builds
 the tasks as it goes, keeping a bounded number in flight, and alone appends records, as the tasks
@@ -43,7 +44,7 @@ from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import on_termination
 from lfrefract.validate import one_of, positive_int
 from simulator.backend import VARIANTS
-from simulator.dataset.check import verify_folder
+from simulator.dataset.check import verify_folders
 from simulator.dataset.manifest import (
     DATASET_FILE,
     DATASET_KIND,
@@ -59,21 +60,13 @@ from simulator.dataset.manifest import (
 from simulator.dataset.sample import SampleTask, render_sample
 from simulator.dataset.spec import SweepSpec, iter_samples, load_spec
 
-__all__ = ["RESUME_HASH_MAX_BYTES", "DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
+__all__ = ["DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
 
 
 #: How long to try to reach a scheduler given by address before giving up.
 SCHEDULER_TIMEOUT = "30s"
 #: Seconds a Ctrl-C or SIGTERM waits for the local cluster's workers to stop before the process ends.
 STOP_TIMEOUT_S = 10
-
-#: A resumed run re-hashes (SHA-256) the files of done samples up to this size and checks larger
-#: ones by size. Measured on the 2-core CI machine (files in the page cache, SHA-256 at about
-#: 1.2 GB/s): a tiny sample's 9 files (6.3 MB, raw.exr 1.4 MB of it) hash in 4.5 ms, its 8 files of
-#: at most 1 MiB (the sidecars meta.json, sample.json, port.txt, and lenses.npz and the small EXRs,
-#: 0.57 MB) in 0.5 ms; an Illum sample's raw.exr (about 0.5 GB) alone takes 0.4 s, or 5 s from a
-#: 100 MB/s network file system, on every resume. ``lfsim dataset check`` re-hashes everything.
-RESUME_HASH_MAX_BYTES = 1 << 20
 
 #: Tasks kept in flight: this many per worker thread of the cluster, at least ``_IN_FLIGHT_MIN``
 #: (the rest are built as these complete, so the driver never holds every sample's scene).
@@ -110,7 +103,8 @@ class RunReport:
         Samples recorded done by an earlier run whose folder failed the resume's verification
         (a file missing, of another size, or with another SHA-256): removed and rendered again.
     verification : str
-        What the resume verified and how (one sentence; empty when no sample was done before).
+        What the resume verified, how long the hashing took, and which file of each damaged sample
+        differed (one sentence; empty when no sample was done before).
     """
 
     out_dir: Path
@@ -203,7 +197,7 @@ def _check_target(out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[
 
 
 def _prepare(
-    out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[str, dict]
+    out: Path, spec: SweepSpec, planned: list[dict], inputs: dict[str, dict], *, progress: bool = False
 ) -> tuple[dict[str, dict], list[str], str]:
     """Create the dataset folder, or tidy an earlier run of the same spec (see the module
     docstring); return the latest manifest record of every sample that is done and intact, the
@@ -232,34 +226,39 @@ def _prepare(
     for leftover in staging_leftovers(out):
         remove(leftover)
     latest = latest_records(read_manifest(out / MANIFEST_FILE, repair=True))
-    done = {}
-    damaged = []
-    hashed = sized = 0
+    recorded = []  # (sample id, record) of the samples recorded done, for the planned sample
     for sample in planned:
         sid = sample["id"]
         record = latest.get(sid)
-        folder = out / sid
-        intact = record is not None and record["status"] == "done" and record.get("hash") == sample["hash"]
-        if intact and verify_folder(folder, record, hashes=True, hash_max_bytes=RESUME_HASH_MAX_BYTES) is None:
+        if record is not None and record["status"] == "done" and record.get("hash") == sample["hash"]:
+            recorded.append((sid, record))
+        elif (out / sid).exists():  # rendered but never recorded (killed in between), or failed since
+            remove(out / sid)
+    start = time.perf_counter()
+    found = verify_folders(((out / sid, record) for sid, record in recorded), hashes=True, progress=progress)
+    seconds = time.perf_counter() - start
+    done = {}
+    damaged = []
+    why = []
+    files = size = 0
+    for (sid, record), problem in zip(recorded, found, strict=True):
+        files += len(record["files"])
+        size += sum(entry["bytes"] for entry in record["files"].values())
+        if problem is None:
             done[sid] = record
-            for entry in record["files"].values():
-                if entry["bytes"] <= RESUME_HASH_MAX_BYTES:
-                    hashed += 1
-                else:
-                    sized += 1
             continue
-        if intact:
-            damaged.append(sid)
-        if folder.exists():  # rendered but never recorded (killed in between), or damaged since
-            remove(folder)
+        damaged.append(sid)
+        why.append(f"{sid}: {problem.detail}")
+        if (out / sid).exists():
+            remove(out / sid)
     verification = ""
-    if done or damaged:
+    if recorded:
+        per_gb = f": {seconds / (size / 1e9):.1f} s per GB" if size else ""
         verification = (
-            f"resume verified {len(done) + len(damaged)} done sample(s): {hashed} file(s) of at most "
-            f"{RESUME_HASH_MAX_BYTES >> 20} MiB (the sidecars among them) by SHA-256, {sized} larger file(s) by "
-            f"size; {len(damaged)} failed and {'were' if len(damaged) != 1 else 'was'} rendered again"
-            + (f" ({', '.join(damaged[:5])}{', ...' if len(damaged) > 5 else ''})" if damaged else "")
-            + f"; `lfsim dataset check {out}` re-hashes every file"
+            f"resume verified {len(recorded)} done sample(s) by the SHA-256 of every file ({files} files, "
+            f"{size / 1e6:.1f} MB, in {seconds:.3g} s{per_gb}); {len(damaged)} failed and "
+            f"{'were' if len(damaged) != 1 else 'was'} rendered again"
+            + (f" ({'; '.join(why[:5])}{'; ...' if len(why) > 5 else ''})" if why else "")
         )
     return done, damaged, verification
 
@@ -445,7 +444,7 @@ def run_dataset(
             # what they leave, the next run removes.
             stack.enter_context(on_termination(lambda: _remove_leftovers(out)))
         _check_target(out, spec, planned, inputs)  # again, under the lock
-        done, damaged, verification = _prepare(out, spec, planned, inputs)
+        done, damaged, verification = _prepare(out, spec, planned, inputs, progress=progress)
         pending = [r for r in planned if r["id"] not in done]
         if pending and client is None:
             client = stack.enter_context(_dask_client(workers, None))

@@ -7,20 +7,26 @@ camera, 1 spp), rendered once per module by a local Dask cluster of one worker.
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
+import re
 import resource
 import shutil
 import signal
 import subprocess
 import sys
 import textwrap
+import time
 import tracemalloc
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lfrefract import ParameterError
 from lfrefract.errors import FileFormatError
+from lfrefract.formats.exr import read_exr
 from simulator.dataset import Dataset, DatasetMismatchError, check_dataset, expand, load_spec, parse_spec, run_dataset
 from simulator.dataset import manifest as manifest_module
 from simulator.dataset import run as run_module
@@ -200,8 +206,62 @@ def test_a_mesh_edited_after_planning_fails_the_sample(tmp_path):
 
 
 # ------------------------------------------------------------- 2. resume verifies by SHA-256
+def _cp_p_same_size(source: bytes, target: Path, scratch: Path) -> None:
+    """Put ``source`` (padded with zero bytes to ``target``'s size) in place of ``target`` with ``cp -p``
+    from a file given ``target``'s modification time: size and mtime stay as they were."""
+    stat = target.stat()
+    assert len(source) <= stat.st_size
+    scratch.write_bytes(source + bytes(stat.st_size - len(source)))
+    os.utime(scratch, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    subprocess.run(["cp", "-p", str(scratch), str(target)], check=True)
+    assert (target.stat().st_size, target.stat().st_mtime_ns) == (stat.st_size, stat.st_mtime_ns)
+
+
 @pytest.mark.render
-def test_resume_rehashes_small_files_and_renders_a_corrupt_sidecar_again(mesh_run, tmp_path):
+def test_resume_renders_again_a_raw_swapped_for_another_samples_of_the_same_size_and_mtime(mesh_run, tmp_path):
+    """A sample's raw.exr (over 1 MiB) replaced by the other sample's, padded to its size and copied with
+    ``cp -p`` from a file of its mtime, is a readable raw of the wrong sample: the resume must see it."""
+    inputs, root = _copy(mesh_run, tmp_path)
+    # The larger raw is the victim: the smaller one, padded with zeros, still reads as its own image.
+    victim, donor = sorted((root / sid / "raw.exr" for sid in ("s000000", "s000001")), key=lambda p: -p.stat().st_size)
+    assert victim.stat().st_size > 1 << 20
+    truth = read_exr(victim)
+    _cp_p_same_size(donor.read_bytes(), victim, tmp_path / "swap.exr")
+    assert np.array_equal(read_exr(victim), read_exr(donor))  # silently another sample's raw image
+    (problem,) = check_dataset(root).problems
+    assert (problem.id, problem.kind) == (victim.parent.name, "corrupt")
+    assert problem.detail.startswith("raw.exr: SHA-256 ")
+    report = run_dataset(inputs / "spec.toml", root, workers=1, progress=False)
+    assert (report.ok, report.skipped, report.rendered, report.damaged) == (True, 1, 1, (victim.parent.name,))
+    assert f"1 failed and was rendered again ({victim.parent.name}: raw.exr: SHA-256 " in report.verification
+    assert check_dataset(root).ok
+    assert np.array_equal(read_exr(victim), truth)  # rendering is bit-reproducible: its own raw again
+
+
+def test_digest_cache_sees_a_same_size_file_copied_or_moved_in_with_the_same_mtime(tmp_path, monkeypatch):
+    """The cache of one run (a mesh many samples read) is keyed by more than path, size and mtime: a
+    ``cp -p`` or a rename into place of a same-size file of the same mtime is read again."""
+    mesh, other = tmp_path / "cube.obj", tmp_path / "other.obj"
+    mesh.write_text(MESH_OBJ)
+    reads = []
+    digest = manifest_module.file_digest
+    monkeypatch.setattr(manifest_module, "file_digest", lambda path: reads.append(path) or digest(path))
+    cache = DigestCache()
+    assert cache.digest(mesh) == cache.digest(mesh) == digest(mesh)
+    assert len(reads) == 1  # an unchanged file is read once
+    time.sleep(0.05)  # past the kernel's coarse clock tick (a few ms) of the file's last change
+    _cp_p_same_size(EDITED_OBJ.encode(), mesh, other)
+    assert cache.digest(mesh) == digest(other)
+    time.sleep(0.05)
+    moved = tmp_path / "moved.obj"
+    moved.write_text(MESH_OBJ)
+    os.utime(moved, ns=(mesh.stat().st_atime_ns, mesh.stat().st_mtime_ns))
+    os.replace(moved, mesh)
+    assert cache.digest(mesh) == (len(MESH_OBJ), hashlib.sha256(MESH_OBJ.encode()).hexdigest())
+
+
+@pytest.mark.render
+def test_resume_rehashes_every_file_and_renders_a_corrupt_sidecar_again(mesh_run, tmp_path):
     inputs, root = _copy(mesh_run, tmp_path)
     sidecar = root / "s000001" / "sample.json"
     text = sidecar.read_text()
@@ -214,10 +274,8 @@ def test_resume_rehashes_small_files_and_renders_a_corrupt_sidecar_again(mesh_ru
     assert "2 samples; 1 rendered now" in proc.stdout
     assert "1 already done" in proc.stdout
     (line,) = [s for s in proc.stdout.splitlines() if s.startswith("resume verified")]
-    assert "resume verified 2 done sample(s): " in line
-    assert "of at most 1 MiB (the sidecars among them) by SHA-256" in line
-    assert "larger file(s) by size; 1 failed and was rendered again (s000001)" in line
-    assert f"`lfsim dataset check {root}` re-hashes every file" in line
+    assert "resume verified 2 done sample(s) by the SHA-256 of every file (" in line
+    assert "1 failed and was rendered again (s000001: sample.json: SHA-256 " in line
     assert check_dataset(root).ok
     assert '"lfsim.dataset.sample"' in sidecar.read_text()
     records = read_manifest(root / "manifest.jsonl")
@@ -226,16 +284,19 @@ def test_resume_rehashes_small_files_and_renders_a_corrupt_sidecar_again(mesh_ru
 
 
 @pytest.mark.render
-def test_resume_reports_what_it_verified(mesh_run, tmp_path):
+def test_resume_reports_what_it_verified_and_how_long_the_hashing_took(mesh_run, tmp_path):
     inputs, root = _copy(mesh_run, tmp_path)
     report = run_dataset(inputs / "spec.toml", root, workers=1, progress=False)
     assert (report.ok, report.skipped, report.rendered, report.damaged) == (True, 2, 0, ())
     files = [entry for r in read_manifest(root / "manifest.jsonl") for entry in r["files"].values()]
-    small = sum(e["bytes"] <= run_module.RESUME_HASH_MAX_BYTES for e in files)
-    assert report.verification.startswith(
-        f"resume verified 2 done sample(s): {small} file(s) of at most 1 MiB (the sidecars among them) by SHA-256, "
-        f"{len(files) - small} larger file(s) by size; 0 failed"
+    megabytes = sum(e["bytes"] for e in files) / 1e6
+    match = re.fullmatch(
+        rf"resume verified 2 done sample\(s\) by the SHA-256 of every file \({len(files)} files, "
+        rf"{megabytes:.1f} MB, in ([0-9.e-]+) s: (\d+\.\d) s per GB\); 0 failed and were rendered again",
+        report.verification,
     )
+    assert match, report.verification
+    print(f"\nresume hashing: {megabytes:.1f} MB in {match[1]} s, {match[2]} s per GB")
     fresh = run_dataset(inputs / "spec.toml", tmp_path / "fresh", workers=1, progress=False)
     assert fresh.verification == ""  # nothing was done before
 
