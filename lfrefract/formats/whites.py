@@ -266,7 +266,7 @@ class WhiteImage:
 
     def flat_field(self) -> FlatField:
         """The white's :func:`flat_field`, prepared once for all the captures it develops (read again
-        only when the file changes: its size or modification time).
+        only when the file changes: its inode, size, modification or status change time).
 
         Raises
         ------
@@ -288,12 +288,16 @@ class WhiteImage:
             If the file cannot be read.
         """
         stat = existing_path(self.path, "white image").stat()
-        return _white_of_file(str(self.path.resolve()), stat.st_mtime_ns, stat.st_size)
+        # The status change time and inode too: whites of one camera are all of one size, and one copied
+        # over the file with ``cp -p`` keeps the modification time; the kernel sets ctime on every write.
+        key = (stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
+        return _white_of_file(str(self.path.resolve()), key)
 
 
 @functools.lru_cache(maxsize=2)  # a stereo rig's two whites; an Illum's flat field is about 0.25 GB
-def _white_of_file(path: str, mtime_ns: int, size: int) -> tuple[FlatField, LightFieldCamera, str | None]:
-    """:meth:`WhiteImage.prepared` of the white image file ``path``; ``mtime_ns`` and ``size`` key the cache."""
+def _white_of_file(path: str, stat_key: tuple[int, ...]) -> tuple[FlatField, LightFieldCamera, str | None]:
+    """:meth:`WhiteImage.prepared` of the white image file ``path``; ``stat_key`` (its device, inode, size,
+    modification and status change times) keys the cache."""
     white = read_lytro_file(path)
     field = flat_field(white.mosaic)
     problem = white_problem(white.mosaic, field, micro_image_pitch_px=white.camera.micro_image_pitch_px)

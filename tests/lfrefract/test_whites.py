@@ -174,6 +174,28 @@ def test_a_white_file_is_prepared_once_and_again_when_it_changes(tmp_path):
     np.testing.assert_array_equal(again.lit_dn, white_mosaic(scale=350.0).counts.astype(np.float32) - BLACK)
 
 
+def test_a_same_size_white_copied_in_with_the_same_mtime_is_prepared_again(tmp_path):
+    """Whites of one camera are all of one size: another one copied over the file with ``cp -p`` from a file of
+    its modification time must not be developed with the flat field remembered for the first."""
+    import os
+    import subprocess
+    import time
+
+    path = write_white(tmp_path, "white", white_mosaic(), zoom=1, focus=2)
+    first = WhiteImage.from_file(path).flat_field()
+    (tmp_path / "other").mkdir()
+    other = write_white(tmp_path / "other", "white", white_mosaic(scale=350.0), zoom=1, focus=2)
+    stat = path.stat()
+    assert other.stat().st_size == stat.st_size
+    os.utime(other, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    time.sleep(0.05)  # past the kernel's coarse clock tick (a few ms) of the file's last change
+    subprocess.run(["cp", "-p", str(other), str(path)], check=True)
+    assert (path.stat().st_size, path.stat().st_mtime_ns) == (stat.st_size, stat.st_mtime_ns)
+    again = WhiteImage.from_file(path).flat_field()
+    assert again is not first
+    np.testing.assert_array_equal(again.lit_dn, white_mosaic(scale=350.0).counts.astype(np.float32) - BLACK)
+
+
 def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
     camera = small_camera()
     white_path = write_white(tmp_path, "white", white_mosaic(), zoom=6000, focus=0)
