@@ -773,13 +773,14 @@ def check_mesh_content(path: str | os.PathLike[str]) -> None:
     if size == 0:
         raise FileFormatError(f"{str(p)!r}: the file is empty")
     st = p.stat()
-    _check_content(str(p), suffix, size, st.st_mtime_ns, st.st_ino)
+    _check_content(str(p), suffix, size, (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_ctime_ns))
 
 
 @functools.lru_cache(maxsize=32)
-def _check_content(path: str, suffix: str, size: int, mtime_ns: int, inode: int) -> None:
-    """The content check, remembered while the file is unchanged (same size, modification time
-    and inode): a job loads a mesh into several scenes (raw, ideal). Refusals are not cached."""
+def _check_content(path: str, suffix: str, size: int, stat_key: tuple[int, ...]) -> None:
+    """The content check, remembered while the file is unchanged (same size, device, inode, modification
+    and status change time: ``cp -p`` keeps the inode and mtime, but the kernel sets ctime on every
+    write): a job loads a mesh into several scenes (raw, ideal). Refusals are not cached."""
     if suffix == ".obj":
         _check_obj(Path(path))
     else:

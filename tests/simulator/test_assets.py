@@ -680,3 +680,23 @@ def test_a_mesh_file_changed_after_passing_is_checked_again(tmp_path):
     assets.check_mesh_content(path)  # unchanged: remembered
     path.write_text(TRIANGLE_OBJ + "v 1 2\n")
     assert "line 5 ('v 1 2') does not parse" in _refusal(path)[1]
+
+
+def test_a_same_size_mesh_copied_in_with_the_same_mtime_is_checked_again(tmp_path):
+    """``cp -p`` writes into the same inode and keeps the modification time of its source: a cache keyed on
+    size, mtime and inode alone would let a broken mesh of the same size through unchecked."""
+    from simulator import assets
+
+    path, broken = tmp_path / "thing.obj", tmp_path / "broken.obj"
+    path.write_text(TRIANGLE_OBJ)
+    assets.check_mesh_content(path)
+    broken.write_text(TRIANGLE_OBJ.replace("v 0 1 0", "v 0 1 x"))
+    stat = path.stat()
+    assert broken.stat().st_size == stat.st_size
+    os.utime(broken, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    time.sleep(0.05)  # past the kernel's coarse clock tick (a few ms) of the file's last change
+    subprocess.run(["cp", "-p", str(broken), str(path)], check=True)
+    assert (path.stat().st_size, path.stat().st_mtime_ns, path.stat().st_ino) == (
+        stat.st_size, stat.st_mtime_ns, stat.st_ino,
+    )  # fmt: skip
+    assert "line 3 ('v 0 1 x') does not parse" in _refusal(path)[1]
