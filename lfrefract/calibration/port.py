@@ -20,9 +20,10 @@ with eight distances over ``distance_range_m`` and each view's board pose in clo
 by the residual. The four best get per-view pose fits, a few joint steps each, and the best of
 them is refined to convergence by nonlinear least squares (scipy) on the
 geometric error: where the refracted line of sight meets the board, against the corner, scaled to
-pixels by ``f / depth``. The covariance of the port parameters follows from the Jacobian; a
-calibration whose standard deviations exceed the caller's limits is an error (degenerate views),
-not an answer.
+pixels by ``f / depth``. Views that straight lines of sight (no port) explain as well as the
+fitted port show no refraction (boards captured in air) and are refused. The covariance of the port
+parameters follows from the Jacobian; a calibration whose standard deviations exceed the caller's
+limits is an error (degenerate views), not an answer.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ __all__ = [
     "CORNER_METHODS",
     "DISTANCE_AT_BOUND_M",
     "MIN_BOARD_CORNERS",
+    "NO_REFRACTION_CHI2",
     "PORT_CALIBRATION_KIND",
     "BoardView",
     "CalibrationError",
@@ -190,6 +192,11 @@ class PortCalibration:
 #: How near an end of ``distance_range_m`` a fitted port distance counts as at that end (metres): far
 #: above the margin the bounded solver keeps inside a bound, far below any port distance's precision.
 DISTANCE_AT_BOUND_M = 1e-6
+#: How much better than straight lines of sight (no port) the port's fit must explain the corners, in
+#: units of their variance: chi-square's 99.9th percentile for the port's three parameters. Measured
+#: on tiny-2x renders: boards behind a port 25 deg tilted gain 9e4-2e5, boards in air lose 450-1100
+#: (the port fits them 6-7 times worse than straight lines).
+NO_REFRACTION_CHI2 = 16.27
 #: ``kind`` of the JSON file ``lfrefract calibrate port`` writes.
 PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
 #: Fewest board captures :func:`calibrate_port` takes: the port's three parameters and one pose per
@@ -451,7 +458,7 @@ def port_from_parameters(params: np.ndarray, template: FlatPort) -> FlatPort:
 
 
 def board_residuals_px(
-    port: FlatPort,
+    port: FlatPort | None,
     origins_cam: np.ndarray,
     directions_cam: np.ndarray,
     board_points_m: np.ndarray,
@@ -461,16 +468,19 @@ def board_residuals_px(
     """The port calibration's geometric residuals of one board view, pixels.
 
     Each line of sight (in air, from ``origins_cam`` (N, 3) along ``directions_cam`` (N, 3), camera
-    frame) is refracted by ``port`` and meets the board of pose ``pose6`` (rotation vector, rad, and
-    translation, m: board to camera frame); its miss of the corner ``board_points_m`` (N, 2, board
-    frame) is scaled by ``focal_px`` / depth.
+    frame) is refracted by ``port`` (None: no port, the line goes on straight, as in air) and meets
+    the board of pose ``pose6`` (rotation vector, rad, and translation, m: board to camera frame); its
+    miss of the corner ``board_points_m`` (N, 2, board frame) is scaled by ``focal_px`` / depth.
 
     Returns
     -------
     ndarray, shape (2 N,)
         (x, y) misses per corner; 1000 px where a line of sight misses the board (or cannot enter the water).
     """
-    origin, d = _water_rays(port, origins_cam, directions_cam)
+    if port is None:
+        origin, d = origins_cam, directions_cam
+    else:
+        origin, d = _water_rays(port, origins_cam, directions_cam)
     rot = Rotation.from_rotvec(pose6[:3]).as_matrix()
     t = pose6[3:]
     normal_b = rot[:, 2]
@@ -555,6 +565,32 @@ def _initial_pose(camera: PinholeCamera, view: BoardView) -> np.ndarray:
     return np.concatenate([rvec.ravel(), tvec.ravel()])
 
 
+def _straight_line_residuals_px(camera: PinholeCamera, views: Sequence[BoardView]) -> np.ndarray | None:
+    """The views' residuals with no port: straight lines of sight, as in air (the in-air model).
+
+    Each view's board pose is fitted alone (from OpenCV's, :func:`_initial_pose`) to the residuals
+    of :func:`board_residuals_px` with ``port=None``.
+
+    Returns
+    -------
+    ndarray, shape (2 N,) or None
+        Every view's residuals in turn, pixels; None if a view's starting pose cannot be found.
+    """
+    parts = []
+    for view in views:
+        directions = camera.pixel_directions(view.corners_px)
+        try:
+            start = _initial_pose(camera, view)
+        except CalibrationError:
+            return None
+
+        def residuals(pose6: np.ndarray, view: BoardView = view, directions: np.ndarray = directions) -> np.ndarray:
+            return board_residuals_px(None, view.centres, directions, view.board_points_m, pose6, camera.focal_px)
+
+        parts.append(least_squares(residuals, start, method="lm", max_nfev=400).fun)
+    return np.concatenate(parts)
+
+
 def _fit_pose(
     problem: _Problem, port: FlatPort, view: int, pose6: np.ndarray, *, max_nfev: int = 200
 ) -> tuple[np.ndarray, float]:
@@ -614,8 +650,10 @@ def calibrate_port(
     ------
     CalibrationError
         Degenerate views: two views of one board pose (the same capture twice is one view,
-        :func:`lfrefract.calibration.distinct.require_distinct_corners`), or the normal or distance
-        not determined to the stated limits.
+        :func:`lfrefract.calibration.distinct.require_distinct_corners`), views that show no
+        refraction (straight lines of sight fit them as well as the best port, within
+        :data:`NO_REFRACTION_CHI2`: boards captured in air), or the normal or distance not determined
+        to the stated limits.
     """
     if not isinstance(camera, PinholeCamera):
         raise ParameterError(f"camera must be a PinholeCamera, got {camera!r}")
@@ -686,6 +724,7 @@ def calibrate_port(
     residuals = fit.fun
     dof = max(len(residuals) - len(fit.x), 1)
     sigma2 = float(np.sum(residuals**2)) / dof
+    _require_refraction(camera, views, residuals, sigma2)
     jac = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
     try:
         cov_all = np.linalg.inv(jac.T @ jac) * sigma2
@@ -708,6 +747,29 @@ def calibrate_port(
         max_normal_std_deg=max_normal_std_deg,
         max_distance_std_m=max_distance_std_m,
     )
+
+
+def _require_refraction(
+    camera: PinholeCamera, views: list[BoardView], port_residuals: np.ndarray, sigma2: float
+) -> None:
+    """Refuse views that straight lines of sight explain as well as the best port (within noise).
+
+    Boards captured in air (no port in the light) fit the port model worse than no port at all, and
+    its distance runs anywhere in its range; the port's three parameters must improve on straight
+    lines by more than :data:`NO_REFRACTION_CHI2` times the corners' variance ``sigma2``.
+    """
+    straight = _straight_line_residuals_px(camera, views)
+    if straight is None:
+        return  # no pose without refraction either: nothing to compare
+    s_port, s_straight = float(np.sum(port_residuals**2)), float(np.sum(straight**2))
+    if s_straight - s_port <= NO_REFRACTION_CHI2 * sigma2:
+        n = len(port_residuals)
+        raise CalibrationError(
+            f"the boards show no refraction: straight lines of sight (no port) fit their corners to "
+            f"{math.sqrt(s_straight / n):.3g} px RMS, the best port to {math.sqrt(s_port / n):.3g} px; they look "
+            "like in-air captures (for the camera's calibration: lfrefract calibrate camera); give captures "
+            "through the port"
+        )
 
 
 def port_result(

@@ -22,8 +22,9 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b)))
 
 
-def _views(port: FlatPort, n: int, noise_px: float, seed: int, depth_m=(0.2, 0.5)) -> list[BoardView]:
-    """n views of the board at random poses that keep it in the image, corners with Gaussian noise."""
+def _views(port: FlatPort | None, n: int, noise_px: float, seed: int, depth_m=(0.2, 0.5)) -> list[BoardView]:
+    """n views of the board at random poses that keep it in the image, corners with Gaussian noise;
+    ``port`` None: in air, no refraction."""
     rng = np.random.default_rng(seed)
     views = []
     while len(views) < n:
@@ -31,7 +32,8 @@ def _views(port: FlatPort, n: int, noise_px: float, seed: int, depth_m=(0.2, 0.5
             rng.uniform(-35, 35, 3) * [1, 1, 0.3],
             [rng.uniform(-0.1, 0.1), rng.uniform(-0.08, 0.08), rng.uniform(*depth_m)],
         )
-        uv = project_through_port(CAMERA, port, pose.to_world(np.c_[BOARD, np.zeros(len(BOARD))]))
+        points = pose.to_world(np.c_[BOARD, np.zeros(len(BOARD))])
+        uv = CAMERA.project(points) if port is None else project_through_port(CAMERA, port, points)
         if np.all(np.isfinite(uv)) and np.all((uv >= 0) & (uv <= [CAMERA.width_px - 1, CAMERA.height_px - 1])):
             views.append(BoardView(corners_px=uv + rng.normal(scale=noise_px, size=uv.shape), board_points_m=BOARD))
     return views
@@ -104,6 +106,20 @@ def test_a_distance_just_inside_the_end_of_its_range_is_an_error_too():
     views = _views(true, 4, 0.2, seed=7)
     with pytest.raises(CalibrationError, match="ended at 2 mm, the end of distance_range_m"):
         calibrate_port(CAMERA, views, thickness_m=0.01)
+
+
+@pytest.mark.parametrize("noise_px", [0.0, 0.05])
+def test_boards_seen_in_air_are_refused_as_showing_no_refraction(noise_px):
+    # In-air views given as port views: the port fit's distance ran to an end of its range (or
+    # its spread over the limits) and the message advised widening the range.
+    views = _views(None, 6, noise_px, seed=4)
+    with pytest.raises(CalibrationError, match="the boards show no refraction: straight lines of sight") as info:
+        calibrate_port(CAMERA, views, thickness_m=0.01)
+    assert "lfrefract calibrate camera" in str(info.value)
+    # The same poses behind a port nearly square to the axis are a port calibration.
+    port = FlatPort.from_degrees(distance_m=0.03, thickness_m=0.01, tilt_x_deg=3.0)
+    result = calibrate_port(CAMERA, _views(port, 6, noise_px, seed=4), thickness_m=0.01)
+    assert _angle_deg(result.port.normal, port.normal) < PORT_CALIB_NORMAL_DEG
 
 
 def test_points_that_cannot_be_seen_project_to_nan():
