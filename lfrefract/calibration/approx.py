@@ -40,6 +40,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy import ndimage
 from scipy.optimize import least_squares
 
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
@@ -182,7 +183,11 @@ def detect_chessboard(
     sees the image scaled to 8 bits at its 99th percentile, and if it finds no board there at its
     99.9th (:data:`WHITE_PERCENTILES`: a board covering under 1 % of the image; a percentile that
     is 0, a small board on an exactly black background, is skipped); the refinement sees the linear
-    image, unclipped.
+    image, unclipped. OpenCV also reports a pattern smaller than the board, often with its corners
+    in a scrambled order: the corners found must be X-junctions where their lattice puts them, and
+    the lattice must not go on beyond its edges (:func:`_lattice_check`); a board with more squares
+    than the pattern is an error naming them. OpenCV's random generator is seeded for each search,
+    so that one image gives one answer.
 
     Parameters
     ----------
@@ -201,31 +206,143 @@ def detect_chessboard(
     ndarray, float64, shape (columns * rows, 2), or None
         Corner pixels ``(u, v)`` (OpenCV convention: pixel centres at integers), row by row with
         u fastest in the detector's order (which may be the reverse of the board's own order on a
-        board that looks the same after a half turn); None if no board was found.
+        board that looks the same after a half turn); None if no board of the pattern was found.
 
     Raises
     ------
     ParameterError
-        If the image has no finite pixel or is blank (its largest value is 0), or an argument is invalid.
+        If the image has no finite pixel or is blank (its largest value is 0), an argument is
+        invalid, or the image shows a chessboard with more squares than ``pattern`` (named with them).
     """
     cols, rows = _pattern(pattern)
     half = positive_int("refine_half_window_px", refine_half_window_px)
     grey = _grey(name, _as_image(name, image))
-    for percentile in WHITE_PERCENTILES:
-        gray8 = _gray8(grey, percentile=percentile)
-        if gray8 is None:
-            continue  # black at this percentile: the board is small on a black background
-        found, corners = cv2.findChessboardCornersSB(
-            gray8, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-        )
-        if found:
-            break
-    else:
+    corners = _find_chessboard(grey, (cols, rows))
+    if corners is None:
+        # The usual mistake: inner corners given as squares, a pattern one short each way. OpenCV
+        # finds no pattern on such a board or a scrambled one (below): look for the board's own.
+        _refuse_larger_board(grey, (cols, rows), name, candidates=[(cols + 1, rows + 1)])
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     linear = grey.astype(np.float32)  # unclipped: the saddle of the board's own edges
     refined = cv2.cornerSubPix(linear, corners.astype(np.float32), (half, half), (-1, -1), criteria)
-    return refined.reshape(-1, 2).astype(np.float64)
+    found = refined.reshape(-1, 2).astype(np.float64)
+    lattice, continues = _lattice_check(grey, found, (cols, rows))
+    if lattice and not continues:
+        return found
+    # A board with more squares than the pattern: OpenCV reports a smaller pattern on it anyway, in
+    # a scrambled order (its corners are no lattice) or as a part of the board.
+    _refuse_larger_board(grey, (cols, rows), name)
+    if continues:
+        raise ParameterError(
+            f"{name}: the chessboard continues beyond the {cols} x {rows} inner corners of pattern {(cols, rows)!r} "
+            f"({cols + 1} x {rows + 1} squares): it has more squares, or lies partly outside the image; give the "
+            "board's own squares (--squares) and captures that show all of it"
+        )
+    return None  # what OpenCV found is not the pattern's lattice of corners
+
+
+#: The least share of a detected pattern's corners that must be X-junctions where their lattice puts
+#: them (:func:`_x_junctions`): every one on the rendered boards (a board's true pattern); 0.67-0.73 on
+#: patterns smaller than the board, whose corners OpenCV reports in a scrambled order.
+LATTICE_MIN_FRACTION = 0.9
+#: The least share of the lattice's next row (or column) beyond an edge that must be X-junctions for
+#: the board to continue there: a whole line of corners, not a chance texture.
+CONTINUES_MIN_FRACTION = 0.75
+#: An X-junction's least score (:func:`_x_junctions`: 1 for an ideal chessboard corner): 0.92-1.0 at
+#: the corners of the rendered boards; 0.4-0.7 where OpenCV put a corner half a square off.
+X_JUNCTION_MIN_SCORE = 0.75
+#: An X-junction's least contrast (the spread of its four squares' values) as a share of the median
+#: over the detected corners: flat or noisy surroundings are no junction.
+X_JUNCTION_MIN_CONTRAST = 0.3
+#: Inner corners tried beyond the pattern's, per side, when the board looks larger than the pattern.
+LARGER_PATTERN_SEARCH = 4
+
+
+def _x_junctions(
+    grey: np.ndarray, points: np.ndarray, along_row: np.ndarray, along_col: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Junction scores (...,) of ``points`` (..., 2) with lattice steps ``along_row``, ``along_col``
+    (..., 2) in pixels: the four squares' values, sampled at their centres, split into two diagonal
+    pairs, and the gap between the pairs over the spread of all four (1 for an ideal chessboard
+    corner; below 0 for an L-junction, a board's edge or a square's middle); and the spread."""
+    half = 0.5 * (along_row + along_col), 0.5 * (along_row - along_col)
+    centres = np.stack([points + half[0], points - half[0], points + half[1], points - half[1]], axis=-2)
+    values = ndimage.map_coordinates(grey, [centres[..., 1], centres[..., 0]], order=1, mode="nearest")
+    a, b = values[..., :2], values[..., 2:]
+    gap = np.maximum(a.min(axis=-1) - b.max(axis=-1), b.min(axis=-1) - a.max(axis=-1))
+    spread = values.max(axis=-1) - values.min(axis=-1)
+    return gap / np.maximum(spread, np.finfo(float).tiny), spread
+
+
+def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, int]) -> tuple[bool, bool]:
+    """Whether detected ``corners`` (row by row) are chessboard corners at their lattice places, and
+    whether the lattice continues beyond one of its edges (a whole row or column of corners more)."""
+    cols, rows = pattern
+    grid = corners.reshape(rows, cols, 2)
+    along_row, along_col = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
+    score, spread = _x_junctions(grey, grid, along_row, along_col)
+    contrast = X_JUNCTION_MIN_CONTRAST * float(np.median(spread))
+    junction = (score > X_JUNCTION_MIN_SCORE) & (spread > contrast)
+    lattice = float(np.mean(junction)) >= LATTICE_MIN_FRACTION
+    continues = False
+    # The next line beyond each edge, extrapolated, with the edge's steps.
+    for line, step_out, row_step, col_step in (
+        (grid[:, 0], grid[:, 0] - grid[:, 1], along_row[:, 0], along_col[:, 0]),
+        (grid[:, -1], grid[:, -1] - grid[:, -2], along_row[:, -1], along_col[:, -1]),
+        (grid[0], grid[0] - grid[1], along_row[0], along_col[0]),
+        (grid[-1], grid[-1] - grid[-2], along_row[-1], along_col[-1]),
+    ):
+        score, spread = _x_junctions(grey, line + step_out, row_step, col_step)
+        continues |= float(np.mean((score > X_JUNCTION_MIN_SCORE) & (spread > contrast))) >= CONTINUES_MIN_FRACTION
+    return lattice, continues
+
+
+def _find_chessboard(grey: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
+    """OpenCV's corners (N, 1, 2) of ``pattern`` in ``grey`` (:func:`_grey`) scaled to each of
+    :data:`WHITE_PERCENTILES` in turn, unrefined; None if not found."""
+    for percentile in WHITE_PERCENTILES:
+        gray8 = _gray8(grey, percentile=percentile)
+        if gray8 is None:
+            continue  # black at this percentile: the board is small on a black background
+        # The exhaustive search draws from OpenCV's random generator: unseeded, a pattern smaller
+        # than the board was found in 3 of 8 calls on one image. Seeded, one image gives one answer.
+        cv2.setRNGSeed(0)
+        found, corners = cv2.findChessboardCornersSB(
+            gray8, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+        )
+        if found:
+            return corners
+    return None
+
+
+def _refuse_larger_board(
+    grey: np.ndarray, pattern: tuple[int, int], name: str, *, candidates: list[tuple[int, int]] | None = None
+) -> None:
+    """Raise :class:`ParameterError` naming the board's squares if the image shows a board larger than
+    ``pattern``: the first of ``candidates`` (inner corners; default every pattern up to
+    :data:`LARGER_PATTERN_SEARCH` more each way, smallest first, in the pattern's orientation first)
+    that OpenCV finds as a whole board's lattice (:func:`_lattice_check`)."""
+    cols, rows = pattern
+    if candidates is None:
+        larger = [
+            (c, r)
+            for c in range(cols, cols + LARGER_PATTERN_SEARCH + 1)
+            for r in range(rows, rows + LARGER_PATTERN_SEARCH + 1)
+            if (c, r) != (cols, rows)
+        ]
+        candidates = sorted(larger, key=lambda cr: (cr[0] * cr[1], (cr[0] - cr[1]) * (cols - rows) < 0, cr))
+    for c, r in candidates:
+        corners = _find_chessboard(grey, (c, r))
+        if corners is None:
+            continue
+        lattice, continues = _lattice_check(grey, corners.reshape(-1, 2).astype(np.float64), (c, r))
+        if lattice and not continues:
+            raise ParameterError(
+                f"{name}: the chessboard has {c + 1} x {r + 1} squares ({c} x {r} inner corners), more than "
+                f"pattern {pattern!r} gives ({cols + 1} x {rows + 1} squares); give the board's own squares "
+                f"(--squares {c + 1} {r + 1})"
+            )
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

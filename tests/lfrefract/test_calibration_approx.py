@@ -8,6 +8,7 @@ so the calibration must give back that model.
 from __future__ import annotations
 
 import math
+import re
 
 import cv2
 import numpy as np
@@ -266,7 +267,7 @@ def test_bad_input_names_what_and_which_view(images):
         )
     with pytest.raises(ParameterError, match="pattern must have at least 2 inner corners"):
         calibrate_approx(images[:3], pattern=(1, 5), square_size_m=SQUARE_M)
-    with pytest.raises(ParameterError, match="square_size_m must be positive"):
+    with pytest.raises(ParameterError, match=r"square_size_m must be a board square's edge in metres, .* got 0\.0"):
         calibrate_approx(images[:3], pattern=PATTERN, square_size_m=0.0)
 
 
@@ -277,6 +278,22 @@ def test_detector_reports_no_board_as_none(images):
     found = detect_chessboard(np.where(np.arange(SIZE[0]) < 5, np.nan, images[0]), PATTERN)
     assert found is not None
     assert found.shape == (35, 2)
+
+
+@pytest.mark.parametrize("pattern", [(6, 4), (3, 3)])
+def test_a_board_with_more_squares_than_the_pattern_is_refused_naming_its_squares(images, pattern):
+    # OpenCV finds no pattern one short each way on a board, or finds it with its corners in a
+    # scrambled order (a 5 x 3 pattern on a 6 x 4 inner-corner board calibrated a port to the end
+    # of its distance range); a smaller pattern may come as a part of the board.
+    with pytest.raises(ParameterError, match=r"board\.exr: the chessboard has (8 x 6|6 x 8) squares") as info:
+        detect_chessboard(images[0], pattern, name="board.exr")
+    assert re.search(r"\((7 x 5|5 x 7) inner corners\).*\(--squares (8 6|6 8)\)", str(info.value))
+
+
+def test_a_board_of_the_pattern_is_not_taken_for_a_larger_one(images):
+    # Its true pattern, either way round: the next row or column beyond each edge is no corner.
+    assert detect_chessboard(images[1], PATTERN).shape == (35, 2)
+    assert detect_chessboard(images[1], PATTERN[::-1]).shape == (35, 2)
 
 
 def _small_board(blur_px: float, *, background: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
