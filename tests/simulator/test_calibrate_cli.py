@@ -14,7 +14,14 @@ from lfrefract.formats.exr import read_exr
 from lfrefract.formats.flatport import read_flat_port
 from lfrefract.formats.jsonio import read_json, write_json
 from simulator import cli as sim_cli
-from simulator.boards import SQUARES, board_scene, calibration_boards, empty_scene
+from simulator.boards import (
+    SQUARES,
+    board_scene,
+    calibration_boards,
+    empty_scene,
+    in_air_board_scene,
+    in_air_boards,
+)
 from simulator.job import render_job
 
 pytestmark = pytest.mark.render
@@ -41,20 +48,28 @@ def test_calibrate_mla_then_synthesize_with_it_and_a_port_file(tmp_path, capsys)
     assert read_json(out.with_suffix(".json"))["coverage"]["filled_fraction"] == np.mean(classes > 0)
 
 
-def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
-    tilt = (25.0, 10.0)
-    view = virtual_camera_for(empty_scene(tilt).camera)
+TILT = (25.0, 10.0)
+
+
+@pytest.fixture(scope="module")
+def port_captures(tmp_path_factory) -> list[str]:
+    """Six board captures behind the port of :data:`TILT` at 0.2 m (``calibration_boards``)."""
+    root = tmp_path_factory.mktemp("port-boards")
     captures = []
-    for i, table in enumerate(calibration_boards(tilt, 0.2, view)):
-        out = tmp_path / f"board{i}"
-        render_job(board_scene(tilt, table, spp=16, seed=i), out, progress=False, write_previews=False)
-        captures.append(str(out / "raw.exr"))
-    board_args = [
-        "--squares",
-        *map(str, SQUARES),
-        "--square-size-m",
-        str(calibration_boards(tilt, 0.2, view)[0]["square_size_m"]),
-    ]
+    for i, table in enumerate(calibration_boards(TILT, 0.2, virtual_camera_for(empty_scene(TILT).camera))):
+        render_job(board_scene(TILT, table, spp=16, seed=i), root / f"board{i}", progress=False, write_previews=False)
+        captures.append(str(root / f"board{i}" / "raw.exr"))
+    return captures
+
+
+def _port_square_size_m() -> str:
+    return str(calibration_boards(TILT, 0.2, virtual_camera_for(empty_scene(TILT).camera))[0]["square_size_m"])
+
+
+def test_calibrate_approx_and_port_from_board_captures(port_captures, tmp_path, capsys):
+    tilt = TILT
+    captures = port_captures
+    board_args = ["--squares", *map(str, SQUARES), "--square-size-m", _port_square_size_m()]
     assert core_cli.main(["calibrate", "approx", *captures, *board_args, "--out", str(tmp_path / "approx.json")]) == 0
     approx = read_json(tmp_path / "approx.json")
     assert approx["rms_px"] < 1.0
@@ -101,6 +116,40 @@ def test_calibrate_approx_and_port_from_board_captures(tmp_path, capsys):
         == 2
     )
     assert "--squares must be at least 3 x 3" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["port", "approx"])
+def test_squares_fewer_than_the_boards_are_refused_naming_its_squares(port_captures, tmp_path, capsys, command):
+    # --squares 6 4 on these 7 x 5 boards: OpenCV found the 5 x 3 inner corners in a scrambled order
+    # and the port fit ended at the end of its distance range, advising to widen it.
+    out = tmp_path / "o.json"
+    args = ["calibrate", command, *port_captures, "--squares", "6", "4", "--square-size-m", _port_square_size_m()]
+    assert core_cli.main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the chessboard has 7 x 5 squares (6 x 4 inner corners)" in err
+    assert "(--squares 7 5)" in err
+    assert not out.exists()
+
+
+def test_boards_captured_in_air_are_refused_by_calibrate_port(tmp_path, capsys):
+    # In-air boards with the port's glass given: the fit ran to an end of its distance range (or over
+    # its std limits) and advised widening the range; straight lines fit them 7 times better.
+    view = virtual_camera_for(empty_scene(TILT).camera)
+    tables = in_air_boards(view)[:3]
+    captures = []
+    for i, table in enumerate(tables):
+        render_job(in_air_board_scene(table, seed=i), tmp_path / f"air{i}", progress=False, write_previews=False)
+        captures.append(str(tmp_path / f"air{i}" / "raw.exr"))
+    sizes = [str(table["square_size_m"]) for table in tables]
+    glass = ["--thickness-m", "0.004", "--n-glass", "1.5", "--n-water", "1.333"]
+    out = tmp_path / "port.json"
+    args = ["calibrate", "port", *captures, "--squares", *map(str, SQUARES), "--square-size-m", *sizes, *glass]
+    assert core_cli.main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the boards show no refraction" in err
+    assert "in-air captures (for the camera's calibration: lfrefract calibrate camera)" in err
+    assert not out.exists()
+    assert not out.with_suffix(".txt").exists()
 
 
 def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsys):
