@@ -55,6 +55,7 @@ from scipy.spatial.transform import Rotation
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.calibration.port import BoardView, board_corners
 from lfrefract.errors import CalibrationError, ParameterError
+from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection, apply_correction
@@ -68,8 +69,6 @@ __all__ = [
     "observed_rays",
 ]
 
-#: ``kind`` of the JSON file ``lfrefract calibrate camera`` writes.
-CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
 #: Fewest board captures a calibration takes: one pose per capture and five shared parameters need
 #: views at several distances and angles.
 MIN_VIEWS = 3

@@ -45,6 +45,7 @@ from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGI
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.errors import CalibrationError, ParameterError
+from lfrefract.formats.jsonio import PORT_CALIBRATION_KIND
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.port import FlatPort
@@ -197,8 +198,6 @@ DISTANCE_AT_BOUND_M = 1e-6
 #: on tiny-2x renders: boards behind a port 25 deg tilted gain 9e4-2e5, boards in air lose 450-1100
 #: (the port fits them 6-7 times worse than straight lines).
 NO_REFRACTION_CHI2 = 16.27
-#: ``kind`` of the JSON file ``lfrefract calibrate port`` writes.
-PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
 #: Fewest board captures :func:`calibrate_port` takes: the port's three parameters and one pose per
 #: board are not separable from a single board.
 MIN_VIEWS = 2

@@ -17,7 +17,23 @@ from lfrefract.validate import file_problem
 #: Version of the sidecar and directory layout written by this package.
 SCHEMA_VERSION = 1
 
-__all__ = ["SCHEMA_VERSION", "read_json", "write_json", "write_text_atomically"]
+__all__ = [
+    "CAMERA_CALIBRATION_KIND",
+    "MLA_CALIBRATION_KIND",
+    "PORT_CALIBRATION_KIND",
+    "SCHEMA_VERSION",
+    "read_json",
+    "write_json",
+    "write_text_atomically",
+]
+
+#: ``kind`` of the JSON files the calibrations write (``lfrefract calibrate camera``, ``mla`` and
+#: ``port``): kept here, below both the calibrations that write them and the readers of camera and
+#: port files that tell them apart (:mod:`lfrefract.formats.paramfile`).
+CAMERA_CALIBRATION_KIND = "lfrefract.calibrate.camera"
+#: An MLA calibration: its ``mla`` table and, when the camera was known, the camera it calibrates.
+MLA_CALIBRATION_KIND = "lfrefract.calibrate.mla"
+PORT_CALIBRATION_KIND = "lfrefract.calibrate.port"
 
 
 def _json_default(value: Any) -> Any:

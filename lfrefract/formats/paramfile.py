@@ -38,7 +38,15 @@ import tomli_w
 
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.flatport import read_flat_port, write_flat_port
-from lfrefract.formats.jsonio import SCHEMA_VERSION, read_json, write_json, write_text_atomically
+from lfrefract.formats.jsonio import (
+    CAMERA_CALIBRATION_KIND,
+    MLA_CALIBRATION_KIND,
+    PORT_CALIBRATION_KIND,
+    SCHEMA_VERSION,
+    read_json,
+    write_json,
+    write_text_atomically,
+)
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.port import FlatPort
 from lfrefract.validate import finite_vector, regular_file, reject_unknown_keys, require_keys, shown
@@ -72,9 +80,6 @@ PORT_SUFFIXES = (".toml", ".json", ".txt")
 CAMERA_FILE_KIND = "lfrefract.camera"
 PORT_FILE_KIND = "lfrefract.port"
 
-#: ``kind`` of an MLA calibration (``lfrefract calibrate mla`` output: its ``mla`` table and, when the
-#: camera was known, the camera it calibrates).
-MLA_CALIBRATION_KIND = "lfrefract.calibrate.mla"
 
 _PORT_SCALARS = ("distance_m", "thickness_m", "n_air", "n_glass", "n_water")
 _DEG_ANGLES = ("tilt_x_deg", "tilt_y_deg")
@@ -126,10 +131,6 @@ def read_parameter_json(path: str | os.PathLike) -> dict:
 
 def _model_tables() -> dict[str, tuple[str, str]]:
     """Top-level tables of a camera or ray model: table -> (what holds it, the one kind that may)."""
-    # Imported here: the calibration package imports the formats.
-    from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND
-    from lfrefract.calibration.port import PORT_CALIBRATION_KIND
-
     calibration = ("a camera calibration (lfrefract calibrate camera output)", CAMERA_CALIBRATION_KIND)
     return {
         "correction": calibration,
