@@ -27,19 +27,26 @@ version; every command's ``--help`` shows its defaults.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib.metadata
+import math
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.outputs import MANIFEST_NAME, terminate_cleanly
 from lfrefract.optics.lens import LENS_PRESETS
+from lfrefract.validate import positive_int
 from simulator.config import (
     DEFAULT_IDEAL_SPP,
     PORT_MODELS,
     THIN_LENS,
+    RenderSettings,
+    SceneConfig,
     SensorSettings,
     embedded_scenes,
     load_scene,
@@ -62,6 +69,53 @@ def _scene_path(arg: str | None) -> Path | None:
     if not Path(arg).exists() and arg in embedded:
         return embedded[arg]
     return Path(arg)
+
+
+@contextlib.contextmanager
+def _named(what: str) -> Iterator[None]:
+    """Errors of the block start with ``what``: the option as the user typed it (``--spp``), or the
+    file the values came from."""
+    try:
+        yield
+    except ParameterError as exc:
+        raise ParameterError(f"{what}: {exc}") from None
+
+
+def _options_by_flag(check: Callable[..., object], given: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The fields of the options given on the command line (those not ``None``), each flag's fields
+    checked alone by ``check(**fields)`` (the others at their defaults), so that an invalid value's
+    error names its flag (``--spp: render.spp must be positive, got 0``), not only the field; as
+    ``lfrefract``'s command line does for its synthesis options.
+
+    Parameters
+    ----------
+    check : callable
+        Builds the options' frozen dataclass (:class:`RenderSettings`, :class:`ExperimentOptions`)
+        from some of its fields; raises :class:`ParameterError` for an invalid one.
+    given : dict
+        Flag -> the fields it sets.
+    """
+    values: dict[str, Any] = {}
+    for flag, fields in given.items():
+        fields = {key: value for key, value in fields.items() if value is not None}
+        if fields:
+            with _named(flag):
+                check(**fields)
+            values.update(fields)
+    return values
+
+
+def _scene_changed(config: SceneConfig, changes: dict[str, object], flags: list[str]) -> SceneConfig:
+    """``config`` with ``changes`` (from ``flags``), and its geometry checked, before any render:
+    errors name the scene file and the options that changed it."""
+    from simulator.geometry import check_geometry
+
+    where = f"scene file {config.source!r}" + (f" with {', '.join(flags)}" if flags else "")
+    with _named(where):
+        if changes:
+            config = config.with_overrides(**changes)
+        check_geometry(config)
+    return config
 
 
 class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -314,6 +368,16 @@ def _dataset(args: argparse.Namespace) -> int:
             print(f"input files not found here (their samples are not checked against them): {report.inputs_gone}")
         print(report.summary())
         return 0 if report.ok else 1
+    from simulator.dataset.run import check_run_options
+
+    _options_by_flag(
+        check_run_options,
+        {
+            "--workers": {"workers": args.workers},
+            "--threads": {"threads_per_worker": args.threads},
+            "--retries": {"retries": args.retries},
+        },
+    )
     report = run_dataset(
         args.spec,
         args.out,
@@ -338,18 +402,36 @@ def _dataset(args: argparse.Namespace) -> int:
 
 def _experiment(args: argparse.Namespace) -> int:
     from lfrefract.formats.capture import camera_from_option
-    from simulator.experiments import ExperimentOptions, run_experiment
+    from simulator.experiments import (
+        OPTION_FLAGS,
+        ExperimentOptions,
+        check_methods,
+        check_renders_dir,
+        load_experiments,
+        run_experiment,
+    )
 
+    given = {
+        "methods": args.methods,
+        "port_distance_m": args.port_distance_m,
+        "thickness_m": args.thickness_m,
+        "tilts_deg": args.tilts_deg,
+        "f_numbers": args.f_numbers,
+        "lens": args.lens,
+    }
     options = ExperimentOptions(
         scale=args.scale,
-        methods=args.methods,
-        camera=None if args.camera is None else camera_from_option(args.camera),
-        port_distance_m=args.port_distance_m,
-        thickness_m=args.thickness_m,
-        tilts_deg=args.tilts_deg,
-        f_numbers=args.f_numbers,
-        lens=args.lens,
+        camera=None if args.camera is None else camera_from_option(args.camera),  # names --camera
+        **_options_by_flag(ExperimentOptions, {OPTION_FLAGS[key]: {key: value} for key, value in given.items()}),
     )
+    experiment = load_experiments().get(args.name)
+    if experiment is not None:  # else run_experiment names the experiments there are
+        experiment.check(options)  # an option that does not apply, by its flag
+        if options.methods is not None:
+            with _named("--methods"):
+                check_methods(options.methods)
+        if args.renders is not None:
+            check_renders_dir(args.name, args.renders, args.out, names=("--renders", "--out"))
     result = run_experiment(
         args.name,
         out=args.out,
@@ -368,9 +450,8 @@ def _rig(args: argparse.Namespace) -> int:
     from simulator.rig import RigCamera, load_rig
     from simulator.rig_render import render_rig
 
+    overrides = _options_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
     rig = load_rig(args.rig)
-    given = {"spp": args.spp, "seed": args.seed}
-    overrides = {key: value for key, value in given.items() if value is not None}
     if overrides:
         cameras = tuple(
             RigCamera(c.name, c.scene.with_overrides(render=dataclasses.replace(c.scene.render, **overrides)))
@@ -385,16 +466,30 @@ def _rig(args: argparse.Namespace) -> int:
 
 
 def _whites(args: argparse.Namespace) -> int:
-    from simulator.whites import render_whites, white_settings
+    from simulator.whites import WhiteSetting, check_white_seed, render_whites, white_settings
 
     camera = camera_preset(args.camera)
     sensor_name = args.sensor or args.camera
     if sensor_name not in DETECTOR_PRESETS:
         raise ParameterError(f"--sensor: camera {args.camera!r} has no detector preset of its name; pass --sensor NAME")
     base = sensor_model(sensor_name, camera)
-    sensor = SensorSettings(detector=base.detector, frames=args.frames)
+    with _named("--frames"):
+        sensor = SensorSettings(detector=base.detector, frames=args.frames)
+    _options_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
+    # Each zoom (given in mm) and each focus distance alone, as the camera takes them.
     zooms = None if args.focal_lengths_mm is None else [f * 1e-3 for f in args.focal_lengths_mm]
-    settings = white_settings(camera, focal_lengths_m=zooms, focus_distances_m=args.focus_m)
+    for zoom_mm in args.focal_lengths_mm or ():
+        with _named(f"--focal-lengths-mm {zoom_mm:g} mm"):
+            WhiteSetting(focal_length_m=zoom_mm * 1e-3, focus_distance_m=math.inf).camera(camera)
+    for focus in args.focus_m:
+        for zoom in zooms or [camera.focal_length_m]:
+            at = "" if zooms is None else f" at --focal-lengths-mm {zoom * 1e3:g}"
+            with _named(f"--focus-m {focus:g}{at}"):
+                WhiteSetting(focal_length_m=zoom, focus_distance_m=focus).camera(camera)
+    with _named("--focal-lengths-mm, --focus-m"):
+        settings = white_settings(camera, focal_lengths_m=zooms, focus_distances_m=args.focus_m)
+    with _named("--seed"):
+        check_white_seed(args.seed, len(settings))
     entries = render_whites(
         args.out,
         camera=camera,
@@ -468,28 +563,46 @@ def _run(args: argparse.Namespace) -> int:
             print(report.read_text().split("![")[0].rstrip())
             print(f"\nwrote {report} (figures, table.csv, point clouds beside it)")
             return 0
-        config = load_scene(_scene_path(args.scene))
+        # Every option alone first, by its flag, before the scene is read and anything rendered.
+        render_options = _options_by_flag(
+            RenderSettings,
+            {
+                "--spp": {"spp": args.spp},
+                "--ideal-spp": {"ideal_spp": args.ideal_spp},
+                "--seed": {"seed": args.seed},
+                "--port-model": {"port_model": args.port_model},
+            },
+        )
+        with _named("--band-pixels"):
+            positive_int("max_band_pixels", args.band_pixels)
+        config = load_scene(_scene_path(args.scene))  # its errors name the file
         changes: dict[str, object] = {}
+        flags: list[str] = []
         if args.camera:
             changes["camera"] = camera_preset(args.camera)
+            flags.append(f"--camera {args.camera}")
         lens_name = args.lens
         if lens_name is None and args.camera and config.lens is not None and config.lens.name in LENS_PRESETS:
             lens_name = config.lens.name  # the scene's preset lens, scaled to the new camera
         if lens_name is not None:
-            changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
+            with _named(f"scene file {config.source!r} with {', '.join([*flags, f'--lens {lens_name}'])}"):
+                changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
+            if args.lens is not None:
+                flags.append(f"--lens {args.lens}")
         sensor = config.sensor if args.sensor is None else None if args.sensor == NO_SENSOR else args.sensor
         if args.frames is not None:
             if sensor is None:
                 raise ParameterError(f"--frames {args.frames} needs a sensor model: pass --sensor NAME")
-            sensor = SensorSettings(detector=sensor_model(sensor, config.camera).detector, frames=args.frames)
+            with _named("--frames"):
+                sensor = SensorSettings(detector=sensor_model(sensor, config.camera).detector, frames=args.frames)
+            flags.append(f"--frames {args.frames}")
         if sensor is not None or args.sensor is not None:  # a preset name, or the scene's moved to --camera
             changes["sensor"] = None if sensor is None else sensor_model(sensor, changes.get("camera", config.camera))
-        given = {"spp": args.spp, "ideal_spp": args.ideal_spp, "seed": args.seed, "port_model": args.port_model}
-        overrides = {key: value for key, value in given.items() if value is not None}
-        if overrides:
-            changes["render"] = dataclasses.replace(config.render, **overrides)
-        if changes:
-            config = config.with_overrides(**changes)
+            if args.sensor is not None:
+                flags.append(f"--sensor {args.sensor}")
+        if render_options:
+            changes["render"] = dataclasses.replace(config.render, **render_options)
+        config = _scene_changed(config, changes, flags)
         from simulator.job import render_job
 
         result = render_job(

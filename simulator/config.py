@@ -903,7 +903,8 @@ def _build(cls: type, table: Any, where: str, base_dir: Path) -> Any:
             kwargs[key] = value
         return cls(**kwargs)
     except ParameterError as exc:
-        raise ParameterError(f"{where}: {exc}") from None
+        # A message that already names the key under its table (render.spp) needs no prefix.
+        raise ParameterError(str(exc) if str(exc).startswith(f"{where}.") else f"{where}: {exc}") from None
 
 
 def _typed_entries(data: Any, kinds: dict[str, type], where: str, base_dir: Path) -> tuple:
@@ -1122,10 +1123,15 @@ def load_scene(path: str | Path | None = None) -> SceneConfig:
     FileNotFoundError
         If ``path`` does not exist.
     ParameterError
-        If the file is not valid TOML or describes an invalid scene.
+        If the file is not valid TOML or describes an invalid scene; every message starts with
+        ``scene file '<path>'``, then names the key as the file spells it.
     """
     p = default_scene_path() if path is None else Path(path)
-    return parse_scene(read_toml(p, "scene"), base_dir=p.parent, source=str(p))
+    data = read_toml(p, "scene")  # its errors name the file already
+    try:
+        return parse_scene(data, base_dir=p.parent, source=str(p))
+    except ParameterError as exc:
+        raise ParameterError(f"scene file {str(p)!r}: {exc}") from None
 
 
 def read_toml(path: str | Path, what: str) -> dict:

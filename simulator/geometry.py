@@ -29,6 +29,7 @@ import numpy as np
 from lfrefract import LightFieldCamera, ParameterError
 from simulator import assets
 from simulator.config import (
+    OBJECT_TYPES,
     Bowl,
     Chessboard,
     Disc,
@@ -244,7 +245,7 @@ def require_water_side(config: SceneConfig, points_world: np.ndarray, what: str)
     points_world : ndarray, shape (N, 3)
         World points, metres.
     what : str
-        The points' owner in the message (``"object[2] (Disc)"``).
+        The points' owner in the message (``"object[2] (disc)"``).
 
     Raises
     ------
@@ -297,8 +298,9 @@ def check_geometry(config: SceneConfig) -> dict:
             f"n_water={port.n_water}, tilt {np.degrees(port.total_tilt_rad):.2f} deg): "
             f"{int(trace.tir.sum())} TIR, {int(trace.misses.sum())} never reach it"
         )
+    kinds = {cls: kind for kind, cls in OBJECT_TYPES.items()}  # the type as a scene file names it
     for i, obj in enumerate(config.objects):
-        require_water_side(config, object_sample_points(obj), f"object[{i}] ({type(obj).__name__})")
+        require_water_side(config, object_sample_points(obj), f"object[{i}] ({kinds[type(obj)]})")
     for i, light in enumerate(config.lights):
         if isinstance(light, PointLight):
             require_water_side(config, np.asarray([light.position_m]), f"light[{i}] (point)")

@@ -207,11 +207,16 @@ def load_rig(path: str | Path | None = None) -> RigConfig:
     FileNotFoundError
         If there is no such file or embedded rig.
     ParameterError
-        If the file is not valid TOML or describes an invalid rig.
+        If the file is not valid TOML or describes an invalid rig; every message starts with
+        ``rig file '<path>'``, then names the key as the file spells it.
     """
     if path is None or (not Path(path).exists() and str(path) in embedded_rigs()):
         path = embedded_rigs()["default" if path is None else str(path)]
     p = Path(path)
     if not p.exists():  # a directory or FIFO is refused by read_toml, by its kind
         raise FileNotFoundError(f"rig file {str(p)!r} does not exist (embedded rigs: {sorted(embedded_rigs())})")
-    return parse_rig(read_toml(p, "rig"), base_dir=p.parent, source=str(p))
+    data = read_toml(p, "rig")  # its errors name the file already
+    try:
+        return parse_rig(data, base_dir=p.parent, source=str(p))
+    except ParameterError as exc:
+        raise ParameterError(f"rig file {str(p)!r}: {exc}") from None

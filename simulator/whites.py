@@ -39,7 +39,7 @@ from simulator.config import RenderSettings, SensorSettings, embedded_scenes, lo
 from simulator.detector import lytro_settings
 from simulator.job import lens_steps, render_raw, sensor_mosaic
 
-__all__ = ["WHITES_INDEX_NAME", "WHITES_KIND", "WhiteSetting", "render_whites", "white_settings"]
+__all__ = ["WHITES_INDEX_NAME", "WHITES_KIND", "WhiteSetting", "check_white_seed", "render_whites", "white_settings"]
 
 #: Kind of a white-image set's output directory.
 WHITES_KIND = "lfsim.whites"
@@ -109,6 +109,18 @@ def white_settings(
     return [WhiteSetting(focal_length_m=f, focus_distance_m=d) for f in zooms for d in focuses]
 
 
+def check_white_seed(seed: int, count: int) -> int:
+    """``seed`` as the render seed of a set of ``count`` settings (setting ``k`` renders with
+    ``seed + k``, every one a seed of :mod:`simulator.seeds`).
+
+    Raises
+    ------
+    ParameterError
+        Unless ``seed`` is an integer in ``[0, 2**31 - 1 - count]``; the message names ``seed``.
+    """
+    return bounded_int("seed", seed, 0, 2**31 - 1 - count)
+
+
 def render_whites(
     out_dir: str | Path,
     *,
@@ -163,7 +175,7 @@ def render_whites(
         raise ParameterError(f"sensor.bit_depth={bits}: Lytro white images hold 10-bit (Illum) or 12-bit (F01) counts")
     if lens is not None and lens not in LENS_PRESETS:
         raise ParameterError(f"lens={lens!r} is not a lens preset ({', '.join(sorted(LENS_PRESETS))})")
-    bounded_int("seed", seed, 0, 2**31 - 1 - len(settings))
+    check_white_seed(seed, len(settings))
     base = load_scene(embedded_scenes()["white"])
     configs = []
     for k, setting in enumerate(settings):

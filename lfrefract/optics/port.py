@@ -40,6 +40,7 @@ from lfrefract.validate import (
     positive_float,
     reject_unknown_keys,
     require_keys,
+    shown,
 )
 
 __all__ = [
@@ -70,6 +71,10 @@ N_MAX = 5.0
 #: few metres; 100 m is beyond any window one looks through and keeps every hit point of a trace
 #: (distance / cos, cos >= GRAZING_COS_MIN) below 1e8 m, far inside float64 and float32 range.
 MAX_DISTANCE_M = 100.0
+
+#: Smallest z component of the port's unit normal: a port closer to edge-on than that (tilt within
+#: 6e-8 deg of 90) does not face the camera.
+_MIN_NORMAL_Z = 1e-9
 
 #: Largest glass thickness, metres. Port glass is millimetres thick; the thickest windows built
 #: (acrylic aquarium panels) are under 0.8 m.
@@ -284,7 +289,7 @@ class FlatPort:
         finite_float("port.tilt_y_rad", self.tilt_y_rad)
         for name in ("n_air", "n_glass", "n_water"):
             _index(f"port.{name}", getattr(self, name))
-        if self.normal[2] <= 1e-9:
+        if self.normal[2] <= _MIN_NORMAL_Z:
             raise ParameterError(
                 f"port tilt (tilt_x_rad={self.tilt_x_rad!r}, tilt_y_rad={self.tilt_y_rad!r}) makes the "
                 f"normal {self.normal.round(6).tolist()} point away from the view: the port would be "
@@ -312,12 +317,25 @@ class FlatPort:
         n_glass: float = 1.5,
         n_water: float = 1.333,
     ) -> FlatPort:
-        """Build a port from tilt angles in degrees (the config-file form)."""
+        """Build a port from tilt angles in degrees (the config-file form); a tilt that turns the
+        port away from the view is named in degrees, as the file gives it."""
+        tilt_x = finite_float("port.tilt_x_deg", tilt_x_deg)
+        tilt_y = finite_float("port.tilt_y_deg", tilt_y_deg)
+        for name, tilt in (("tilt_x_deg", tilt_x), ("tilt_y_deg", tilt_y)):
+            if not abs(tilt) < 90.0:
+                raise ParameterError(
+                    f"port.{name} must lie in (-90, 90) deg, got {shown(tilt)}: the port would be behind the camera"
+                )
+        if math.cos(math.radians(tilt_x)) * math.cos(math.radians(tilt_y)) <= _MIN_NORMAL_Z:
+            raise ParameterError(
+                f"port tilt (tilt_x_deg={tilt_x!r}, tilt_y_deg={tilt_y!r}) turns the normal within 1e-9 of "
+                "perpendicular to the view: the port would be behind the camera"
+            )
         return cls(
             distance_m=distance_m,
             thickness_m=thickness_m,
-            tilt_x_rad=math.radians(finite_float("port.tilt_x_deg", tilt_x_deg)),
-            tilt_y_rad=math.radians(finite_float("port.tilt_y_deg", tilt_y_deg)),
+            tilt_x_rad=math.radians(tilt_x),
+            tilt_y_rad=math.radians(tilt_y),
             n_air=n_air,
             n_glass=n_glass,
             n_water=n_water,

@@ -60,7 +60,7 @@ from simulator.dataset.manifest import (
 from simulator.dataset.sample import SampleTask, render_sample
 from simulator.dataset.spec import SweepSpec, iter_samples, load_spec
 
-__all__ = ["DatasetBusyError", "DatasetMismatchError", "RunReport", "run_dataset"]
+__all__ = ["DatasetBusyError", "DatasetMismatchError", "RunReport", "check_run_options", "run_dataset"]
 
 
 #: How long to try to reach a scheduler given by address before giving up.
@@ -364,6 +364,38 @@ def _remove_leftovers(out: Path) -> None:
             remove(leftover)
 
 
+def check_run_options(
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    threads_per_worker: int | None = None,
+    retries: int = 2,
+    variant: str | None = None,
+) -> None:
+    """Check the options of :func:`run_dataset` (but the spec and the output) as it does, before
+    any work; ``lfsim dataset run`` checks each alone to name its flag.
+
+    Raises
+    ------
+    ParameterError
+        For ``workers`` together with ``scheduler``, an empty scheduler address, ``workers`` or
+        ``threads_per_worker`` not a positive integer, ``retries`` not an integer >= 0, or an
+        unknown ``variant``; the message names the parameter and its value.
+    """
+    if scheduler is not None and workers is not None:
+        raise ParameterError(f"workers={workers!r} is for the local cluster; with scheduler={scheduler!r} leave it out")
+    if scheduler is not None and (not isinstance(scheduler, str) or not scheduler):
+        raise ParameterError(f"scheduler must be an address such as 'tcp://host:8786', got {scheduler!r}")
+    if workers is not None:
+        positive_int("workers", workers)
+    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        raise ParameterError(f"retries must be an integer >= 0, got {retries!r}")
+    if variant is not None:
+        one_of("variant", variant, VARIANTS)
+    if threads_per_worker is not None:
+        positive_int("threads_per_worker", threads_per_worker)
+
+
 def run_dataset(
     spec: SweepSpec | str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -414,17 +446,12 @@ def run_dataset(
     start = time.perf_counter()
     if not isinstance(spec, SweepSpec):
         spec = load_spec(spec)
-    if scheduler is not None and workers is not None:
-        raise ParameterError(f"workers={workers!r} is for the local cluster; with scheduler={scheduler!r} leave it out")
-    if scheduler is not None and (not isinstance(scheduler, str) or not scheduler):
-        raise ParameterError(f"scheduler must be an address such as 'tcp://host:8786', got {scheduler!r}")
-    workers = 1 if workers is None else positive_int("workers", workers)
-    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        raise ParameterError(f"retries must be an integer >= 0, got {retries!r}")
-    if variant is not None:
-        one_of("variant", variant, VARIANTS)
+    check_run_options(
+        workers=workers, scheduler=scheduler, threads_per_worker=threads_per_worker, retries=retries, variant=variant
+    )
+    workers = 1 if workers is None else int(workers)
     if threads_per_worker is not None:
-        threads_per_worker = positive_int("threads_per_worker", threads_per_worker)
+        threads_per_worker = int(threads_per_worker)
     elif scheduler is None:
         threads_per_worker = max(1, _cpus() // workers)
     digests = DigestCache()  # an input file many samples read is hashed once per run

@@ -27,11 +27,12 @@ An experiment is registered with :func:`register`; its function is
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -52,10 +53,13 @@ __all__ = [
     "Experiment",
     "ExperimentOptions",
     "ExperimentResult",
+    "check_methods",
+    "check_renders_dir",
     "check_scale",
     "complete_rows",
     "experiment_names",
     "load_experiments",
+    "named_options",
     "register",
     "run_experiment",
     "write_table",
@@ -327,21 +331,72 @@ def write_table(rows: Sequence[dict], out_dir: Path, stem: str = "table") -> tup
     return csv_path, md_path
 
 
-def _renders_dir(experiment: Experiment, renders: Path, out: Path) -> Path:
-    """``renders`` checked for ``experiment`` writing into ``out`` (see :func:`run_experiment`)."""
+@contextlib.contextmanager
+def named_options(options: ExperimentOptions, *names: str) -> Iterator[None]:
+    """Errors of the block start with the flags (:data:`OPTION_FLAGS`) of those of ``names`` that
+    ``options`` gives: an experiment checks what its options make (a port, a rig, a camera at an
+    f-number) when it runs, and the user is told which options made it.
+
+    Parameters
+    ----------
+    options : ExperimentOptions
+    *names : str
+        The fields the checked values derive from; those left at ``None`` (the experiment's own
+        choice) are not named, and with none given the error passes unchanged.
+    """
+    given = [OPTION_FLAGS[name] for name in names if getattr(options, name) is not None]
+    try:
+        yield
+    except ParameterError as exc:
+        if not given:
+            raise
+        raise ParameterError(f"{', '.join(given)}: {exc}") from None
+
+
+def check_renders_dir(
+    name: str, renders: str | Path, out: str | Path, *, names: tuple[str, str] = ("renders_dir", "out")
+) -> Path:
+    """``renders`` as the folder of kept renders of experiment ``name`` writing into ``out``.
+
+    Parameters
+    ----------
+    name : str
+        A registered experiment.
+    renders, out : path-like
+        The folder of kept renders and the experiment's output (see :func:`run_experiment`).
+    names : tuple of str
+        What ``renders`` and ``out`` are called in messages (``lfsim experiment``: ``--renders``,
+        ``--out``).
+
+    Raises
+    ------
+    ParameterError
+        If the experiment keeps no renders, or either folder holds the other.
+    """
+    experiment = load_experiments()[name]
+    renders, out = Path(renders), Path(out)
     if not experiment.keeps_renders:
         keeping = sorted(e.name for e in EXPERIMENTS.values() if e.keeps_renders)
         raise ParameterError(
-            f"renders_dir ({str(renders)!r}) does not apply to experiment {experiment.name!r}: it keeps no renders "
+            f"{names[0]} ({str(renders)!r}) does not apply to experiment {experiment.name!r}: it keeps no renders "
             f"(those that do: {', '.join(keeping)})"
         )
     here, there = renders.resolve(), out.resolve()
     if here == there or here.is_relative_to(there) or there.is_relative_to(here):
         raise ParameterError(
-            f"renders_dir ({str(renders)!r}) and out ({str(out)!r}) must not hold one another: the output is "
+            f"{names[0]} ({str(renders)!r}) and {names[1]} ({str(out)!r}) must not hold one another: the output is "
             "replaced as a whole, the renders are kept"
         )
     return renders
+
+
+def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
+    """``methods`` if every one is a registered method
+    (:func:`simulator.experiments.methods.method_names`), else :class:`ParameterError` naming it."""
+    from simulator.experiments.methods import method_names
+
+    registered = method_names()
+    return tuple(one_of("method", method, registered) for method in methods)
 
 
 def load_experiments() -> dict[str, Experiment]:
@@ -433,13 +488,9 @@ def run_experiment(
         if both:
             raise ParameterError(f"give either options or {', '.join(both)}, not both")
     experiment.check(options)
-    keep = {} if renders_dir is None else {"renders_dir": _renders_dir(experiment, Path(renders_dir), Path(out))}
+    keep = {} if renders_dir is None else {"renders_dir": check_renders_dir(experiment.name, renders_dir, out)}
     if options.methods is not None:
-        from simulator.experiments.methods import method_names
-
-        registered = method_names()
-        for method in options.methods:
-            one_of("method", method, registered)
+        check_methods(options.methods)
     start = time.perf_counter()
     with staged_directory(out, kind=f"lfsim.experiment.{name}", overwrite=overwrite) as stage:
         result = experiment.run(stage, options, progress=progress, **keep)

@@ -68,7 +68,7 @@ from lfrefract.optics.lens import trace_lens
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.optics.seen_by import pixels_seeing_points
 from lfrefract.synthesis.warp_map import SynthesisOptions, lens_plane_hits, mla_points_img, necessary_air_rays
-from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, register
+from simulator.experiments import ExperimentOptions, ExperimentResult, check_scale, named_options, register
 
 __all__ = [
     "APERTURES",
@@ -741,11 +741,21 @@ def run(out_dir: Path, options: ExperimentOptions, *, progress: bool) -> Experim
     out_dir = Path(out_dir)
     synthesis = SynthesisOptions()
     output = virtual_camera_for(setup.camera)
-    for n in setup.f_numbers:  # the camera validates each f-number (no overlapping micro-images)
-        dataclasses.replace(setup.camera, f_number=n)
+    with named_options(options, "camera", "f_numbers"):
+        for n in setup.f_numbers:  # the camera validates each f-number (no overlapping micro-images)
+            dataclasses.replace(setup.camera, f_number=n)
     n0 = setup.f_numbers[0]
     jobs = [("tilt", t, setup.distance_m) for t in setup.tilts_deg]
     jobs += [("distance", 0.0, d) for d in setup.distances_m]
+    for series, tilt, distance in jobs:  # every port clears the lens, checked before any work
+        made_by = ("camera", "port_distance_m", "tilts_deg") if series == "tilt" else ("camera", "port_distance_m")
+        with named_options(options, *made_by):
+            port = setup.port(tilt, distance)
+            if port.clearance_m(setup.camera.aperture_radius_m) <= 0.0:
+                raise ParameterError(
+                    f"port.distance_m={port.distance_m!r} at tilt {tilt:g} deg cuts the main-lens aperture "
+                    f"(radius {setup.camera.aperture_radius_m:.4g} m)"
+                )
     if setup.reference_port is not None:
         jobs.append(("reference", None, setup.distance_m))
     rows: list[dict] = []

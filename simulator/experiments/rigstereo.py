@@ -33,7 +33,7 @@ from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, build_warp_map
 from simulator.boards import CALIBRATION_ROTATIONS_DEG, PATTERN, SQUARES, chessboard_corners_world, find_corners
 from simulator.config import Chessboard, Placement, PointLight, RenderSettings, SceneObject, main_lens
-from simulator.experiments import ExperimentOptions
+from simulator.experiments import ExperimentOptions, named_options
 from simulator.experiments.kept import kept_render
 from simulator.experiments.methods import (
     BUILTIN_METHODS,
@@ -164,6 +164,11 @@ def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) ->
     """
     rig = load_rig(setup.rig)
     options = options if options is not None else ExperimentOptions()
+    with named_options(options, "port_distance_m", "thickness_m", "camera", "lens"):
+        return _rig_with_options(rig, setup, options)
+
+
+def _rig_with_options(rig: RigConfig, setup: RigSetup, options: ExperimentOptions) -> RigConfig:
     wall = rig.wall
     changes = {
         key: value

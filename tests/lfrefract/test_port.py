@@ -446,9 +446,25 @@ def test_bad_port_parameters(kwargs, pattern):
 @pytest.mark.parametrize(("tilt_x", "tilt_y"), [(90.0, 0.0), (0.0, 90.0), (120.0, 0.0), (0.0, -135.0)])
 def test_port_behind_the_camera(tilt_x, tilt_y):
     with pytest.raises(ParameterError, match="behind the camera") as info:
-        FlatPort.from_degrees(distance_m=0.05, tilt_x_deg=tilt_x, tilt_y_deg=tilt_y)
+        FlatPort(distance_m=0.05, tilt_x_rad=math.radians(tilt_x), tilt_y_rad=math.radians(tilt_y))
     assert "tilt_x_rad" in str(info.value)
     assert repr(math.radians(tilt_x)) in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("tilt_x", "tilt_y", "named"),
+    [(90.0, 0.0, "tilt_x_deg"), (0.0, 90.0, "tilt_y_deg"), (120.0, 0.0, "tilt_x_deg"), (0.0, -135.0, "tilt_y_deg")],
+)
+def test_port_behind_the_camera_is_named_in_degrees_as_given(tilt_x, tilt_y, named):
+    # A port file or scene gives degrees: the refusal names the key and the value it holds, not radians.
+    with pytest.raises(ParameterError, match="behind the camera") as info:
+        FlatPort.from_degrees(distance_m=0.05, tilt_x_deg=tilt_x, tilt_y_deg=tilt_y)
+    assert f"port.{named} must lie in (-90, 90) deg, got {tilt_x if named == 'tilt_x_deg' else tilt_y!r}" in str(
+        info.value
+    )
+    assert "_rad" not in str(info.value)
+    with pytest.raises(ParameterError, match=re.escape("tilt_x_deg=89.99999999999, tilt_y_deg=0.0")):
+        FlatPort.from_degrees(distance_m=0.05, tilt_x_deg=89.99999999999)  # nearer edge-on than 1e-9
 
 
 def test_bad_tilt_degrees_are_named():

@@ -94,17 +94,39 @@ def test_an_option_that_does_not_apply_is_refused(tmp_path, capsys, experiment, 
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--port-distance-m", "-1"], "port_distance_m must be positive"),
-        (["--thickness-m", "2"], "thickness_m must lie in [0, 1] m"),
-        (["--tilts-deg", "0,95"], "tilts_deg[1] must lie in (-90, 90) deg"),
-        (["--tilts-deg", "0,0"], "tilts_deg must not repeat"),
+        (["--port-distance-m", "-1"], "--port-distance-m: port_distance_m must be positive, got -1"),
+        (
+            ["--port-distance-m=0.0001"],
+            "--port-distance-m: port.distance_m=0.0001 at tilt 5 deg cuts the main-lens aperture",
+        ),
+        (["--thickness-m", "2"], "--thickness-m: thickness_m must lie in [0, 1] m"),
+        (["--thickness-m=nan"], "--thickness-m: thickness_m must be finite, got nan"),
+        (["--tilts-deg", "0,95"], "--tilts-deg: tilts_deg[1] must lie in (-90, 90) deg, got 95"),
+        (["--tilts-deg=nan"], "--tilts-deg: tilts_deg[0] must be finite, got nan"),
+        (["--tilts-deg", "0,0"], "--tilts-deg: tilts_deg must not repeat"),
         (["--camera", "pinhole"], "--camera must be a preset"),
-        (["--f-numbers", "0.1"], "f_number"),
+        (["--f-numbers=0"], "--f-numbers: f_numbers[0] must be positive, got 0"),
+        (["--f-numbers", "0.1"], "--f-numbers: f_number must lie in [0.5, 128]"),
+        (["--f-numbers", "1"], "--f-numbers: f_number=1.0 gives an image-side f-number"),
     ],
 )
 def test_invalid_option_values_name_the_option(tmp_path, capsys, argv, message):
     out = tmp_path / "x"
     assert sim_cli.main(["experiment", "fov", "--out", str(out), "--quiet", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--methods", "nonesuch"], "--methods: method must be one of"),
+        (["--thickness-m", "0"], "--thickness-m: wall.thickness_m must be positive, got 0"),
+    ],
+)
+def test_invalid_option_values_of_a_stereo_experiment_name_the_option(tmp_path, capsys, argv, message):
+    out = tmp_path / "x"
+    assert sim_cli.main(["experiment", "planes", "--out", str(out), "--quiet", *argv]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
 
@@ -212,7 +234,9 @@ def test_renders_overlapping_the_output_are_refused_before_any_work(tmp_path, ca
     out = tmp_path / "out"
     renders = {"inside": out / "renders", "same": out, "around": tmp_path}[where]
     assert sim_cli.main(["experiment", "probe", "--out", str(out), "--renders", str(renders), "--quiet"]) == 2
-    assert "must not hold one another" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "must not hold one another" in err
+    assert f"--renders ({str(renders)!r}) and --out ({str(out)!r})" in err
     assert not out.exists()
     assert not (tmp_path / "renders").exists()
 
@@ -221,7 +245,7 @@ def test_renders_for_an_experiment_that_keeps_none_are_refused(tmp_path, capsys)
     out, renders = tmp_path / "out", tmp_path / "renders"
     assert sim_cli.main(["experiment", "fov", "--out", str(out), "--renders", str(renders), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "does not apply to experiment 'fov'" in err
+    assert f"--renders ({str(renders)!r}) does not apply to experiment 'fov'" in err
     assert "pipeline, planes" in err
     assert not out.exists()
     assert not renders.exists()

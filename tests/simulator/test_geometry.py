@@ -77,7 +77,7 @@ def test_procedural_meshes_are_cached_read_only_and_placed(obj):
 
 def test_check_geometry_names_an_object_on_the_camera_side():
     config = scene(port=port(), objects=[{"type": "disc", "position_m": [0.0, 0.0, 0.015], "radius_m": 0.01}])
-    with pytest.raises(ParameterError, match=r"object\[0\] \(Disc\) reaches the camera side of the port"):
+    with pytest.raises(ParameterError, match=r"object\[0\] \(disc\) reaches the camera side of the port"):
         geometry.check_geometry(config)
     ok = scene(port=port(), objects=[{"type": "disc", "position_m": [0.0, 0.0, 0.3], "radius_m": 0.01}])
     assert geometry.check_geometry(ok)["port_clearance_m"] > 0.0
