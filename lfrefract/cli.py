@@ -86,7 +86,7 @@ from lfrefract import (
 from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.approx import KIND as APPROX_KIND
-from lfrefract.calibration.approx import square_size
+from lfrefract.calibration.approx import MIN_PX_PER_SQUARE, square_size
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
 from lfrefract.calibration.camera import MIN_VIEWS as CAMERA_MIN_VIEWS
 from lfrefract.calibration.joint import JointCalibration
@@ -645,15 +645,16 @@ def naive(args: argparse.Namespace) -> int:
 
 def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
+    if not (args.grid >= 3 and args.grid % 2):  # before the capture is read, named as the option
+        raise ParameterError(f"--grid must be an odd integer >= 3 (a central view with neighbours), got {args.grid}")
     capture = _read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
     camera, output = _known(capture.camera, capture.raw_path), capture.output
-    if isinstance(args.grid, int) and args.grid >= 3 and args.grid % 2:  # else subaperture_stack names the grid
-        require_memory(
-            f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
-            f"with {capture.channels} channel(s), and its export",
-            view_stack_bytes(camera, output, grid=args.grid, channels=capture.channels, exported=True),
-            reduce="a smaller --grid",
-        )
+    require_memory(
+        f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
+        f"with {capture.channels} channel(s), and its export",
+        view_stack_bytes(camera, output, grid=args.grid, channels=capture.channels, exported=True),
+        reduce="a smaller --grid",
+    )
     stack = subaperture_stack(
         camera,
         capture.raw,
@@ -699,7 +700,10 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
         inputs=[*_capture_files(args.white), *_option_files(args)],
         overwrite=args.overwrite,
     )
-    result = calibrate_mla(capture.raw, grid=args.grid)
+    try:
+        result = calibrate_mla(capture.raw, grid=args.grid)
+    except ParameterError as exc:  # the library names the image "white": the user gave a file
+        raise type(exc)(f"{str(args.white)!r}: {exc}") from None
     data = {"kind": MLA_KIND, "source": str(args.white), "mla": result.to_dict()}
     if capture.camera is not None:  # from --camera or the meta.json beside the white image
         data["camera"] = result.calibrated_camera(capture.camera).to_dict()
@@ -741,6 +745,15 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     for path, other in zip(args.boards, found, strict=True):
         if other.camera != found[0].camera:
             raise ParameterError(f"{path!r} was taken with another camera than {args.boards[0]!r}")
+    camera = found[0].camera
+    if camera is not None:  # the board is located in the central view: one pixel per microlens
+        view = virtual_camera_for(camera)
+        if max(args.squares) * MIN_PX_PER_SQUARE > max(view.width_px, view.height_px):
+            raise ParameterError(
+                f"--squares {args.squares[0]} {args.squares[1]}: a board of that many squares cannot be located in "
+                f"the {view.width_px} x {view.height_px} px central view of {camera.name!r} (a square needs at least "
+                f"{MIN_PX_PER_SQUARE} px there); give the board's own count of squares"
+            )
     return found[0]
 
 

@@ -49,7 +49,12 @@ from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.validate import as_points, finite_float, positive_float, positive_int, reject_unknown_keys, require_keys
 
-__all__ = ["DISTORTION_MODEL", "ApproxCalibration", "calibrate_approx", "detect_chessboard"]
+__all__ = ["DISTORTION_MODEL", "MIN_PX_PER_SQUARE", "ApproxCalibration", "calibrate_approx", "detect_chessboard"]
+
+#: Fewest pixels a chessboard square spans in an image where :func:`detect_chessboard` can find it
+#: (OpenCV's detector needs a few pixels of each square around every corner): a board of more
+#: squares than the image holds at this size is no board the commands could locate.
+MIN_PX_PER_SQUARE = 3
 
 #: Names of the distortion coefficients, in OpenCV's order.
 DISTORTION_MODEL = ("k1", "k2", "p1", "p2", "k3")

@@ -568,8 +568,8 @@ def read_capture(
         return read_lytro_capture(raw_path, camera=camera, port=port, white=white)
     if white is not None:
         raise ParameterError(
-            f"a white image ({str(white)!r}) develops a Lytro capture (.lfr, .raw); {str(raw_path)!r} is a linear "
-            "raw image already"
+            f"white {str(white)!r} (--white): a white image develops a Lytro capture (.lfr, .raw); "
+            f"{str(raw_path)!r} is a linear raw image already: leave the white image out"
         )
     parameters = capture_parameters(raw_path, camera=camera, port=port, camera_required=camera_required)
     raw = read_exr(parameters.raw_path)

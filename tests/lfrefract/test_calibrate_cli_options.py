@@ -89,3 +89,19 @@ def test_calibrate_port_takes_the_distance_range_it_advises(tmp_path):
     raw = make_capture(tmp_path / "cap")
     argv = [*_board([raw], tmp_path / "c.json", target="port"), "--distance-range-m", "0.001", "0.5"]
     assert build_parser().parse_args(argv).distance_range_m == [0.001, 0.5]
+
+
+@pytest.mark.parametrize("target", ["approx", "port", "camera"])
+def test_more_squares_than_the_central_view_holds_are_refused_at_once(tmp_path, capsys, target):
+    # 1000 x 1000 squares were searched for in every capture and left each out as "not found".
+    raw = make_capture(tmp_path / "cap")
+    err = refused(capsys, _board([raw], tmp_path / "c.json", squares=("1000", "1000"), target=target))
+    assert_says(err, "--squares 1000 1000", "cannot be located in the 92 x 69 px central view", "at least 3 px")
+
+
+@pytest.mark.parametrize("value", [0.0, 0.5])
+def test_calibrate_mla_on_a_white_with_no_contrast_names_the_file(tmp_path, capsys, value):
+    # "white has no contrast: every pixel is 0.0" named no file.
+    raw = make_capture(tmp_path / "cap", raw=np.full_like(textured_raw(), value))
+    err = refused(capsys, ["calibrate", "mla", str(raw), "--out", str(tmp_path / "mla.json")])
+    assert_says(err, repr(str(raw)), "no contrast")

@@ -729,3 +729,16 @@ def test_synth_reports_the_gathers_compilation_apart_from_the_apply(tmp_path, ca
     assert compile1 > apply1  # a compilation: seconds; a gather of tiny's image: milliseconds
     assert compile2 < compile1  # compiled once
     assert apply1 <= APPLY_REPEAT_FACTOR * apply2 + APPLY_REPEAT_SLACK_S, done.stdout
+
+
+@pytest.mark.parametrize("grid", ["0", "4", "-3"])
+def test_views_names_a_bad_grid_by_its_option_before_reading(tmp_path, capsys, grid):
+    # "grid must be an odd integer >= 3" named the Python parameter, after the capture was read.
+    err = refused(capsys, ["views", str(tmp_path / "none.exr"), "--out", str(tmp_path / "v"), "--grid", grid])
+    assert_says(err, "--grid must be an odd integer >= 3", f"got {grid}")
+
+
+def test_a_white_given_for_a_linear_raw_image_names_the_option(tmp_path, capsys):
+    raw = make_capture(tmp_path / "cap")
+    err = refused(capsys, ["naive", str(raw), "--out", str(tmp_path / "n.exr"), "--white", str(tmp_path)])
+    assert_says(err, "(--white)", "is a linear raw image already", "leave the white image out")
