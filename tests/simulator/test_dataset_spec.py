@@ -180,12 +180,13 @@ BAD_SPECS = [
     (
         "port behind the camera",
         spec_data(grid={"port.tilt_x_deg": [10.0, 95.0]}),
-        r"sample s000001 \(port.tilt_x_deg=95.0\): port tilt .* the port would be behind the camera",
+        r"sample s000001 \(port.tilt_x_deg=95.0\): port.tilt_x_deg must lie in \(-90, 90\) deg, got 95.0: the port "
+        "would be behind the camera",
     ),
     (
         "tilt puts the scene behind the glass",
         spec_data(grid={"port.tilt_x_deg": [80.0]}),
-        r"sample s000000 \(port.tilt_x_deg=80.0\): object\[0\] \(TexturedPlane\) reaches the camera side of the port",
+        r"sample s000000 \(port.tilt_x_deg=80.0\): object\[0\] \(textured_plane\) reaches the camera side of the port",
     ),
     (
         "tilt cuts the aperture",
@@ -202,7 +203,8 @@ BAD_SPECS = [
     (
         "random tilt reaching 95 deg",
         spec_data(random={"port.tilt_y_deg": {"uniform": [94.0, 96.0]}}),
-        r"sample s000000 \(port.tilt_y_deg=9\d\.\d+\): port tilt .* behind the camera",
+        r"sample s000000 \(port.tilt_y_deg=9\d\.\d+\): port.tilt_y_deg must lie in \(-90, 90\) deg, got 9\d\.\d+: "
+        "the port would be behind the camera",
     ),
     (
         "unknown preset",
@@ -212,7 +214,7 @@ BAD_SPECS = [
     (
         "object in front of the glass",
         spec_data(grid={"object.0.position_m": [[0.0, 0.0, 0.01]]}),
-        r"object\[0\] \(TexturedPlane\) reaches the camera side of the port",
+        r"object\[0\] \(textured_plane\) reaches the camera side of the port",
     ),
     (
         "negative thickness",
