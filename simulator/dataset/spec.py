@@ -911,8 +911,11 @@ def load_spec(path: str | Path) -> SweepSpec:
     embedded = embedded_sweeps()
     if not p.exists() and str(path) in embedded:
         p = embedded[str(path)]
-    data = _read_toml(p, "sweep spec")
-    return parse_spec(data, base_dir=p.parent, source=str(p))
+    data = _read_toml(p, "sweep spec")  # its errors name the file already
+    try:
+        return parse_spec(data, base_dir=p.parent, source=str(p))
+    except ParameterError as exc:
+        raise ParameterError(f"sweep spec file {str(p)!r}: {exc}") from None
 
 
 def toml_digest(path: str | Path) -> str:
@@ -1123,22 +1126,26 @@ def iter_samples(
             seed = sample_seed(spec.seed, index)
             point = _grid_point(spec, index // spec.repeats)
             rejected: dict[str, int] = {}
-            for draw in range(spec.max_draws):
-                params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
-                for dist in spec.random:
-                    params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key, draw))
-                try:
-                    sample = _build_sample(spec, index, seed, params, base_scene, digests, rejected)
-                    break
-                except _RefusedDrawError as refusal:
-                    rejected[refusal.reason] = rejected.get(refusal.reason, 0) + 1
-                    if not spec.random:
-                        raise ParameterError(f"{refusal}; the sample has no [random] keys to draw again") from None
-            else:
-                raise ParameterError(
-                    f"sample {sample_id(index)}: none of {spec.max_draws} draws of its [random] keys was accepted "
-                    f"(refused, by reason: {rejected}); widen the ranges, loosen [constraints] or raise sweep.max_draws"
-                )
+            try:  # every refusal of a sample names the spec file first
+                for draw in range(spec.max_draws):
+                    params: dict[str, Any] = dict(zip(grid_keys, (copy.deepcopy(v) for v in point), strict=True))
+                    for dist in spec.random:
+                        params[dist.key] = dist.draw(key_rng(spec.seed, index, dist.key, draw))
+                    try:
+                        sample = _build_sample(spec, index, seed, params, base_scene, digests, rejected)
+                        break
+                    except _RefusedDrawError as refusal:
+                        rejected[refusal.reason] = rejected.get(refusal.reason, 0) + 1
+                        if not spec.random:
+                            raise ParameterError(f"{refusal}; the sample has no [random] keys to draw again") from None
+                else:
+                    raise ParameterError(
+                        f"sample {sample_id(index)}: none of {spec.max_draws} draws of its [random] keys was "
+                        f"accepted (refused, by reason: {rejected}); widen the ranges, loosen [constraints] or raise "
+                        "sweep.max_draws"
+                    )
+            except ParameterError as exc:
+                raise ParameterError(f"sweep spec file {spec.source!r}: {exc}") from None
             yield sample
             bar.update()
             elapsed = time.perf_counter() - start

@@ -151,3 +151,20 @@ def test_dataset_run_options_are_named_by_their_flag(tmp_path, capsys, argv, wor
     assert err.startswith(f"lfsim: error: {words[0]}"), err
     assert all(word in err for word in words)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        ("spp = 0\n", ["sweep.spp", "0"]),
+        ('[grid]\n"port.tilt_x_deg" = [0.0, 95.0]\n', ["sample s000001", "port.tilt_x_deg", "95.0"]),
+    ],
+)
+def test_a_bad_sweep_spec_is_named_with_its_key(tmp_path, capsys, extra, words):
+    spec, out = tmp_path / "spec.toml", tmp_path / "ds"
+    spec.write_text('[sweep]\nname = "t"\nseed = 5\nscene = "default"\n' + extra)
+    err = _refusal(capsys, ["dataset", "run", str(spec), "--out", str(out), "--quiet"])
+    assert err.startswith(f"lfsim: error: sweep spec file {str(spec)!r}: "), err
+    assert all(word in err for word in words)
+    assert "_rad" not in err
+    assert not out.exists()

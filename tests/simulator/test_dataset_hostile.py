@@ -321,7 +321,8 @@ def test_a_sweep_over_the_limit_is_refused_before_any_sample_is_built(tmp_path, 
     proc = _lfsim("dataset", "run", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out"))
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        f"lfsim: error: the sweep has {count} samples, more than {MAX_SAMPLES}: check [grid] and sweep.repeats"
+        f"lfsim: error: sweep spec file {str(tmp_path / 'big.toml')!r}: the sweep has {count} samples, more than "
+        f"{MAX_SAMPLES}: check [grid] and sweep.repeats"
     ]
     assert not (tmp_path / "out").exists()
 
