@@ -39,6 +39,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 import lfrefract
+from lfrefract._memory import available_cpus
 from lfrefract.errors import FileFormatError, ParameterError
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.outputs import on_termination
@@ -379,7 +380,8 @@ def check_run_options(
     ------
     ParameterError
         For ``workers`` together with ``scheduler``, an empty scheduler address, ``workers`` or
-        ``threads_per_worker`` not a positive integer, ``retries`` not an integer >= 0, or an
+        ``threads_per_worker`` not a positive integer, ``workers`` beyond the CPUs this process may
+        use, ``retries`` not an integer >= 0, or an
         unknown ``variant``; the message names the parameter and its value.
     """
     if scheduler is not None and workers is not None:
@@ -388,6 +390,13 @@ def check_run_options(
         raise ParameterError(f"scheduler must be an address such as 'tcp://host:8786', got {scheduler!r}")
     if workers is not None:
         positive_int("workers", workers)
+        cpus = available_cpus()
+        if workers > cpus:
+            raise ParameterError(
+                f"workers={workers} worker processes for a local cluster on {cpus} CPU(s): each renders on every CPU "
+                "it is given, so more processes than CPUs only add memory (a Mitsuba process each); give at most "
+                f"{cpus}, or start a cluster of more machines and give its scheduler"
+            )
     if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
         raise ParameterError(f"retries must be an integer >= 0, got {retries!r}")
     if variant is not None:

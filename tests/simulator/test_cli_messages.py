@@ -143,6 +143,8 @@ def test_whites_options_are_named_by_their_flag(tmp_path, capsys, argv, words):
         (["--workers", "0"], ["--workers", "0"]),
         (["--threads", "0"], ["--threads", "0"]),
         (["--retries", "-1"], ["--retries", "-1"]),
+        # 100000 local worker processes were started (one Mitsuba each) until memory ran out.
+        (["--workers", "100000"], ["--workers", "100000", "CPU(s)", "give at most"]),
     ],
 )
 def test_dataset_run_options_are_named_by_their_flag(tmp_path, capsys, argv, words):
