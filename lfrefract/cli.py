@@ -151,6 +151,7 @@ from lfrefract.synthesis.warp_map import (
     uses_kdtree,
     warp_map_key,
 )
+from lfrefract.validate import fields_by_flag
 
 #: How ``synth`` takes the colours of a Lytro capture: from the demosaiced image, or from each
 #: colour's own Bayer sites. Demosaicing first is the default: on the tiny camera's capture it
@@ -323,25 +324,9 @@ def _depth_aware_options(args: argparse.Namespace) -> DepthAwareOptions | None:
 
 
 def _options_by_flag(kind: type[_Options], given: dict[str, dict[str, Any]]) -> _Options:
-    """``kind(**fields)`` of the options given on the command line, each flag's fields checked alone
-    (the others at their defaults), so that an invalid value's error names its flag (``--k: k must be
-    positive, got 0``), not only the Python field.
-
-    Parameters
-    ----------
-    kind : type
-        The options' frozen dataclass (:class:`SynthesisOptions`, :class:`DepthAwareOptions`).
-    given : dict
-        Flag -> the fields of ``kind`` it sets.
-    """
-    values: dict[str, Any] = {}
-    for flag, fields in given.items():
-        try:
-            kind(**fields)
-        except ParameterError as exc:
-            raise ParameterError(f"{flag}: {exc}") from None
-        values.update(fields)
-    return kind(**values)
+    """``kind(**fields)`` of the options given on the command line, each flag's value checked alone so
+    that its error names the flag (:func:`lfrefract.validate.fields_by_flag`)."""
+    return kind(**fields_by_flag(kind, given))
 
 
 def _synthesis_options(args: argparse.Namespace) -> SynthesisOptions:

@@ -8,12 +8,13 @@ numbers, or an integer of a million digits, is abbreviated rather than printed).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import math
 import os
 import reprlib
 import stat
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,9 +27,11 @@ __all__ = [
     "as_table",
     "bounded_float",
     "bounded_int",
+    "fields_by_flag",
     "file_problem",
     "finite_float",
     "finite_vector",
+    "named",
     "non_negative_float",
     "one_of",
     "path_of",
@@ -326,3 +329,56 @@ def path_of(name: str, value: Any) -> Path:
     if isinstance(value, os.PathLike):
         value = os.fspath(value)
     return Path(text(name, value))
+
+
+@contextlib.contextmanager
+def named(what: str) -> Iterator[None]:
+    """Prefix ``what`` to every :class:`ParameterError` the block raises (of the same class).
+
+    A library check names its field (``render.spp must be positive``); a command line wraps it in
+    what the user gave: the option as typed (``--spp``) or the file the value came from.
+
+    Examples
+    --------
+    >>> with named("--k"):
+    ...     positive_int("k", 0)
+    Traceback (most recent call last):
+    lfrefract.errors.ParameterError: --k: k must be positive, got 0
+    """
+    try:
+        yield
+    except ParameterError as exc:
+        raise type(exc)(f"{what}: {exc}") from None
+
+
+def fields_by_flag(check: Callable[..., object], given: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """The fields set by command-line flags, each flag's fields checked alone by ``check(**fields)``
+    (the others at their defaults) so that an invalid value's error starts with its flag.
+
+    Parameters
+    ----------
+    check : callable
+        Builds the options' frozen dataclass from some of its fields (``SynthesisOptions``,
+        ``RenderSettings``, ...), raising :class:`ParameterError` for an invalid one.
+    given : mapping
+        Flag, as the user types it -> the fields it sets; a field whose value is None (an option
+        not given) is left out.
+
+    Returns
+    -------
+    dict
+        Every field given, to build the options with.
+
+    Raises
+    ------
+    ParameterError
+        ``"--flag: <the check's message>"`` for the first invalid flag.
+    """
+    values: dict[str, Any] = {}
+    for flag, fields in given.items():
+        present = {key: value for key, value in fields.items() if value is not None}
+        if present:
+            with named(flag):
+                check(**present)
+            values.update(present)
+    return values

@@ -27,20 +27,17 @@ version; every command's ``--help`` shows its defaults.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import importlib.metadata
 import math
 import sys
-from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 from lfrefract import PRESETS, ParameterError, __version__, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.outputs import MANIFEST_NAME, terminate_cleanly
 from lfrefract.optics.lens import LENS_PRESETS
-from lfrefract.validate import positive_int
+from lfrefract.validate import fields_by_flag, named, positive_int
 from simulator.config import (
     DEFAULT_IDEAL_SPP,
     PORT_MODELS,
@@ -71,47 +68,13 @@ def _scene_path(arg: str | None) -> Path | None:
     return Path(arg)
 
 
-@contextlib.contextmanager
-def _named(what: str) -> Iterator[None]:
-    """Errors of the block start with ``what``: the option as the user typed it (``--spp``), or the
-    file the values came from."""
-    try:
-        yield
-    except ParameterError as exc:
-        raise ParameterError(f"{what}: {exc}") from None
-
-
-def _options_by_flag(check: Callable[..., object], given: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The fields of the options given on the command line (those not ``None``), each flag's fields
-    checked alone by ``check(**fields)`` (the others at their defaults), so that an invalid value's
-    error names its flag (``--spp: render.spp must be positive, got 0``), not only the field; as
-    ``lfrefract``'s command line does for its synthesis options.
-
-    Parameters
-    ----------
-    check : callable
-        Builds the options' frozen dataclass (:class:`RenderSettings`, :class:`ExperimentOptions`)
-        from some of its fields; raises :class:`ParameterError` for an invalid one.
-    given : dict
-        Flag -> the fields it sets.
-    """
-    values: dict[str, Any] = {}
-    for flag, fields in given.items():
-        fields = {key: value for key, value in fields.items() if value is not None}
-        if fields:
-            with _named(flag):
-                check(**fields)
-            values.update(fields)
-    return values
-
-
 def _scene_changed(config: SceneConfig, changes: dict[str, object], flags: list[str]) -> SceneConfig:
     """``config`` with ``changes`` (from ``flags``), and its geometry checked, before any render:
     errors name the scene file and the options that changed it."""
     from simulator.geometry import check_geometry
 
     where = f"scene file {config.source!r}" + (f" with {', '.join(flags)}" if flags else "")
-    with _named(where):
+    with named(where):
         if changes:
             config = config.with_overrides(**changes)
         check_geometry(config)
@@ -370,7 +333,7 @@ def _dataset(args: argparse.Namespace) -> int:
         return 0 if report.ok else 1
     from simulator.dataset.run import check_run_options
 
-    _options_by_flag(
+    fields_by_flag(
         check_run_options,
         {
             "--workers": {"workers": args.workers},
@@ -422,13 +385,13 @@ def _experiment(args: argparse.Namespace) -> int:
     options = ExperimentOptions(
         scale=args.scale,
         camera=None if args.camera is None else camera_from_option(args.camera),  # names --camera
-        **_options_by_flag(ExperimentOptions, {OPTION_FLAGS[key]: {key: value} for key, value in given.items()}),
+        **fields_by_flag(ExperimentOptions, {OPTION_FLAGS[key]: {key: value} for key, value in given.items()}),
     )
     experiment = load_experiments().get(args.name)
     if experiment is not None:  # else run_experiment names the experiments there are
         experiment.check(options)  # an option that does not apply, by its flag
         if options.methods is not None:
-            with _named("--methods"):
+            with named("--methods"):
                 check_methods(options.methods)
         if args.renders is not None:
             check_renders_dir(args.name, args.renders, args.out, names=("--renders", "--out"))
@@ -450,7 +413,7 @@ def _rig(args: argparse.Namespace) -> int:
     from simulator.rig import RigCamera, load_rig
     from simulator.rig_render import render_rig
 
-    overrides = _options_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
+    overrides = fields_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
     rig = load_rig(args.rig)
     if overrides:
         cameras = tuple(
@@ -473,22 +436,22 @@ def _whites(args: argparse.Namespace) -> int:
     if sensor_name not in DETECTOR_PRESETS:
         raise ParameterError(f"--sensor: camera {args.camera!r} has no detector preset of its name; pass --sensor NAME")
     base = sensor_model(sensor_name, camera)
-    with _named("--frames"):
+    with named("--frames"):
         sensor = SensorSettings(detector=base.detector, frames=args.frames)
-    _options_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
+    fields_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
     # Each zoom (given in mm) and each focus distance alone, as the camera takes them.
     zooms = None if args.focal_lengths_mm is None else [f * 1e-3 for f in args.focal_lengths_mm]
     for zoom_mm in args.focal_lengths_mm or ():
-        with _named(f"--focal-lengths-mm {zoom_mm:g} mm"):
+        with named(f"--focal-lengths-mm {zoom_mm:g} mm"):
             WhiteSetting(focal_length_m=zoom_mm * 1e-3, focus_distance_m=math.inf).camera(camera)
     for focus in args.focus_m:
         for zoom in zooms or [camera.focal_length_m]:
             at = "" if zooms is None else f" at --focal-lengths-mm {zoom * 1e3:g}"
-            with _named(f"--focus-m {focus:g}{at}"):
+            with named(f"--focus-m {focus:g}{at}"):
                 WhiteSetting(focal_length_m=zoom, focus_distance_m=focus).camera(camera)
-    with _named("--focal-lengths-mm, --focus-m"):
+    with named("--focal-lengths-mm, --focus-m"):
         settings = white_settings(camera, focal_lengths_m=zooms, focus_distances_m=args.focus_m)
-    with _named("--seed"):
+    with named("--seed"):
         check_white_seed(args.seed, len(settings))
     entries = render_whites(
         args.out,
@@ -564,7 +527,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"\nwrote {report} (figures, table.csv, point clouds beside it)")
             return 0
         # Every option alone first, by its flag, before the scene is read and anything rendered.
-        render_options = _options_by_flag(
+        render_options = fields_by_flag(
             RenderSettings,
             {
                 "--spp": {"spp": args.spp},
@@ -573,7 +536,7 @@ def _run(args: argparse.Namespace) -> int:
                 "--port-model": {"port_model": args.port_model},
             },
         )
-        with _named("--band-pixels"):
+        with named("--band-pixels"):
             positive_int("max_band_pixels", args.band_pixels)
         config = load_scene(_scene_path(args.scene))  # its errors name the file
         changes: dict[str, object] = {}
@@ -585,7 +548,7 @@ def _run(args: argparse.Namespace) -> int:
         if lens_name is None and args.camera and config.lens is not None and config.lens.name in LENS_PRESETS:
             lens_name = config.lens.name  # the scene's preset lens, scaled to the new camera
         if lens_name is not None:
-            with _named(f"scene file {config.source!r} with {', '.join([*flags, f'--lens {lens_name}'])}"):
+            with named(f"scene file {config.source!r} with {', '.join([*flags, f'--lens {lens_name}'])}"):
                 changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
             if args.lens is not None:
                 flags.append(f"--lens {args.lens}")
@@ -593,7 +556,7 @@ def _run(args: argparse.Namespace) -> int:
         if args.frames is not None:
             if sensor is None:
                 raise ParameterError(f"--frames {args.frames} needs a sensor model: pass --sensor NAME")
-            with _named("--frames"):
+            with named("--frames"):
                 sensor = SensorSettings(detector=sensor_model(sensor, config.camera).detector, frames=args.frames)
             flags.append(f"--frames {args.frames}")
         if sensor is not None or args.sensor is not None:  # a preset name, or the scene's moved to --camera

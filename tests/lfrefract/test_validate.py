@@ -84,3 +84,32 @@ def test_regular_file_names_the_kind(tmp_path):
     loop.symlink_to(loop)
     with pytest.raises(ParameterError, match=r"the file '.*loop' cannot be examined: "):
         v.regular_file("the file", loop, max_bytes=10)
+
+
+def test_fields_by_flag_names_the_first_invalid_flag_and_skips_options_not_given():
+    from dataclasses import dataclass
+
+    from lfrefract.validate import fields_by_flag, named
+
+    @dataclass(frozen=True)
+    class Options:
+        k: int = 8
+        spp: int = 1
+
+        def __post_init__(self):
+            v.positive_int("k", self.k)
+            v.positive_int("spp", self.spp)
+
+    assert fields_by_flag(Options, {"--k": {"k": 3}, "--spp": {"spp": None}}) == {"k": 3}
+    with pytest.raises(ParameterError, match=r"^--spp: spp must be positive, got 0$"):
+        fields_by_flag(Options, {"--k": {"k": 3}, "--spp": {"spp": 0}})
+    with pytest.raises(ParameterError, match=r"^--k: k must be positive, got 0$"), named("--k"):
+        v.positive_int("k", 0)
+
+
+def test_the_docstring_examples_of_validate_hold():
+    import doctest
+
+    import lfrefract.validate
+
+    assert doctest.testmod(lfrefract.validate).failed == 0
