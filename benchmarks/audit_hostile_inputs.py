@@ -125,6 +125,20 @@ out.with_suffix(".txt").write_text(json.dumps(lytro.metadata, indent=1))
 """
 
 
+#: The file that marks a --work folder as this script's: only in such a folder does it delete anything
+#: (an unfinished fixture set, a case's earlier folder).
+WORK_MARKER = ".audit-hostile-inputs"
+
+
+def claim_work_folder(work: Path) -> None:
+    """Make ``work`` this script's folder, or refuse a folder that holds anything else: everything the
+    script removes lies under it, so a user's folder given by mistake is never touched."""
+    if work.exists() and not (work / WORK_MARKER).exists() and any(work.iterdir()):
+        raise SystemExit(f"--work {str(work)!r} holds files this script did not write: give an empty or new folder")
+    work.mkdir(parents=True, exist_ok=True)
+    (work / WORK_MARKER).touch()
+
+
 def build_fixtures(fixtures: Path, tree: Path) -> None:
     """Make every file the cases start from with the commands of ``tree`` (once; a finished set is
     marked by ``done``)."""
@@ -1841,6 +1855,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     fixtures = args.work / "fixtures"
     if not args.list:
+        claim_work_folder(args.work)
         build_fixtures(fixtures, args.tree.resolve())
     cases = all_cases(fixtures)
     if args.only:

@@ -103,3 +103,17 @@ def test_a_sample_of_the_forged_lytro_cases_is_refused_by_name(audit, fixtures, 
     outcomes = {name: _run(audit, cases[name], fixtures, tmp_path) for name in SAMPLE}
     wrong = {name: (o["class"], o["detail"]) for name, o in outcomes.items() if o["class"] != "ok"}
     assert wrong == {}
+
+
+def test_the_audit_deletes_nothing_in_a_folder_it_did_not_write(audit, tmp_path):
+    """Its fixtures and case folders are removed and made anew under --work: a --work folder holding
+    a user's files is refused before anything is touched."""
+    work = tmp_path / "mine"
+    work.mkdir()
+    (work / "fixtures").mkdir()
+    (work / "fixtures" / "precious.txt").write_text("keep")
+    with pytest.raises(SystemExit, match="holds files this script did not write"):
+        audit.main(["--work", str(work), "--only", "nothing"])
+    assert (work / "fixtures" / "precious.txt").read_text() == "keep"
+    audit.claim_work_folder(tmp_path / "new")
+    audit.claim_work_folder(tmp_path / "new")  # its own folder, again
