@@ -87,7 +87,7 @@ from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory,
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.approx import MIN_PX_PER_SQUARE, square_size
-from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, calibrate_camera, corrected_view
+from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, RAY_MODELS, calibrate_camera, corrected_view
 from lfrefract.calibration.camera import MIN_VIEWS as CAMERA_MIN_VIEWS
 from lfrefract.calibration.joint import JointCalibration
 from lfrefract.calibration.port import (
@@ -127,7 +127,7 @@ from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
-from lfrefract.optics.ray_correction import PARAMETERS, RayCorrection
+from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection
 from lfrefract.synthesis.depth_aware import (
     FILLED_EXACT_GIVEN_DEPTH,
     DepthAwareOptions,
@@ -742,7 +742,7 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     return found[0]
 
 
-def _ray_model(args: argparse.Namespace, capture: Capture | CaptureParameters) -> RayCorrection | None:
+def _ray_model(args: argparse.Namespace, capture: Capture | CaptureParameters) -> Correction | None:
     """The ray correction of ``--camera`` (None: the thin lens), once a capture taken through a real
     main lens that the thin lens would stand for is refused (:func:`check_lens_modelled`)."""
     correction = ray_correction_from_option(args.camera)
@@ -869,7 +869,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         "names": boards.sources,
     }
     joint = None
-    correction: RayCorrection | None
+    correction: Correction | None
     if prior is not None:  # the port and the camera's ray model together
         joint = calibrate_port_and_camera(view, views, prior=prior, **glass)
         result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
@@ -1040,14 +1040,33 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     boards = _board_views(args, camera, view, pattern, command="camera", minimum=CAMERA_MIN_VIEWS)
     views = boards.views
-    result = calibrate_camera(camera, views, view=view, names=boards.sources)
+    result = calibrate_camera(
+        camera,
+        views,
+        view=view,
+        names=boards.sources,
+        ray_model=args.ray_model,
+        progress=lambda line: print(line, file=sys.stderr),
+    )
     write_json(out, {**result.to_dict(), **boards.to_dict()})
     c = result.correction
-    slope = "held at 1 (the captures do not determine it)" if "slope_scale" in result.held else f"{c.slope_scale:.5f}"
+    if isinstance(c, RayCorrection):
+        slope = (
+            "held at 1 (the captures do not determine it)" if "slope_scale" in result.held else f"{c.slope_scale:.5f}"
+        )
+        terms = f"pupil scale {c.pupil_scale:.5f}, slope scale {slope}, k1 {c.k1:.4g}, k2 {c.k2:.4g}"
+    else:
+        chosen = next(
+            s for s in result.capacity_scores if (s.degree, s.aperture_degree) == (c.degree, c.aperture_degree)
+        )
+        terms = (
+            f"{c.name} ({len(c.exponents)} terms), chosen by the held-back captures' error "
+            f"{chosen.held_back_rms_m * 1e3:.4f} mm"
+        )
     print(
-        f"ray model from {len(views)} captures{boards.left_out_note()}: pupil scale {c.pupil_scale:.5f}, "
-        f"slope scale {slope}, k1 {c.k1:.4g}, k2 {c.k2:.4g}; corners {result.ray_rms_m * 1e3:.4f} mm "
-        f"RMS from their rays (thin lens: {result.initial_ray_rms_m * 1e3:.4f} mm); wrote {args.out}"
+        f"ray model from {len(views)} captures{boards.left_out_note()}: {terms}; corners "
+        f"{result.ray_rms_m * 1e3:.4f} mm RMS from their rays (thin lens: {result.initial_ray_rms_m * 1e3:.4f} mm); "
+        f"wrote {args.out}"
     )
     return 0
 
@@ -1357,6 +1376,14 @@ def _calibrate_approx_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _calibrate_camera_arguments(parser: argparse.ArgumentParser) -> None:
     _board_arguments(parser, "camera", sizes_per_capture=True)
+    parser.add_argument(
+        "--ray-model",
+        choices=RAY_MODELS,
+        default="radial",
+        help="the camera's ray model: radial (five parameters: pupil and slope scales, two radial terms, pupil "
+        "drift) or polynomial (a generic model for any lens, its capacity chosen by the error on held-back "
+        "captures; slower). Default: radial",
+    )
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import Correction
 from lfrefract.synthesis.depth_aware import DepthAwareOptions, DepthAwareSynthesis
 from lfrefract.synthesis.views import (
     apply_resampling,
@@ -141,7 +141,7 @@ class ConventionalView:
     camera : LightFieldCamera
     view : PinholeCamera
         Output geometry.
-    ray_correction : RayCorrection, optional
+    ray_correction : RayCorrection or PolynomialCorrection, optional
         A calibrated camera's rays (``lfrefract calibrate camera``): each lens sits where its
         corrected chief ray points, so the main lens's distortion is not in the image. Default: the
         thin lens's rays.
@@ -149,7 +149,7 @@ class ConventionalView:
 
     camera: LightFieldCamera
     view: PinholeCamera
-    ray_correction: RayCorrection | None = None
+    ray_correction: Correction | None = None
     _idx: np.ndarray = field(init=False, repr=False)
     _matrix: sparse.csr_matrix = field(init=False, repr=False)
     _inside: np.ndarray = field(init=False, repr=False)

@@ -151,6 +151,13 @@ SENSOR_VS_NUMPY_WEIGHT_RELATIVE = 1e-5
 # 63 mm from the axis origin. About 5 times the measured maxima.
 SENSOR_VS_NUMPY_REAL_LENS_ORIGIN_M = 1e-7
 SENSOR_VS_NUMPY_REAL_LENS_DIRECTION = 3e-6
+# The same for the fisheye lens file (scenes/lenses/fisheye.toml, tests/simulator/test_lens_files.py):
+# 17 surfaces, paths leaving at up to 90 deg, its front surface 0.18-0.22 m from the camera origin on
+# the tiny and square-rotated-offset cameras. 20000 paths: origins 8.4e-8 m at most (3.5e-7 and 4.6e-7 of
+# their distance from the origin, as the presets' 2.1e-8 m at 63 mm), directions 2.5e-6. Origins are
+# checked relative to their distance (float32 round-off grows with it), 4 times the measured.
+SENSOR_VS_NUMPY_LENS_FILE_ORIGIN_RELATIVE = 2e-6
+SENSOR_VS_NUMPY_LENS_FILE_DIRECTION = 1e-5
 
 # Pixels; projecting the pinhole sensor's float32 directions (1e-6) back with f = 321 px, plus the
 # float32 film position ((u + 0.5) / W rounds to ~1e-5 px at W = 200).
@@ -1056,3 +1063,14 @@ CAMERA_CAL_BOARD_DEPTH_RELATIVE = 0.015
 # The slope scale fitted from large synthetic boards against the synthetic camera's (1.0): the field
 # curvature the model lacks biases it a little; 1 % is the spread the calibration accepts (MAX_SCALE_STD).
 CAMERA_CAL_FREE_SLOPE_SCALE = 0.01
+# The generic polynomial ray model (tests/lfrefract/test_polynomial_rays.py). Its inverse (Newton on the
+# four thin-lens coordinates) to 1e-12 of the aperture and field scales: 1e-12 m leaves ample room.
+POLY_INVERSE_M = 1e-12
+# Noise-free boards seen along a (3, 1) model: the fit returns it to rounding (its frame kept): 1e-9 m
+# 25 mm out (measured about 1e-13 m).
+POLY_NOISE_FREE_RAY_M = 1e-9
+# The synthetic field-curvature camera, polynomial model chosen among (3, 1) and (5, 1): 0.0085 mm and
+# 0.077 mrad measured (radial model: 0.045 mm, 0.39 mrad); bounds between, so a capacity choice that
+# stayed at (3, 1) (0.067 mm, 0.78 mrad) fails.
+POLY_SYNTHETIC_RAY_M = 0.02e-3
+POLY_SYNTHETIC_ANGLE_RAD = 0.2e-3

@@ -43,8 +43,9 @@ dimensionless; the board's own frame has its corners on z = 0.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -54,20 +55,36 @@ from scipy.spatial.transform import Rotation
 
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.calibration.port import BoardView, board_corners
+from lfrefract.calibration.ray_fit import CapacityScore, choose_capacity, fit_polynomial
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
-from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection, apply_correction
+from lfrefract.optics.ray_correction import (
+    PARAMETERS,
+    POLYNOMIAL_CAPACITIES,
+    Correction,
+    CorrectionEstimate,
+    PolynomialCorrection,
+    RayCorrection,
+    apply_correction,
+)
+from lfrefract.validate import one_of
 
 __all__ = [
     "CAMERA_CALIBRATION_KIND",
+    "RAY_MODELS",
     "CameraCalibration",
     "RayCorrection",
     "calibrate_camera",
     "corrected_view",
     "observed_rays",
 ]
+
+#: The ray models :func:`calibrate_camera` fits: ``"radial"``, the five-parameter
+#: :class:`RayCorrection`; ``"polynomial"``, the generic :class:`PolynomialCorrection` whose capacity
+#: is chosen by the error on held-back captures (:mod:`lfrefract.calibration.ray_fit`).
+RAY_MODELS = ("radial", "polynomial")
 
 #: Fewest board captures a calibration takes: one pose per capture and five shared parameters need
 #: views at several distances and angles.
@@ -90,7 +107,8 @@ class CameraCalibration:
     ----------
     camera : LightFieldCamera
         The thin-lens camera the correction applies to (the nominal one the views were located with).
-    correction : RayCorrection
+    correction : RayCorrection or PolynomialCorrection
+        The fitted model (``ray_model`` of :func:`calibrate_camera`).
     ray_rms_m : float
         RMS distance from each corner to each of its rays at the solution, metres.
     initial_ray_rms_m : float
@@ -112,10 +130,15 @@ class CameraCalibration:
         captures do not determine it (see the module docstring), else empty.
     poses : tuple of tuple of float
         Each capture's board pose: rotation vector (rad) and translation (m), board to camera frame.
+    capacity_scores : tuple of CapacityScore
+        For the polynomial model: each capacity tried with its error on held-back captures
+        (:func:`lfrefract.calibration.ray_fit.choose_capacity`); empty for the radial model. The
+        polynomial model's ``correction_std``, ``correction_covariance`` and ``clustered_std`` are over
+        its free coefficients (normalised, in the basis without rigid motions).
     """
 
     camera: LightFieldCamera
-    correction: RayCorrection
+    correction: Correction
     ray_rms_m: float
     initial_ray_rms_m: float
     per_view_rms_m: tuple[float, ...]
@@ -124,10 +147,22 @@ class CameraCalibration:
     clustered_std: tuple[float, ...]
     held: tuple[str, ...]
     poses: tuple[tuple[float, ...], ...]
+    capacity_scores: tuple[CapacityScore, ...] = ()
 
     @property
     def estimate(self) -> CorrectionEstimate:
-        """The correction with its covariance."""
+        """The correction with its covariance (the radial model only).
+
+        Raises
+        ------
+        CalibrationError
+            For the polynomial model, which a joint refinement with the port does not take.
+        """
+        if not isinstance(self.correction, RayCorrection):
+            raise CalibrationError(
+                f"the {self.correction.name} ray model has no radial estimate to refine (a joint refinement "
+                "with the port takes the radial model only)"
+            )
         return CorrectionEstimate(correction=self.correction, covariance=self.correction_covariance)
 
     def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
@@ -137,6 +172,20 @@ class CameraCalibration:
 
     def to_dict(self) -> dict:
         """Plain data for the JSON file (``kind`` :data:`CAMERA_CALIBRATION_KIND`)."""
+        if isinstance(self.correction, PolynomialCorrection):
+            return {
+                "kind": CAMERA_CALIBRATION_KIND,
+                "camera": self.camera.to_dict(),
+                "correction": self.correction.to_dict(),
+                "ray_rms_m": self.ray_rms_m,
+                "initial_ray_rms_m": self.initial_ray_rms_m,
+                "per_view_rms_m": list(self.per_view_rms_m),
+                "capacity_scores": [dataclasses.asdict(s) for s in self.capacity_scores],
+                "poses": [list(p) for p in self.poses],
+                "model": "the thin-lens ray (a, t) becomes the ray through a + dO(a, t) on z = 0 with slopes "
+                "t + dT(a, t), dO and dT polynomials in (a / aperture_norm_m, t / slope_norm) with the "
+                "exponents and coefficients given; lfrefract.optics.ray_correction.PolynomialCorrection",
+            }
         return {
             "kind": CAMERA_CALIBRATION_KIND,
             "camera": self.camera.to_dict(),
@@ -179,6 +228,9 @@ def calibrate_camera(
     *,
     view: PinholeCamera,
     names: Sequence[str] | None = None,
+    ray_model: str = "radial",
+    capacities: Sequence[tuple[int, int]] = POLYNOMIAL_CAPACITIES,
+    progress: Callable[[str], None] | None = None,
 ) -> CameraCalibration:
     """Fit the ray model of ``camera`` to chessboard light fields taken in air.
 
@@ -193,6 +245,14 @@ def calibrate_camera(
         The views' geometry ``K``.
     names : sequence of str, optional
         How errors name the views (their files); default ``views[i]``.
+    ray_model : {"radial", "polynomial"}
+        Which member of the family to fit (:data:`RAY_MODELS`): the five-parameter radial model, or
+        the generic polynomial model, its capacity chosen by the error on held-back captures.
+    capacities : sequence of (int, int)
+        The polynomial model's capacities to choose among, smallest first (default
+        :data:`~lfrefract.optics.ray_correction.POLYNOMIAL_CAPACITIES`).
+    progress : callable, optional
+        Called with a line per capacity tried (the polynomial model).
 
     Raises
     ------
@@ -207,6 +267,7 @@ def calibrate_camera(
         raise ParameterError(f"camera must be a LightFieldCamera, got {type(camera).__name__}")
     if not isinstance(view, PinholeCamera):
         raise ParameterError(f"view must be a PinholeCamera, got {type(view).__name__}")
+    one_of("ray_model", ray_model, RAY_MODELS)
     views = list(views)
     if not all(isinstance(v, BoardView) for v in views):
         raise ParameterError("views must be BoardView objects")
@@ -227,6 +288,8 @@ def calibrate_camera(
     everything = np.ones(len(PARAMETERS), dtype=bool)
     # The thin-lens model's own best poses, for the starting figure and a good start.
     start = _fit(observed, identity, ~everything, np.concatenate(poses))
+    if ray_model == "polynomial":
+        return _calibrate_polynomial(camera, observed, start, capacities, progress)
     fit = _fit(observed, identity, everything, start.x)
     held: tuple[str, ...] = ()
     if _spread(fit)[_SLOPE] > MAX_SCALE_STD:
@@ -251,6 +314,52 @@ def calibrate_camera(
         clustered_std=tuple(float(x) for x in np.sqrt(np.diag(fit.clustered))),
         held=held,
         poses=tuple(tuple(float(x) for x in pose) for pose in fit.poses),
+    )
+
+
+def _calibrate_polynomial(
+    camera: LightFieldCamera,
+    observed: list,
+    start: _Fit,
+    capacities: Sequence[tuple[int, int]],
+    progress: Callable[[str], None] | None,
+) -> CameraCalibration:
+    """:func:`calibrate_camera` for the polynomial model: its capacity by held-back captures."""
+    sensor = camera.sensor
+    half_diagonal_m = 0.5 * math.hypot(sensor.width_px, sensor.height_px) * sensor.pixel_pitch_m
+    r_norm, t_norm = camera.aperture_radius_m, half_diagonal_m / camera.lens_to_mla_m
+    # The priors weigh against the corners' noise: first taken as the thin-lens fit's RMS, then as that
+    # of a mid-sized model (the thin lens's includes the lens's departure from it).
+    first = fit_polynomial(
+        observed,
+        degree=3,
+        aperture_degree=1,
+        aperture_norm_m=r_norm,
+        slope_norm=t_norm,
+        poses=start.poses,
+        noise_m=start.rms_m,
+    )
+    fit, scores = choose_capacity(
+        observed,
+        aperture_norm_m=r_norm,
+        slope_norm=t_norm,
+        poses=first.poses,
+        noise_m=first.rms_m,
+        capacities=capacities,
+        progress=progress,
+    )
+    return CameraCalibration(
+        camera=camera,
+        correction=fit.correction,
+        ray_rms_m=fit.rms_m,
+        initial_ray_rms_m=start.rms_m,
+        per_view_rms_m=fit.per_capture_rms_m,
+        correction_std=tuple(float(x) for x in np.sqrt(np.diag(fit.covariance))),
+        correction_covariance=fit.covariance,
+        clustered_std=tuple(float(x) for x in np.sqrt(np.diag(fit.clustered))),
+        held=(),
+        poses=tuple(tuple(float(x) for x in pose) for pose in fit.poses),
+        capacity_scores=scores,
     )
 
 
@@ -339,7 +448,7 @@ def _spread(fit: _Fit) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(fit.covariance), np.diag(fit.clustered)))
 
 
-def corrected_view(view: BoardView, correction: RayCorrection, pinhole: PinholeCamera) -> BoardView:
+def corrected_view(view: BoardView, correction: Correction, pinhole: PinholeCamera) -> BoardView:
     """A board view's corners as the calibrated camera sees them: each observation's thin-lens ray
     (its view centre on z = 0 and the line of sight of its pixel in ``pinhole``) corrected, and
     expressed again as a centre and a pixel of ``pinhole``. The port calibration

@@ -71,7 +71,7 @@ from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
-from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection
+from lfrefract.optics.ray_correction import Correction, CorrectionEstimate, RayCorrection, correction_from_dict
 from lfrefract.validate import file_problem, one_of
 
 __all__ = [
@@ -792,7 +792,7 @@ def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
     )
 
 
-def ray_correction_from_option(value: str | os.PathLike | None) -> RayCorrection | None:
+def ray_correction_from_option(value: str | os.PathLike | None) -> Correction | None:
     """The calibrated ray correction a ``--camera`` option carries: that of a camera calibration
     (``lfrefract calibrate camera`` output, kind ``lfrefract.calibrate.camera``, of any suffix but
     ``.toml``); None for any other camera (a preset, a camera file, a ``meta.json``), which holds no
@@ -823,14 +823,15 @@ def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | 
     return (path, data) if data.get("kind") == CAMERA_CALIBRATION_KIND else None
 
 
-def _calibration_estimate(path: Path, data: dict) -> tuple[RayCorrection, CorrectionEstimate | None]:
+def _calibration_estimate(path: Path, data: dict) -> tuple[Correction, CorrectionEstimate | None]:
     """The ``correction`` of a camera calibration's content ``data`` (read from ``path``), and its
-    estimate with the ``correction_covariance`` (None if the file has none)."""
+    estimate with the ``correction_covariance`` (None if the file has none, or if the model is the
+    polynomial one, which carries no radial covariance)."""
     try:
-        correction = RayCorrection.from_dict(
+        correction = correction_from_dict(
             _json_key(path, "correction", "--camera", data), where=f"{str(path)!r}: correction"
         )
-        if "correction_covariance" not in data:
+        if not isinstance(correction, RayCorrection) or "correction_covariance" not in data:
             return correction, None
         covariance = CorrectionEstimate.covariance_from_dict(
             data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
@@ -859,7 +860,13 @@ def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstim
             "a refinement needs the calibrated ray model and its covariance"
         )
     path, data = found
-    _, estimate = _calibration_estimate(path, data)
+    correction, estimate = _calibration_estimate(path, data)
+    if not isinstance(correction, RayCorrection):
+        raise ParameterError(
+            f"--camera {str(value)!r} holds the {correction.name} ray model: a joint refinement with the port takes "
+            "the radial model only (lfrefract calibrate camera --ray-model radial); the polynomial model is used "
+            "as calibrated"
+        )
     if estimate is None:
         raise FileFormatError(
             f"{str(path)!r} has no correction_covariance (written by an earlier lfrefract): run "
@@ -868,7 +875,7 @@ def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstim
     return estimate
 
 
-def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection | None, *, camera: object) -> None:
+def check_port_ray_model(port_path: str | os.PathLike, correction: Correction | None, *, camera: object) -> None:
     """Refuse a calibrated port with another ray model than the one it was calibrated on.
 
     A port is calibrated on one ray model of the camera (``lfrefract calibrate port`` records it in
@@ -881,7 +888,7 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection
     ----------
     port_path : path-like
         The ``--port`` file.
-    correction : RayCorrection or None
+    correction : RayCorrection, PolynomialCorrection or None
         The ray correction of ``--camera`` (None: the thin-lens model).
     camera : object
         What ``--camera`` was, for the message.
@@ -906,13 +913,15 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: RayCorrection
         recorded = (
             None
             if model["correction"] is None
-            else RayCorrection.from_dict(model["correction"], where=f"{str(path)!r}: ray_model.correction")
+            else correction_from_dict(model["correction"], where=f"{str(path)!r}: ray_model.correction")
         )
     except ParameterError as exc:
         raise FileFormatError(str(exc)) from None
     same = (recorded is None and correction is None) or (
         recorded is not None
         and correction is not None
+        and type(recorded) is type(correction)
+        and recorded.vector().shape == correction.vector().shape
         and np.allclose(recorded.vector(), correction.vector(), rtol=0.0, atol=1e-12)
     )
     if not same:
@@ -947,7 +956,7 @@ def recorded_main_lens(data: Mapping | None) -> str | None:
 
 
 def check_lens_modelled(
-    capture: Capture | CaptureParameters, correction: RayCorrection | None, *, camera: str | os.PathLike | None = None
+    capture: Capture | CaptureParameters, correction: Correction | None, *, camera: str | os.PathLike | None = None
 ) -> None:
     """Refuse a capture taken through a real main lens when the camera model is the bare thin lens.
 

@@ -19,7 +19,7 @@ from lfrefract.formats.outputs import staged_directory
 from lfrefract.formats.pfm import write_pfm
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import correction_from_dict
 from lfrefract.synthesis.views import ViewStack
 from lfrefract.validate import file_problem, one_of, positive_float, positive_int
 
@@ -383,7 +383,7 @@ def read_view_stack(path: str | os.PathLike) -> ViewStack:
         camera = LightFieldCamera.from_dict(json.loads(camera_text)) if camera_text else None
         # Optional: stacks written before calibrated cameras were read have none (the thin lens's rays).
         correction_text = str(arrays["ray_correction"]) if "ray_correction" in arrays else ""
-        correction = RayCorrection.from_dict(json.loads(correction_text)) if correction_text else None
+        correction = correction_from_dict(json.loads(correction_text)) if correction_text else None
         output = PinholeCamera.from_K(arrays["K"], int(views.shape[3]), int(views.shape[2]))
         return ViewStack(
             views=views,

@@ -26,6 +26,7 @@ Frames and units: camera frame (OpenCV axes), metres; slopes are dimensionless.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -34,9 +35,29 @@ import numpy as np
 
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import CapturedRays
-from lfrefract.validate import bounded_float, finite_float, reject_unknown_keys, require_keys, shown
+from lfrefract.validate import (
+    bounded_float,
+    bounded_int,
+    finite_float,
+    named,
+    reject_unknown_keys,
+    require_keys,
+    shown,
+)
 
-__all__ = ["PARAMETERS", "CorrectionEstimate", "RayCorrection", "apply_correction", "corrected_slopes"]
+__all__ = [
+    "PARAMETERS",
+    "POLYNOMIAL_CAPACITIES",
+    "Correction",
+    "CorrectionEstimate",
+    "PolynomialCorrection",
+    "RayCorrection",
+    "apply_correction",
+    "corrected_slopes",
+    "correction_from_dict",
+    "frame_directions",
+    "polynomial_exponents",
+]
 
 #: Newton steps :meth:`RayCorrection.thin_lens_rays` takes at most (3 on the Illum's calibrated
 #: model over slopes up to 0.35: the radial terms are a few per cent of the slope).
@@ -274,3 +295,355 @@ def corrected_slopes(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     s, k1, k2 = p[1], p[2], p[3]
     r2 = np.sum(t * t, axis=1, keepdims=True)
     return s * t * (1.0 + k1 * r2 + k2 * r2 * r2)
+
+
+# --------------------------------------------------------------------------- the generic member
+
+#: The capacities :func:`lfrefract.calibration.calibrate_camera` tries, smallest first: (total degree
+#: of the polynomial in the thin-lens ray's four coordinates, its largest degree in the aperture
+#: point). Measured on true rays (tiny-2x, every 2nd pixel, fitted directly): (3, 1) leaves the
+#: double Gauss 0.03 mm / 0.46 mrad from the true rays 25 mm out, (5, 3) 0.002 mm / 0.09 mrad, the
+#: retrofocus wide angle 0.002 mm / 0.02 mrad; which one a camera gets is decided by the error on
+#: held-back board captures, never by its lens.
+POLYNOMIAL_CAPACITIES: tuple[tuple[int, int], ...] = (
+    (1, 1),
+    (2, 1),
+    (3, 1),
+    (4, 1),
+    (5, 1),
+    (5, 2),
+    (6, 2),
+    (7, 2),
+    (7, 3),
+)
+
+#: The columns of :attr:`PolynomialCorrection.coefficients`: what each term adds to.
+POLYNOMIAL_COLUMNS = ("origin_x_m", "origin_y_m", "slope_x", "slope_y")
+
+#: Residual (normalised coordinates, about 1e-12 of the aperture radius and the field) at which
+#: :meth:`PolynomialCorrection.thin_lens_rays` stops.
+_POLY_INVERSE_TOLERANCE = 1e-12
+
+#: Largest degree of :class:`PolynomialCorrection` (a sanity bound for files; 84 terms at 8).
+_MAX_DEGREE = 8
+
+
+@functools.cache
+def _exponent_table(degree: int, aperture_degree: int) -> np.ndarray:
+    rows = [
+        (i, j, k, l)
+        for total in range(degree + 1)
+        for i in range(total, -1, -1)
+        for j in range(total - i, -1, -1)
+        for k in range(total - i - j, -1, -1)
+        for l in (total - i - j - k,)  # noqa: E741 (the fourth exponent)
+        if i + j <= aperture_degree
+    ]
+    table = np.array(rows, dtype=np.int64).reshape(-1, 4)
+    table.setflags(write=False)
+    return table
+
+
+def polynomial_exponents(degree: int, aperture_degree: int) -> np.ndarray:
+    """The monomials of a :class:`PolynomialCorrection`, shape (M, 4) int: exponents of
+    ``(a_x / R, a_y / R, t_x / T, t_y / T)``, total degree at most ``degree`` and at most
+    ``aperture_degree`` in ``a``, in a fixed order (by total degree, then lexicographically)."""
+    return _exponent_table(int(degree), int(aperture_degree))
+
+
+def _monomials(x: np.ndarray, exponents: np.ndarray) -> np.ndarray:
+    """Each monomial of ``exponents`` (M, 4) at the normalised coordinates ``x`` (N, 4): (N, M)."""
+    powers = _powers(x, int(exponents.max(initial=0)))
+    out = np.ones((x.shape[0], len(exponents)))
+    for c in range(4):
+        out *= powers[exponents[:, c], :, c].T
+    return out
+
+
+def _powers(x: np.ndarray, top: int) -> np.ndarray:
+    """``x ** p`` for p = 0 .. ``top``: (top + 1, *x.shape)."""
+    powers = np.ones((top + 1, *x.shape))
+    for p in range(1, top + 1):
+        powers[p] = powers[p - 1] * x
+    return powers
+
+
+def _jacobian(x: np.ndarray, exponents: np.ndarray, coefficients: np.ndarray) -> np.ndarray:
+    """d(monomials @ coefficients)/dx at ``x`` (N, 4): (N, 4 outputs, 4 coordinates); memory (N, M)."""
+    powers = _powers(x, int(exponents.max(initial=0)))
+    out = np.empty((x.shape[0], coefficients.shape[1], 4))
+    for c in range(4):
+        e = exponents[:, c]
+        grad = powers[np.maximum(e - 1, 0), :, c].T * e  # d/dx x^e = e x^(e-1)
+        for other in range(4):
+            if other != c:
+                grad *= powers[exponents[:, other], :, other].T
+        out[:, :, c] = grad @ coefficients
+    return out
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PolynomialCorrection:
+    """A generic non-central ray model: polynomial fields over the thin-lens ray's coordinates.
+
+    A thin-lens ray through the aperture point ``a`` (metres, on z = 0) with slopes ``t`` is the
+    camera's ray through ``a + dO(a, t)`` on z = 0 with slopes ``t + dT(a, t)``; ``dO`` and ``dT``
+    are polynomials in ``(a / R, t / T)`` of total degree at most ``degree`` and at most
+    ``aperture_degree`` in ``a`` (:func:`polynomial_exponents`). A plenoptic pixel's thin-lens ray
+    is fixed by its microlens (``t``) and its place in the micro-image (``a``), so this is a smooth
+    field over both, with no assumption about the lens's symmetry or design: its capacity is chosen
+    by :func:`lfrefract.calibration.calibrate_camera` by the error on held-back board captures.
+    The zero polynomial is the thin lens.
+
+    The coefficients carry no rigid motion of the camera frame (in-air views cannot see one: the
+    board poses absorb it): they have no component along :func:`frame_directions`, so the frame is
+    the thin-lens camera's, its origin at the paraxial entrance pupil, the centre of projection.
+
+    Attributes
+    ----------
+    degree, aperture_degree : int
+        Total degree (1 to 8) and degree in ``a`` (0 to ``degree``).
+    aperture_norm_m : float
+        ``R``: the aperture coordinates' scale, metres (the aperture radius).
+    slope_norm : float
+        ``T``: the slopes' scale (the largest slope of the field).
+    coefficients : ndarray, shape (M, 4)
+        Per monomial, what it adds to ``(dO_x, dO_y, dT_x, dT_y)`` (:data:`POLYNOMIAL_COLUMNS`;
+        metres for the origins).
+    """
+
+    degree: int
+    aperture_degree: int
+    aperture_norm_m: float
+    slope_norm: float
+    coefficients: np.ndarray
+
+    def __post_init__(self) -> None:
+        degree = bounded_int("degree", self.degree, 1, _MAX_DEGREE)
+        object.__setattr__(self, "degree", degree)
+        object.__setattr__(self, "aperture_degree", bounded_int("aperture_degree", self.aperture_degree, 0, degree))
+        object.__setattr__(
+            self, "aperture_norm_m", bounded_float("aperture_norm_m", self.aperture_norm_m, 1e-6, 1.0, unit="m")
+        )
+        object.__setattr__(self, "slope_norm", bounded_float("slope_norm", self.slope_norm, 1e-3, 10.0))
+        n_terms = len(self.exponents)
+        try:
+            coef = np.array(self.coefficients, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ParameterError(f"coefficients must be {n_terms} rows of 4 numbers") from None
+        if coef.shape != (n_terms, 4) or not np.all(np.isfinite(coef)):
+            raise ParameterError(
+                f"coefficients must be {n_terms} rows of 4 finite numbers for degree {degree} / aperture degree "
+                f"{self.aperture_degree}, got shape {coef.shape}"
+            )
+        coef.setflags(write=False)
+        object.__setattr__(self, "coefficients", coef)
+
+    @property
+    def exponents(self) -> np.ndarray:
+        """The monomials, (M, 4) (:func:`polynomial_exponents`)."""
+        return polynomial_exponents(self.degree, self.aperture_degree)
+
+    @property
+    def name(self) -> str:
+        """``"polynomial-D-Da"``: how reports name the model."""
+        return f"polynomial-{self.degree}-{self.aperture_degree}"
+
+    def _normalised(self, a: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.column_stack([a / self.aperture_norm_m, t / self.slope_norm])
+
+    def monomials(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+        """The monomials at thin-lens rays (aperture points (N, 2), slopes (N, 2)): (N, M)."""
+        a, t = np.asarray(aperture_points_m, float), np.asarray(slopes, float)
+        return _monomials(self._normalised(a, t), self.exponents)
+
+    def offsets(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+        """``(dO_x, dO_y, dT_x, dT_y)`` of thin-lens rays (aperture points (N, 2), slopes (N, 2)): (N, 4)."""
+        return self.monomials(aperture_points_m, slopes) @ self.coefficients
+
+    def origins_and_slopes(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's rays as crossings of z = 0 (N, 2, metres) and slopes (N, 2)."""
+        a, t = np.asarray(aperture_points_m, float), np.asarray(slopes, float)
+        delta = self.offsets(a, t)
+        return a + delta[:, :2], t + delta[:, 2:]
+
+    def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's rays for thin-lens rays, as :meth:`RayCorrection.apply`: origins (N, 3) on
+        z = 0 and unit directions (N, 3)."""
+        origins, out = self.origins_and_slopes(aperture_points_m, slopes)
+        directions = np.column_stack([out, np.ones(len(out))])
+        return np.column_stack([origins, np.zeros(len(out))]), directions / np.linalg.norm(
+            directions, axis=1, keepdims=True
+        )
+
+    def thin_lens_rays(
+        self, points_cam: np.ndarray, directions_cam: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The thin-lens rays that :meth:`apply` maps to the given rays, as
+        :meth:`RayCorrection.thin_lens_rays`: Newton's method on the four coordinates, from the
+        ray itself; ``found`` where it converged to a root at which the map keeps its orientation
+        (positive Jacobian determinant). Outputs are NaN where not found."""
+        p = np.asarray(points_cam, dtype=np.float64)
+        d = np.asarray(directions_cam, dtype=np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            target_t = d[:, :2] / d[:, 2:3]
+        target_o = p[:, :2] - p[:, 2:3] * target_t
+        target = np.column_stack([target_o / self.aperture_norm_m, target_t / self.slope_norm])
+        scale = np.array([self.aperture_norm_m] * 2 + [self.slope_norm] * 2)
+        coef = self.coefficients / scale  # in normalised output units
+        exps = self.exponents
+        live = np.all(np.isfinite(target), axis=1)
+        goal = np.where(live[:, None], target, 0.0)
+
+        def residual_of(xs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            return xs + _monomials(xs, exps) @ coef - goal[rows]
+
+        x = goal - _monomials(goal, exps) @ coef  # one fixed-point step: the map is near the identity
+        res = residual_of(x, np.arange(len(x)))
+        norm = np.max(np.abs(res), axis=1)
+        todo = np.flatnonzero(live & (norm > _POLY_INVERSE_TOLERANCE))
+        for _ in range(_INVERSE_MAX_STEPS):
+            if len(todo) == 0:
+                break
+            xs = x[todo]
+            jac = np.eye(4) + _jacobian(xs, exps, coef)
+            ok = np.abs(np.linalg.det(jac)) > 1e-12
+            step = np.zeros_like(xs)
+            step[ok] = np.linalg.solve(jac[ok], res[todo][ok][:, :, None])[:, :, 0]
+            # Damped: halve the step until the residual shrinks (at most 20 times).
+            fraction = np.ones(len(todo))
+            trial = xs - step
+            trial_res = residual_of(trial, todo)
+            trial_norm = np.max(np.abs(trial_res), axis=1)
+            for _ in range(20):
+                worse = ~(trial_norm < norm[todo]) & ok
+                if not np.any(worse):
+                    break
+                fraction[worse] *= 0.5
+                trial[worse] = xs[worse] - fraction[worse, None] * step[worse]
+                trial_res[worse] = residual_of(trial[worse], todo[worse])
+                trial_norm[worse] = np.max(np.abs(trial_res[worse]), axis=1)
+            better = (trial_norm < norm[todo]) & ok
+            x[todo[better]] = trial[better]
+            res[todo[better]] = trial_res[better]
+            norm[todo[better]] = trial_norm[better]
+            todo = todo[better & (trial_norm > _POLY_INVERSE_TOLERANCE)]
+        det = np.linalg.det(np.eye(4) + _jacobian(x, exps, coef))
+        found = live & (norm <= 1e3 * _POLY_INVERSE_TOLERANCE) & (det > 0.0)
+        a = np.where(found[:, None], x[:, :2] * self.aperture_norm_m, np.nan)
+        t = np.where(found[:, None], x[:, 2:] * self.slope_norm, np.nan)
+        return a, t, found
+
+    def corrected(self, rays: CapturedRays) -> CapturedRays:
+        """``rays`` (thin-lens captured rays) with the model applied; masks and lenses kept."""
+        d = rays.directions_cam
+        origins, directions = self.apply(rays.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
+        return CapturedRays(
+            origins_cam=origins,
+            directions_cam=directions,
+            in_aperture=rays.in_aperture,
+            lens_indices=rays.lens_indices,
+        )
+
+    def vector(self) -> np.ndarray:
+        """The coefficients, flattened row by row (M * 4,)."""
+        return self.coefficients.ravel().copy()
+
+    def to_dict(self) -> dict:
+        """Plain data: ``family`` ``"polynomial"``, the capacity, the scales and the coefficients."""
+        return {
+            "family": "polynomial",
+            "degree": self.degree,
+            "aperture_degree": self.aperture_degree,
+            "aperture_norm_m": self.aperture_norm_m,
+            "slope_norm": self.slope_norm,
+            "columns": list(POLYNOMIAL_COLUMNS),
+            "exponents": self.exponents.tolist(),
+            "coefficients": self.coefficients.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "correction") -> PolynomialCorrection:
+        """From :meth:`to_dict`'s data; its ``columns`` and ``exponents`` are checked against the capacity."""
+        table: Any = data
+        keys = {"family", "degree", "aperture_degree", "aperture_norm_m", "slope_norm", "columns", "exponents"}
+        reject_unknown_keys(where, table, keys | {"coefficients"})
+        require_keys(where, table, keys | {"coefficients"})
+        if table["family"] != "polynomial":
+            raise ParameterError(f"{where}.family must be 'polynomial', got {shown(table['family'])}")
+        if table["columns"] != list(POLYNOMIAL_COLUMNS):
+            raise ParameterError(f"{where}.columns must be {list(POLYNOMIAL_COLUMNS)}, got {shown(table['columns'])}")
+        degree = bounded_int(f"{where}.degree", table["degree"], 1, _MAX_DEGREE)
+        aperture = bounded_int(f"{where}.aperture_degree", table["aperture_degree"], 0, degree)
+        if table["exponents"] != polynomial_exponents(degree, aperture).tolist():
+            raise ParameterError(
+                f"{where}.exponents must be the monomials of degree {degree} and aperture degree {aperture} in "
+                f"their order (lfrefract.optics.ray_correction.polynomial_exponents), got {shown(table['exponents'])}"
+            )
+        rows = table["coefficients"]
+        if not isinstance(rows, list) or not all(isinstance(r, list) and len(r) == 4 for r in rows):
+            raise ParameterError(f"{where}.coefficients must be rows of 4 numbers, got {shown(rows)}")
+        values = [
+            [finite_float(f"{where}.coefficients[{i}][{j}]", v) for j, v in enumerate(r)] for i, r in enumerate(rows)
+        ]
+        with named(where):
+            return cls(
+                degree=degree,
+                aperture_degree=aperture,
+                aperture_norm_m=table["aperture_norm_m"],
+                slope_norm=table["slope_norm"],
+                coefficients=np.array(values).reshape(-1, 4),
+            )
+
+
+def frame_directions(exponents: np.ndarray) -> np.ndarray:
+    """The six coefficient directions (6, M * 4) that fix the camera frame of a
+    :class:`PolynomialCorrection` with the monomials ``exponents`` (M, 4), unit length (normalised
+    coefficients, row-major (M, 4)).
+
+    In-air board views see a ray model only up to a rigid motion of the camera frame (every board
+    pose moves with it). Of the model's coefficients, six carry such a motion to first order: the
+    constant ``dO`` (a shift across the axis), the constant ``dT`` (a turn about x or y), ``dO``
+    along ``t`` equally in x and y (a shift along the axis: where the rays cross z = 0) and ``dT``
+    turning ``t`` (``dT_x`` along ``t_y`` minus ``dT_y`` along ``t_x``: a turn about the axis). A
+    model without them keeps the thin-lens camera's frame: its axial ray is the thin lens's axis, and
+    its paraxial chief rays cross z = 0 at the origin (the entrance pupil, the centre of projection).
+    A centred lens, whatever its design, has none of them.
+    """
+    index = {tuple(int(v) for v in e): m for m, e in enumerate(exponents)}
+    one, tx, ty = (0, 0, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1)
+    directions: list[dict[tuple[int, tuple[int, ...]], float]] = [
+        {(0, one): 1.0},
+        {(1, one): 1.0},
+        {(2, one): 1.0},
+        {(3, one): 1.0},
+        {(0, tx): 1.0, (1, ty): 1.0},
+        {(2, ty): 1.0, (3, tx): -1.0},
+    ]
+    table = np.zeros((len(directions), len(exponents), 4))
+    for g, direction in enumerate(directions):
+        for (column, exponent), value in direction.items():
+            if exponent in index:
+                table[g, index[exponent], column] = value
+    out = table.reshape(len(directions), -1)
+    norms = np.linalg.norm(out, axis=1, keepdims=True)
+    return out[norms[:, 0] > 0] / norms[norms[:, 0] > 0]
+
+
+#: Every member of the ray-model family: the thin lens is ``None`` (no correction).
+Correction = RayCorrection | PolynomialCorrection
+
+
+def correction_from_dict(data: Any, *, where: str = "correction") -> Correction:
+    """A ray correction from its plain data: :class:`PolynomialCorrection` when ``family`` is
+    ``"polynomial"``, else :class:`RayCorrection` (its files carry no ``family``; ``"radial"`` is
+    accepted for it)."""
+    table: Any = data
+    if not isinstance(table, Mapping):
+        raise ParameterError(f"{where} must be a table, got {shown(table)}")
+    family = table.get("family", "radial")
+    if family == "polynomial":
+        return PolynomialCorrection.from_dict(table, where=where)
+    if family != "radial":
+        raise ParameterError(f"{where}.family must be 'radial' or 'polynomial', got {shown(family)}")
+    return RayCorrection.from_dict({k: v for k, v in table.items() if k != "family"}, where=where)

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import Correction
 from lfrefract.synthesis._kernels import angle_from_chord
 
 __all__ = ["LazyRayTree", "RayTree"]
@@ -38,7 +38,7 @@ class RayTree:
     sites : ndarray of bool, shape (2, 2), optional
         Raw pixels ``(u, v)`` are used only where ``sites[v % 2, u % 2]`` (one colour of a CFA);
         default all.
-    correction : RayCorrection, optional
+    correction : RayCorrection or PolynomialCorrection, optional
         The camera's calibrated rays instead of its thin-lens ones (which pixels are usable is
         still the thin-lens model's).
     """
@@ -51,7 +51,7 @@ class RayTree:
         usable_radius_m: float,
         lambda_m_per_rad: float,
         sites: np.ndarray | None = None,
-        correction: RayCorrection | None = None,
+        correction: Correction | None = None,
     ):
         rays = camera.captured_rays()
         keep = np.hypot(rays.origins_cam[:, 0], rays.origins_cam[:, 1]) <= usable_radius_m
@@ -136,7 +136,7 @@ class LazyRayTree:
         usable_radius_m: float,
         lambda_m_per_rad: float,
         sites: np.ndarray | None = None,
-        correction: RayCorrection | None = None,
+        correction: Correction | None = None,
     ):
         self._camera, self._port = camera, port
         self._usable_radius_m, self._lambda_m_per_rad = usable_radius_m, lambda_m_per_rad

@@ -58,7 +58,7 @@ from lfrefract._memory import require_memory
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import Correction, PolynomialCorrection, RayCorrection
 from lfrefract.synthesis.empty import masked_reason, output_geometry, require_a_value
 from lfrefract.validate import finite_vector, one_of, positive_float
 
@@ -192,7 +192,7 @@ def naive_view(
     output: PinholeCamera | None = None,
     kind: str = "central",
     recorded: np.ndarray | None = None,
-    ray_correction: RayCorrection | None = None,
+    ray_correction: Correction | None = None,
 ) -> np.ndarray:
     """Resample a conventional view of ``raw`` onto a pinhole image, ignoring any port.
 
@@ -457,7 +457,7 @@ def resampling_matrix(
     *,
     slope_shift: tuple[float, float] = (0.0, 0.0),
     lenses: np.ndarray | None = None,
-    ray_correction: RayCorrection | None = None,
+    ray_correction: Correction | None = None,
 ) -> tuple[np.ndarray, sparse.csr_matrix, np.ndarray]:
     """Linear interpolation from per-lens samples to the pixels of a pinhole image.
 
@@ -596,7 +596,7 @@ def _row_extent(corners: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def subaperture_centre_m(
-    camera: LightFieldCamera, offset_px: tuple[float, float], *, ray_correction: RayCorrection | None = None
+    camera: LightFieldCamera, offset_px: tuple[float, float], *, ray_correction: Correction | None = None
 ) -> np.ndarray:
     """Centre of projection (3,), camera frame, metres, of the sub-aperture view at ``offset_px``.
 
@@ -614,6 +614,11 @@ def subaperture_centre_m(
 
 def checked_correction(ray_correction: object) -> RayCorrection | None:
     """``ray_correction`` if it is a :class:`RayCorrection` or None; else :class:`ParameterError`."""
+    if isinstance(ray_correction, PolynomialCorrection):
+        raise ParameterError(
+            f"the {ray_correction.name} ray model has no sub-aperture views: its rays of one view do not share a "
+            "centre of projection (sub-aperture views and stacks take the thin lens or the radial model)"
+        )
     if ray_correction is not None and not isinstance(ray_correction, RayCorrection):
         raise ParameterError(f"ray_correction must be a RayCorrection or None, got {ray_correction!r}")
     return ray_correction
@@ -626,7 +631,7 @@ def subaperture_view(
     *,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
-    ray_correction: RayCorrection | None = None,
+    ray_correction: Correction | None = None,
 ) -> np.ndarray:
     """The sub-aperture view at ``offset_px`` from the micro-image centres, as a pinhole image.
 
@@ -775,7 +780,7 @@ class ViewStack:
     centres_m: np.ndarray
     output: PinholeCamera
     camera: LightFieldCamera | None = None
-    ray_correction: RayCorrection | None = None
+    ray_correction: Correction | None = None
 
     def __post_init__(self) -> None:
         checked_correction(self.ray_correction)
@@ -883,7 +888,7 @@ def subaperture_stack(
     spacing_px: float | None = None,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
-    ray_correction: RayCorrection | None = None,
+    ray_correction: Correction | None = None,
 ) -> ViewStack:
     """A regular ``grid x grid`` set of sub-aperture views of ``raw`` (a light-field view stack).
 

@@ -52,7 +52,7 @@ from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import LightFieldCamera, image_side_px
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import RayCorrection
+from lfrefract.optics.ray_correction import Correction, PolynomialCorrection, RayCorrection
 from lfrefract.synthesis._kernels import (
     THIN_LENS,
     AirFace,
@@ -180,7 +180,7 @@ class SynthesisOptions:
     search: str = "auto"
     cfa_pattern: str | None = None
     cfa_colour: str | None = None
-    ray_correction: RayCorrection | None = None
+    ray_correction: Correction | None = None
 
     def __post_init__(self) -> None:
         positive_int("k", self.k)
@@ -201,8 +201,17 @@ class SynthesisOptions:
         if self.cfa_pattern is not None:
             one_of("cfa_pattern", self.cfa_pattern, CFA_PATTERNS)
             one_of("cfa_colour", self.cfa_colour, ("R", "G", "B"))
-        if self.ray_correction is not None and not isinstance(self.ray_correction, RayCorrection):
-            raise ParameterError(f"ray_correction must be a RayCorrection or None, got {self.ray_correction!r}")
+        if self.ray_correction is not None and not isinstance(
+            self.ray_correction, (RayCorrection, PolynomialCorrection)
+        ):
+            raise ParameterError(
+                f"ray_correction must be a RayCorrection, a PolynomialCorrection or None, got {self.ray_correction!r}"
+            )
+        if isinstance(self.ray_correction, PolynomialCorrection) and self.search == "analytic":
+            raise ParameterError(
+                f"search='analytic' does not take the {self.ray_correction.name} ray model (its rays of one microlens "
+                "are not parallel): use search='kdtree' or 'auto'"
+            )
         lenses = 3 * self.lens_rings * (self.lens_rings + 1) + 1  # hexagonal rings around a lens
         if self.k > lenses * (2 * self.window + 1) ** 2:
             most = lenses * (2 * self.window + 1) ** 2
@@ -234,10 +243,13 @@ class SynthesisOptions:
 
 def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
     """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, or
-    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``)."""
+    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``) or with a polynomial ray
+    model (:class:`PolynomialCorrection`: the rays of one microlens are not parallel)."""
     if options.search == "kdtree":
         return True
-    return options.search == "auto" and camera.lens_to_mla_m != camera.focal_length_m
+    return options.search == "auto" and (
+        camera.lens_to_mla_m != camera.focal_length_m or isinstance(options.ray_correction, PolynomialCorrection)
+    )
 
 
 def necessary_air_rays(
@@ -697,9 +709,10 @@ def _air_face(port: FlatPort) -> AirFace:
     return AirFace(nx=float(n[0]), ny=float(n[1]), nz=float(n[2]), d_m=float(port.distance_m))
 
 
-def _ray_model(correction: RayCorrection | None) -> RayModel:
-    """The kernels' form of a ray correction (None: the thin lens)."""
-    if correction is None:
+def _ray_model(correction: Correction | None) -> RayModel:
+    """The kernels' form of a ray correction (None: the thin lens; a polynomial model is searched by
+    the k-d tree only, :func:`uses_kdtree`, and never reaches the kernels)."""
+    if not isinstance(correction, RayCorrection):
         return THIN_LENS
     return RayModel(*(float(v) for v in correction.vector()))
 

@@ -1,0 +1,479 @@
+"""Fitting the generic ray model to in-air chessboard light fields, and choosing its capacity.
+
+:class:`~lfrefract.optics.ray_correction.PolynomialCorrection` maps a thin-lens ray ``(a, t)`` to the
+camera's ray through ``a + dO`` on z = 0 with slopes ``t + dT``. A board corner ``X`` (camera frame)
+seen along it leaves the residual
+
+    ``e = X_xy - (a + dO) - X_z (t + dT)``,
+
+the corner's offset from the ray in the plane z = X_z (metres): the ray reprojection error of
+Dansereau et al. (CVPR 2013) measured in the board's depth plane rather than perpendicular to the ray
+(the two differ by the ray's cosine, at most 6 % at a slope of 0.35). ``e`` is linear in the model's
+coefficients, so one Gauss-Newton step solves for them exactly for given board poses; the poses (six
+per capture) are eliminated by their Schur complement, as in bundle adjustment, and the whole is
+damped (Levenberg-Marquardt). The coefficients are expressed in a basis without the six directions
+that move the camera frame (:func:`lfrefract.optics.ray_correction.frame_directions`), which the poses
+would absorb.
+
+Two priors keep the problem determined without choosing the answer: every normalised coefficient has
+a weak zero-mean prior of :data:`COEFFICIENT_PRIOR` (the ray moves by at most about the aperture
+radius or the field's largest slope), and the slope scale (``dT`` along ``t``, the focal length) has
+the prior :data:`~lfrefract.calibration.camera.HELD_SLOPE_SCALE_STD` that the file's focal length is
+right to 1 %: boards spanning a few degrees cannot tell a focal length from a distance (see
+:mod:`lfrefract.calibration.camera`).
+
+The capacity (:data:`~lfrefract.optics.ray_correction.POLYNOMIAL_CAPACITIES`) is chosen by the error
+on held-back captures (:func:`choose_capacity`): the captures are split into folds; each fold is fitted
+without its captures, then each held-back capture's pose alone is fitted to the fixed model, and its
+corners' RMS offset is the held-back error. The smallest capacity whose error lies within one
+standard error of the best is kept (the "one standard error" rule of cross-validation).
+
+Frames and units: camera frame (OpenCV axes), metres; slopes dimensionless.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from lfrefract.errors import CalibrationError
+from lfrefract.optics.ray_correction import (
+    POLYNOMIAL_CAPACITIES,
+    PolynomialCorrection,
+    frame_directions,
+    polynomial_exponents,
+)
+
+__all__ = ["COEFFICIENT_PRIOR", "CapacityScore", "PolynomialFit", "choose_capacity", "fit_polynomial"]
+
+#: Prior standard deviation of every normalised coefficient (output in units of the aperture radius
+#: or the field's largest slope): a ray model that moves rays by more than that is not a camera's.
+COEFFICIENT_PRIOR = 1.0
+#: Levenberg-Marquardt iterations at most, and the relative decrease of the cost that ends them.
+_MAX_ITERATIONS = 60
+_TOLERANCE = 1e-10
+#: Capacities in a row without improvement after which :func:`choose_capacity` stops.
+_PATIENCE = 3
+#: Most folds of the held-back captures (fewer with fewer captures: one capture a fold).
+MAX_FOLDS = 5
+
+#: One capture's observations: board points (N, 3, board frame, metres), aperture points (N, 2,
+#: metres) and thin-lens slopes (N, 2).
+Observed = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class PolynomialFit:
+    """One fit of :func:`fit_polynomial`.
+
+    Attributes
+    ----------
+    correction : PolynomialCorrection
+    poses : ndarray, shape (n, 6)
+        Each capture's rotation vector (rad) and translation (m), board to camera frame.
+    rms_m : float
+        RMS corner-to-ray offset (both components), metres.
+    per_capture_rms_m : tuple of float
+    covariance : ndarray, shape (P, P)
+        Covariance of the free coefficients (normalised, in the gauge-free basis ``basis``), marginal
+        over the poses, scaled by the residual variance.
+    clustered : ndarray, shape (P, P)
+        The same with each capture as one sample (sandwich estimate).
+    basis : ndarray, shape (4 M, P)
+        The basis that keeps the frame: normalised coefficients (row-major (M, 4)) are ``basis @ q``.
+    """
+
+    correction: PolynomialCorrection
+    poses: np.ndarray
+    rms_m: float
+    per_capture_rms_m: tuple[float, ...]
+    covariance: np.ndarray
+    clustered: np.ndarray
+    basis: np.ndarray
+
+
+@dataclass(frozen=True)
+class CapacityScore:
+    """The held-back error of one capacity (:func:`choose_capacity`).
+
+    Attributes
+    ----------
+    degree, aperture_degree : int
+    held_back_rms_m : float
+        RMS offset of the held-back captures' corners from the rays of the model fitted without them.
+    standard_error_m : float
+        Its standard error over the held-back captures.
+    fit_rms_m : float
+        The RMS of the fit to every capture.
+    """
+
+    degree: int
+    aperture_degree: int
+    held_back_rms_m: float
+    standard_error_m: float
+    fit_rms_m: float
+
+
+def _left_jacobian(rotvec: np.ndarray) -> np.ndarray:
+    """SO(3)'s left Jacobian at each rotation vector (n, 3) -> (n, 3, 3): d exp(w) / dw = [.]x J_l(w)."""
+    theta = np.linalg.norm(rotvec, axis=1)
+    skew = _skew(rotvec)
+    small = theta < 1e-6
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    return np.eye(3) + a[:, None, None] * skew + b[:, None, None] * skew @ skew
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices of vectors (n, 3) -> (n, 3, 3)."""
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return out
+
+
+class _Problem:
+    """The least-squares problem of one capacity on a set of captures (see the module docstring)."""
+
+    def __init__(
+        self,
+        observed: Sequence[Observed],
+        degree: int,
+        aperture_degree: int,
+        aperture_norm_m: float,
+        slope_norm: float,
+    ) -> None:
+        self.exponents = polynomial_exponents(degree, aperture_degree)
+        self.degree, self.aperture_degree = degree, aperture_degree
+        self.norms = np.array([aperture_norm_m, aperture_norm_m, slope_norm, slope_norm])
+        self.template = PolynomialCorrection(
+            degree=degree,
+            aperture_degree=aperture_degree,
+            aperture_norm_m=aperture_norm_m,
+            slope_norm=slope_norm,
+            coefficients=np.zeros((len(self.exponents), 4)),
+        )
+        fixed = frame_directions(self.exponents)
+        _, singular, vt = np.linalg.svd(fixed)
+        rank = int(np.sum(singular > 1e-9))
+        self.basis = vt[rank:].T  # (4M, P): no component along the frame's directions
+        self.observed = list(observed)
+        self.points = [p for p, _, _ in self.observed]
+        self.a = [a for _, a, _ in self.observed]
+        self.t = [t for _, _, t in self.observed]
+        self.phi = [self.template.monomials(a, t) for _, a, t in self.observed]
+        # The slope scale: the normalised coefficients of dT_x along t_x and dT_y along t_y, averaged.
+        index = {tuple(int(v) for v in e): m for m, e in enumerate(self.exponents)}
+        scale_row = np.zeros((len(self.exponents), 4))
+        scale_row[index[(0, 0, 1, 0)], 2] = 0.5
+        scale_row[index[(0, 0, 0, 1)], 3] = 0.5
+        self.scale_row = scale_row.ravel() @ self.basis  # (P,): the slope scale - 1 of q
+
+    @property
+    def n_free(self) -> int:
+        return self.basis.shape[1]
+
+    def correction(self, q: np.ndarray) -> PolynomialCorrection:
+        coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
+        return PolynomialCorrection(
+            degree=self.degree,
+            aperture_degree=self.aperture_degree,
+            aperture_norm_m=self.template.aperture_norm_m,
+            slope_norm=self.template.slope_norm,
+            coefficients=coefficients,
+        )
+
+    def residuals(self, q: np.ndarray, poses: np.ndarray) -> list[np.ndarray]:
+        """Each capture's residuals (N_k, 2), metres."""
+        coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
+        out = []
+        for k in range(len(self.observed)):
+            delta = self.phi[k] @ coefficients
+            corners = Rotation.from_rotvec(poses[k, :3]).apply(self.points[k]) + poses[k, 3:]
+            out.append(corners[:, :2] - (self.a[k] + delta[:, :2]) - corners[:, 2:3] * (self.t[k] + delta[:, 2:]))
+        return out
+
+    def normal_equations(self, q: np.ndarray, poses: np.ndarray) -> list[tuple[np.ndarray, ...]]:
+        """Per capture, the Gauss-Newton blocks of its residuals ``r`` and Jacobians ``J_q`` (free
+        coefficients) and ``J_p`` (its pose): ``(J_q^T J_q, J_q^T r, J_p^T J_p, J_q^T J_p, J_p^T r)``.
+
+        ``J_q`` is never formed: a residual's x component depends only on the coefficients of ``dO_x``
+        (through the monomials) and ``dT_x`` (through ``X_z`` times them), so its blocks are the
+        monomials' Gram matrices weighted by 1, ``X_z`` and ``X_z^2``. The pose's rotation is
+        differentiated through SO(3)'s left Jacobian, exactly at any rotation.
+        """
+        coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
+        big_r, big_t = self.norms[0], self.norms[2]
+        m = len(self.exponents)
+        out: list[tuple[np.ndarray, ...]] = []
+        for k in range(len(self.observed)):
+            phi = self.phi[k]
+            delta = phi @ coefficients
+            slopes = self.t[k] + delta[:, 2:]
+            rotated = Rotation.from_rotvec(poses[k, :3]).apply(self.points[k])
+            corners = rotated + poses[k, 3:]
+            z = corners[:, 2]
+            r = corners[:, :2] - (self.a[k] + delta[:, :2]) - z[:, None] * slopes  # (n, 2)
+            de_dx = np.zeros((len(z), 2, 3))  # d e / d X
+            de_dx[:, 0, 0] = de_dx[:, 1, 1] = 1.0
+            de_dx[:, :, 2] = -slopes
+            dx_dw = -_skew(rotated) @ _left_jacobian(poses[k : k + 1, :3])[0]  # X = exp(w) P + T
+            jp = np.concatenate([de_dx @ dx_dw, de_dx], axis=2)  # (n, 2, 6)
+            zphi = z[:, None] * phi
+            g0, g1, g2 = phi.T @ phi, phi.T @ zphi, zphi.T @ zphi
+            hqq = np.zeros((m, 4, m, 4))
+            gq = np.zeros((m, 4))
+            hqp = np.zeros((m, 4, 6))
+            for axis in range(2):  # x: dO_x (column 0), dT_x (column 2); y: columns 1 and 3
+                o_col, t_col = axis, axis + 2
+                hqq[:, o_col, :, o_col] = big_r * big_r * g0
+                hqq[:, o_col, :, t_col] = big_r * big_t * g1
+                hqq[:, t_col, :, o_col] = big_r * big_t * g1.T
+                hqq[:, t_col, :, t_col] = big_t * big_t * g2
+                gq[:, o_col] = -big_r * (phi.T @ r[:, axis])
+                gq[:, t_col] = -big_t * (zphi.T @ r[:, axis])
+                hqp[:, o_col] = -big_r * (phi.T @ jp[:, axis])
+                hqp[:, t_col] = -big_t * (zphi.T @ jp[:, axis])
+            jp_flat = jp.reshape(-1, 6)
+            out.append(
+                (
+                    hqq.reshape(4 * m, 4 * m),
+                    gq.ravel(),
+                    jp_flat.T @ jp_flat,
+                    self.basis.T @ hqp.reshape(4 * m, 6),
+                    jp_flat.T @ r.ravel(),
+                )
+            )
+        return out
+
+    def summed(self, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, ...]]]:
+        """:meth:`normal_equations` with the coefficient blocks summed over captures and expressed in
+        the free basis: ``J_q^T J_q`` (P, P), ``J_q^T r`` (P,), and per capture ``(J_p^T J_p, J_q^T J_p,
+        J_p^T r)``."""
+        blocks = self.normal_equations(q, poses)
+        hqq = self.basis.T @ sum(b[0] for b in blocks) @ self.basis
+        gq = self.basis.T @ sum(b[1] for b in blocks)
+        return hqq, gq, [(b[2], b[3], b[4]) for b in blocks]
+
+
+def _prior(problem: _Problem, noise_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The prior's information matrix (P, P) and its mean's (zero) pull: rows of ``q / sigma``
+    in units of the corners' noise ``noise_m``."""
+    from lfrefract.calibration.camera import HELD_SLOPE_SCALE_STD  # its definition lives with the radial model
+
+    info = np.eye(problem.n_free) * (noise_m / COEFFICIENT_PRIOR) ** 2
+    info += np.outer(problem.scale_row, problem.scale_row) * (noise_m / HELD_SLOPE_SCALE_STD) ** 2
+    return info, np.zeros(problem.n_free)
+
+
+def _solve(
+    problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float, *, fix_model: bool = False
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Levenberg-Marquardt with the poses eliminated (Schur complement). ``fix_model``: only poses."""
+    prior_info, _ = _prior(problem, noise_m)
+    n = len(problem.observed)
+
+    def cost(q_: np.ndarray, poses_: np.ndarray) -> float:
+        r = sum(float(np.sum(e * e)) for e in problem.residuals(q_, poses_))
+        return r + (0.0 if fix_model else float(q_ @ prior_info @ q_))
+
+    current = cost(q, poses)
+    damping = 1e-3
+    stats: dict = {"iterations": 0}
+    for iteration in range(_MAX_ITERATIONS):
+        stats["iterations"] = iteration + 1
+        hqq, gq, blocks = problem.summed(q, poses)
+        hqq, gq = (0.0 * hqq, 0.0 * gq) if fix_model else (hqq + prior_info, gq + prior_info @ q)
+        improved = False
+        for _ in range(12):
+            schur, rhs, inverses = hqq + damping * np.diag(np.diag(hqq) + 1e-30), gq.copy(), []
+            for hpp, hqp, gp in blocks:
+                inv = np.linalg.inv(hpp + damping * np.diag(np.diag(hpp)))
+                inverses.append(inv)
+                if not fix_model:
+                    schur -= hqp @ inv @ hqp.T
+                    rhs -= hqp @ inv @ gp
+            dq = np.zeros(problem.n_free) if fix_model else -np.linalg.solve(schur, rhs)
+            dposes = np.stack([-inv @ (gp + hqp.T @ dq) for inv, (hpp, hqp, gp) in zip(inverses, blocks, strict=True)])
+            trial_q, trial_poses = q + dq, poses + dposes
+            trial = cost(trial_q, trial_poses)
+            if trial < current:
+                improved = True
+                decrease = (current - trial) / max(current, 1e-300)
+                q, poses, current = trial_q, trial_poses, trial
+                damping = max(damping / 5.0, 1e-12)
+                break
+            damping *= 10.0
+        if not improved or decrease < _TOLERANCE:
+            break
+    stats["cost"] = current
+    stats["n"] = n
+    return q, poses, stats
+
+
+def fit_polynomial(
+    observed: Sequence[Observed],
+    *,
+    degree: int,
+    aperture_degree: int,
+    aperture_norm_m: float,
+    slope_norm: float,
+    poses: np.ndarray,
+    noise_m: float,
+    start: np.ndarray | None = None,
+) -> PolynomialFit:
+    """Fit a :class:`PolynomialCorrection` of the given capacity and one pose per capture.
+
+    Parameters
+    ----------
+    observed : sequence of (ndarray, ndarray, ndarray)
+        Per capture: board points (N, 3, board frame, metres), the thin-lens rays' aperture points
+        (N, 2, metres) and slopes (N, 2) along which each was seen.
+    degree, aperture_degree : int
+        The capacity.
+    aperture_norm_m, slope_norm : float
+        The model's scales ``R`` and ``T``.
+    poses : ndarray, shape (n, 6)
+        Starting poses (rotation vector, translation), e.g. the thin-lens model's own.
+    noise_m : float
+        The corners' offset noise the priors are weighed against (metres; e.g. a first fit's RMS).
+    start : ndarray, optional
+        Starting free coefficients (default zero: the thin lens).
+    """
+    problem = _Problem(observed, degree, aperture_degree, aperture_norm_m, slope_norm)
+    q0 = np.zeros(problem.n_free) if start is None else start
+    q, fitted, _ = _solve(problem, q0, np.array(poses, dtype=float), noise_m)
+    return _result(problem, q, fitted, noise_m)
+
+
+def _result(problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float) -> PolynomialFit:
+    residuals = problem.residuals(q, poses)
+    prior_info, _ = _prior(problem, noise_m)
+    n_rows = sum(r.size for r in residuals)
+    total = float(sum(np.sum(r * r) for r in residuals))
+    hqq, _, blocks = problem.summed(q, poses)
+    hqq = hqq + prior_info
+    scores = []
+    for (_, gq_k, _, _, _), (hpp, hqp, gp) in zip(problem.normal_equations(q, poses), blocks, strict=True):
+        hqq -= hqp @ np.linalg.solve(hpp, hqp.T)
+        # The capture's score on q with its pose optimal (its pose score is ~zero there).
+        scores.append(problem.basis.T @ gq_k - hqp @ np.linalg.solve(hpp, gp))
+    dof = max(1, n_rows - problem.n_free - 6 * len(residuals))
+    bread = np.linalg.inv(hqq)
+    n = len(residuals)
+    meat = np.stack(scores).T @ np.stack(scores) * (n / max(1, n - 1))
+    return PolynomialFit(
+        correction=problem.correction(q),
+        poses=poses,
+        rms_m=math.sqrt(total / (n_rows / 2)),
+        per_capture_rms_m=tuple(math.sqrt(float(np.sum(r * r)) / len(r)) for r in residuals),
+        covariance=bread * (total / dof),
+        clustered=bread @ meat @ bread,
+        basis=problem.basis,
+    )
+
+
+def held_back_rms(
+    correction: PolynomialCorrection | Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    observed: Observed,
+    pose: np.ndarray,
+) -> tuple[float, int]:
+    """RMS offset (metres) of one capture's corners from a fixed model's rays, its pose fitted
+    alone (from ``pose``), and the number of corners."""
+    problem = _Problem([observed], 1, 0, 1.0, 1.0)  # a zero model: the fixed model enters as the rays
+    fixed = correction.origins_and_slopes if isinstance(correction, PolynomialCorrection) else correction
+    origins, slopes = fixed(observed[1], observed[2])
+    problem.a, problem.t = [origins], [slopes]
+    q = np.zeros(problem.n_free)
+    _, fitted, _stats = _solve(problem, q, np.array([pose], dtype=float), 1.0, fix_model=True)
+    residual = problem.residuals(q, fitted)[0]
+    return math.sqrt(float(np.sum(residual * residual)) / len(residual)), len(residual)
+
+
+def choose_capacity(
+    observed: Sequence[Observed],
+    *,
+    aperture_norm_m: float,
+    slope_norm: float,
+    poses: np.ndarray,
+    noise_m: float,
+    capacities: Sequence[tuple[int, int]] = POLYNOMIAL_CAPACITIES,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[PolynomialFit, tuple[CapacityScore, ...]]:
+    """The capacity with the smallest error on held-back captures (one standard error rule), fitted
+    to every capture, and every capacity's score (see the module docstring).
+
+    Stops going up the ladder once :data:`_PATIENCE` capacities in a row have not improved on the
+    best (terms of even degree, which a centred lens lacks, can make one capacity worse than the one
+    below while the next odd one is better).
+
+    Raises
+    ------
+    CalibrationError
+        With fewer than 3 captures (no capture can be held back).
+    """
+    observed = list(observed)
+    n = len(observed)
+    if n < 3:
+        raise CalibrationError(f"choosing the ray model's capacity needs at least 3 captures, got {n}")
+    folds = np.arange(n) % min(MAX_FOLDS, n)
+    scores: list[CapacityScore] = []
+    fits: list[PolynomialFit] = []
+    worse_in_a_row = 0
+    for degree, aperture_degree in capacities:
+        full = fit_polynomial(
+            observed,
+            degree=degree,
+            aperture_degree=aperture_degree,
+            aperture_norm_m=aperture_norm_m,
+            slope_norm=slope_norm,
+            poses=poses,
+            noise_m=noise_m,
+        )
+        errors, counts = [], []
+        for fold in np.unique(folds):
+            keep = np.flatnonzero(folds != fold)
+            part = fit_polynomial(
+                [observed[k] for k in keep],
+                degree=degree,
+                aperture_degree=aperture_degree,
+                aperture_norm_m=aperture_norm_m,
+                slope_norm=slope_norm,
+                poses=full.poses[keep],
+                noise_m=noise_m,
+            )
+            for k in np.flatnonzero(folds == fold):
+                rms, count = held_back_rms(part.correction, observed[k], full.poses[k])
+                errors.append(rms)
+                counts.append(count)
+        err, cnt = np.array(errors), np.array(counts)
+        mean_sq = float(np.sum(err**2 * cnt) / np.sum(cnt))
+        # Standard error of the pooled RMS over captures (delta method on the mean square).
+        se = math.sqrt(float(np.var(err**2, ddof=1)) / n) / (2.0 * math.sqrt(mean_sq)) if n > 1 else 0.0
+        score = CapacityScore(
+            degree=degree,
+            aperture_degree=aperture_degree,
+            held_back_rms_m=math.sqrt(mean_sq),
+            standard_error_m=se,
+            fit_rms_m=full.rms_m,
+        )
+        scores.append(score)
+        fits.append(full)
+        if progress is not None:
+            progress(
+                f"ray model polynomial-{degree}-{aperture_degree}: held-back {score.held_back_rms_m * 1e6:.2f} um "
+                f"(+- {se * 1e6:.2f}), fit {full.rms_m * 1e6:.2f} um"
+            )
+        best = min(s.held_back_rms_m for s in scores)
+        worse_in_a_row = worse_in_a_row + 1 if score.held_back_rms_m > best else 0
+        if worse_in_a_row >= _PATIENCE:
+            break
+    best_index = int(np.argmin([s.held_back_rms_m for s in scores]))
+    bar = scores[best_index].held_back_rms_m + scores[best_index].standard_error_m
+    chosen = next(i for i, s in enumerate(scores) if s.held_back_rms_m <= bar)
+    return fits[chosen], tuple(scores)
