@@ -280,9 +280,12 @@ def register(mi: ModuleType) -> None:
             Each surface is the sphere ``c |q|^2 + 2 q_z = 0`` about its vertex (``q`` relative to
             the vertex, camera frame; light from the sensor travels towards +z); the nearer root of
             the ray's quadratic is taken in the form that is stable for any curvature (a plane at
-            ``c = 0``). A path is stopped where it misses a sphere, falls outside a clear aperture or
-            is totally reflected. Returns the point on the front surface, the direction into the
-            scene and whether the path got through (stopped paths: the origin and +z, finite).
+            ``c = 0``), whatever the sign of its denominator (a path that enters a strongly curved
+            surface's sphere through its far side, as in a fisheye, has a negative one; the normal
+            test refuses a root on the far hemisphere). A path is stopped where it misses a sphere,
+            falls outside a clear aperture or is totally reflected. Returns the point on the front
+            surface, the direction into the scene and whether the path got through (stopped paths:
+            the origin and +z, finite).
             """
             passed = mi.Bool(True)
             for vertex_z, c, aperture2, n_from, n_to in self._lens:
@@ -293,7 +296,7 @@ def register(mi: ModuleType) -> None:
                 denom = big_b + dr.safe_sqrt(disc)
                 s = -big_c / denom
                 hit = dr.fma(direction, s, q)
-                passed &= (disc >= 0.0) & (denom > 0.0) & (s >= -1e-9)
+                passed &= (disc >= 0.0) & dr.isfinite(s) & (s >= -1e-9)
                 passed &= hit.x * hit.x + hit.y * hit.y <= aperture2
                 normal = mi.Vector3f(c * hit.x, c * hit.y, 1.0 + c * hit.z)
                 cos_i = dr.dot(direction, normal)

@@ -680,6 +680,10 @@ def _trace_design(
         # Surface c |X|^2 - 2 z = 0 (vertex at the origin); ray q + s e with |e| = 1:
         # c s^2 - 2 B s + C = 0 with B = e_z - c q.e, C = c |q|^2 - 2 q_z; the root nearer the vertex
         # is s = C / (B + sqrt(B^2 - c C)), stable for any c (c = 0 gives the plane's s = -q_z / e_z).
+        # It equals (B - sqrt(B^2 - c C)) / c, the crossing of the vertex-side cap, whatever the sign of
+        # its denominator: a ray that meets a strongly curved surface after entering its sphere through
+        # the far side (a steep marginal ray of a telephoto's rear group) has B + sqrt(...) < 0. The
+        # normal test below refuses a root on the far hemisphere.
         big_b = e[:, 2] - c * np.einsum("ij,ij->i", q, e)
         big_c = c * np.einsum("ij,ij->i", q, q) - 2.0 * q[:, 2]
         disc = big_b * big_b - c * big_c
@@ -687,7 +691,7 @@ def _trace_design(
         with np.errstate(divide="ignore", invalid="ignore"):
             s = big_c / denom
         hit = q + s[:, None] * e
-        ok = (disc >= 0.0) & (denom > 0.0) & np.isfinite(s) & (s >= -1e-12 * (1.0 + np.abs(q[:, 2])))
+        ok = (disc >= 0.0) & np.isfinite(s) & (s >= -1e-12 * (1.0 + np.abs(q[:, 2])))
         ok &= hit[:, 0] ** 2 + hit[:, 1] ** 2 <= semi_aperture[i] ** 2
         # Unit normal along the travel: -(c x, c y, c z - 1), of length 1 on the sphere.
         normal = np.stack([-c * hit[:, 0], -c * hit[:, 1], 1.0 - c * hit[:, 2]], axis=1)
