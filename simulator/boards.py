@@ -40,6 +40,7 @@ from lfrefract.calibration.port import (
     project_through_port,
 )
 from lfrefract.methods import CalibrationViews
+from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.synthesis.views import subaperture_view
@@ -625,7 +626,7 @@ def port_from_renders(
 
 
 def in_air_board_scene(
-    board: dict, *, lens: str = "thin", spp: int = 16, seed: int = 0, camera: str = CAMERA
+    board: dict, *, lens: str | LensPrescription = "thin", spp: int = 16, seed: int = 0, camera: str = CAMERA
 ) -> SceneConfig:
     """One board in air (``medium = "air"``, no port) before the camera with main lens ``lens``.
 
@@ -633,8 +634,9 @@ def in_air_board_scene(
     ----------
     board : dict
         The board's ``[[object]]`` table (:func:`board_table`).
-    lens : str
-        ``"thin"`` or a lens preset (``lfsim lenses``), scaled to the camera.
+    lens : str or LensPrescription
+        ``"thin"``, a lens preset (``lfsim lenses``) or a design (a lens file's), scaled and stopped
+        to the camera (:func:`simulator.config.main_lens`).
     spp, seed : int
         Samples per pixel and seed of the render.
     camera : str

@@ -15,7 +15,9 @@
     lfsim scenes
 
 SCENE is a TOML file or the name of an embedded scene (``default``, ``white``); without it the
-embedded default scene is rendered. RIG is a stereo rig file (:mod:`simulator.rig`) or the name of
+embedded default scene is rendered. LENS is ``thin``, a lens preset (``lfsim lenses``) or a lens file
+(TOML or JSON; ``scenes/lenses/`` holds a family of published designs), scaled to the camera's focal
+length and stopped to its f-number. RIG is a stereo rig file (:mod:`simulator.rig`) or the name of
 an embedded rig (``default``). SPEC is a sweep spec (:mod:`simulator.dataset.spec`) or the name of
 an embedded sweep (``tilt``); ``dataset run`` completes an interrupted run of the same spec in DIR,
 and exits with 1 if a sample failed; ``dataset check`` exits with 1 unless every sample is done and
@@ -46,6 +48,7 @@ from simulator.config import (
     SceneConfig,
     SensorSettings,
     embedded_scenes,
+    lens_option,
     load_scene,
     main_lens,
     sensor_model,
@@ -57,6 +60,12 @@ __all__ = ["main"]
 
 #: ``lfsim render --sensor none``: no sensor model (raw.exr only), whatever the scene says.
 NO_SENSOR = "none"
+#: What every ``--lens`` takes (:func:`simulator.config.lens_option`).
+LENS_HELP = (
+    f"'{THIN_LENS}', a lens preset ({', '.join(sorted(LENS_PRESETS))}: lfsim lenses) or a lens file (TOML or "
+    "JSON, e.g. scenes/lenses/tessar.toml: docs/lenses.md), scaled to the camera's focal length and stopped to "
+    "its f-number (a design slower than that f-number has its axial beam cut by its own rims)"
+)
 
 
 def _scene_path(arg: str | None) -> Path | None:
@@ -175,12 +184,7 @@ def _parser() -> argparse.ArgumentParser:
         f"else {DEFAULT_IDEAL_SPP})",
     )
     render.add_argument("--seed", type=int, help="sampler seed (default: the scene's)")
-    render.add_argument(
-        "--lens",
-        choices=[THIN_LENS, *sorted(LENS_PRESETS)],
-        help="main lens replacing the scene's camera.lens: the thin lens or a preset scaled and stopped to the "
-        "camera (lfsim lenses)",
-    )
+    render.add_argument("--lens", metavar="LENS", help=f"main lens replacing the scene's camera.lens: {LENS_HELP}")
     render.add_argument(
         "--rays",
         action="store_true",
@@ -249,8 +253,8 @@ def _parser() -> argparse.ArgumentParser:
     exp.add_argument("--f-numbers", type=_numbers, help="main-lens f-numbers, separated by commas")
     exp.add_argument(
         "--lens",
-        choices=[THIN_LENS, *sorted(LENS_PRESETS)],
-        help="main lens every rig camera renders through (the core still assumes a thin lens)",
+        metavar="LENS",
+        help=f"main lens every rig camera renders through (the core still assumes a thin lens): {LENS_HELP}",
     )
     exp.add_argument(
         "--renders",
@@ -274,7 +278,7 @@ def _parser() -> argparse.ArgumentParser:
     whites.add_argument(
         "--sensor", choices=sorted(DETECTOR_PRESETS), help="detector preset (default: the camera's name)"
     )
-    whites.add_argument("--lens", choices=[THIN_LENS, *sorted(LENS_PRESETS)], default=THIN_LENS, help="main lens")
+    whites.add_argument("--lens", metavar="LENS", default=THIN_LENS, help=f"main lens: {LENS_HELP}")
     whites.add_argument(
         "--focal-lengths-mm", type=_numbers, help="zoom settings, focal lengths in mm (default: the camera's)"
     )
@@ -380,7 +384,7 @@ def _experiment(args: argparse.Namespace) -> int:
         "thickness_m": args.thickness_m,
         "tilts_deg": args.tilts_deg,
         "f_numbers": args.f_numbers,
-        "lens": args.lens,
+        "lens": None if args.lens is None else lens_option(args.lens),
     }
     options = ExperimentOptions(
         scale=args.scale,
@@ -436,6 +440,7 @@ def _whites(args: argparse.Namespace) -> int:
     if sensor_name not in DETECTOR_PRESETS:
         raise ParameterError(f"--sensor: camera {args.camera!r} has no detector preset of its name; pass --sensor NAME")
     base = sensor_model(sensor_name, camera)
+    lens = lens_option(args.lens)
     with named("--frames"):
         sensor = SensorSettings(detector=base.detector, frames=args.frames)
     fields_by_flag(RenderSettings, {"--spp": {"spp": args.spp}, "--seed": {"seed": args.seed}})
@@ -458,7 +463,7 @@ def _whites(args: argparse.Namespace) -> int:
         camera=camera,
         settings=settings,
         sensor=sensor,
-        lens=None if args.lens == THIN_LENS else args.lens,
+        lens=None if lens == THIN_LENS else lens,
         spp=args.spp,
         seed=args.seed,
         variant=args.variant,
@@ -548,8 +553,9 @@ def _run(args: argparse.Namespace) -> int:
         if lens_name is None and args.camera and config.lens is not None and config.lens.name in LENS_PRESETS:
             lens_name = config.lens.name  # the scene's preset lens, scaled to the new camera
         if lens_name is not None:
+            lens = lens_option(lens_name)  # its errors name --lens (and the file)
             with named(f"scene file {config.source!r} with {', '.join([*flags, f'--lens {lens_name}'])}"):
-                changes["lens"] = main_lens(lens_name, changes.get("camera", config.camera))
+                changes["lens"] = main_lens(lens, changes.get("camera", config.camera))
             if args.lens is not None:
                 flags.append(f"--lens {args.lens}")
         sensor = config.sensor if args.sensor is None else None if args.sensor == NO_SENSOR else args.sensor

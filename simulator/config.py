@@ -9,9 +9,11 @@ A scene file has these tables (every length in metres, angles only in ``*_deg`` 
     [camera]                          # preset = "tiny" | "f01" | "illum", or every field of
     preset = "tiny"                   #   LightFieldCamera.to_dict() (with [camera.mla], [camera.sensor])
     lens = "thin"                     # optional main lens: "thin" (default), a lens preset
-                                      #   ("double-gauss", "wide-angle": lfsim lenses) scaled and
-                                      #   stopped to the camera, or a [camera.lens] table (a
-                                      #   LensPrescription); a real lens needs a [port] clear of it
+                                      #   ("double-gauss", "wide-angle": lfsim lenses) or the path
+                                      #   of a lens file (relative to the scene file; scenes/lenses/)
+                                      #   scaled and stopped to the camera, or a [camera.lens] table
+                                      #   (a LensPrescription, used as it is); a real lens needs a
+                                      #   [port] clear of it
     [camera.pose]                     # optional; camera-to-world, default identity
     rotation_xyz_deg = [0, 0, 0]
     position_m = [0, 0, 0]
@@ -122,7 +124,8 @@ from typing import Any
 import numpy as np
 
 from lfrefract import FlatPort, LightFieldCamera, Pose, camera_preset, seawater_index
-from lfrefract.errors import ParameterError
+from lfrefract.errors import FileFormatError, ParameterError
+from lfrefract.formats.paramfile import read_lens_file
 from lfrefract.optics.lens import LENS_PRESETS, LensPrescription, lens_preset
 from lfrefract.optics.pose import rotation_from_euler_xyz
 from lfrefract.optics.real_lens import RealLensCamera
@@ -131,6 +134,7 @@ from lfrefract.validate import (
     as_table,
     bounded_float,
     bounded_int,
+    file_problem,
     finite_float,
     finite_vector,
     one_of,
@@ -183,6 +187,8 @@ __all__ = [
     "apply_water_index",
     "default_scene_path",
     "embedded_scenes",
+    "lens_option",
+    "lens_record",
     "load_scene",
     "main_lens",
     "parse_scene",
@@ -1002,23 +1008,83 @@ def _check_sensor(sensor: SensorSettings, camera: LightFieldCamera) -> None:
             )
 
 
-def main_lens(value: Any, camera: LightFieldCamera) -> LensPrescription | None:
-    """The main lens a ``camera.lens`` value names: ``"thin"`` (None: the thin lens), a preset name
-    of :data:`lfrefract.optics.lens.LENS_PRESETS` (scaled and stopped to ``camera``), or a lens table
-    (:meth:`LensPrescription.from_dict`, which must already have the camera's focal length and
-    f-number)."""
+def main_lens(value: Any, camera: LightFieldCamera, *, base_dir: Path | str = ".") -> LensPrescription | None:
+    """The main lens a ``camera.lens`` value names.
+
+    Parameters
+    ----------
+    value : str, LensPrescription or table
+        ``"thin"`` (None: the thin lens); a preset name of :data:`lfrefract.optics.lens.LENS_PRESETS`;
+        the path of a lens file (:func:`lfrefract.formats.paramfile.read_lens_file`; ``scenes/lenses/`` holds a
+        family of them); a :class:`LensPrescription` (a design, such as a lens file's,
+        :func:`lens_option`) -- these three scaled to ``camera``'s focal length and stopped to its
+        f-number -- or a lens table (:meth:`LensPrescription.from_dict`), used as it is: it must
+        already have the camera's focal length and f-number.
+    camera : LightFieldCamera
+    base_dir : path-like
+        What a relative lens-file path is relative to (a scene file's folder).
+
+    Raises
+    ------
+    ParameterError
+        For a string that is none of these (naming ``camera.lens``, the value and why the path is no
+        file), for a lens file that is invalid (naming it and its key) or cannot be stopped to the
+        camera's f-number, or for an invalid table.
+    """
+    if isinstance(value, LensPrescription):
+        return value.scaled_to_focal_length(camera.focal_length_m).with_f_number(camera.f_number)
     if isinstance(value, str):
         if value == THIN_LENS:
             return None
-        if value not in LENS_PRESETS:
+        if value in LENS_PRESETS:
+            return lens_preset(value, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
+        path = Path(value) if Path(value).is_absolute() else Path(base_dir) / value
+        problem = "an empty path" if not value else file_problem(path)
+        if problem is not None:
             raise ParameterError(
-                f"camera.lens={value!r} is neither {THIN_LENS!r} nor a lens preset ({', '.join(sorted(LENS_PRESETS))})"
+                f"camera.lens={value!r} is neither {THIN_LENS!r}, a lens preset ({', '.join(sorted(LENS_PRESETS))}) "
+                f"nor a lens file ({problem})"
             )
-        return lens_preset(value, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
+        try:
+            return read_lens_file(path, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
+        except (FileFormatError, ParameterError) as exc:
+            raise ParameterError(f"camera.lens={value!r}: {exc}") from None
     return LensPrescription.from_dict(as_table("[camera.lens]", value))
 
 
-def _camera(table: Any) -> tuple[LightFieldCamera, Pose, LensPrescription | None]:
+def lens_record(value: str | LensPrescription) -> str | dict:
+    """How a run records a main lens it was given (:func:`lens_option`): ``"thin"`` or the preset's
+    name, or a design by its table (:meth:`LensPrescription.to_dict`), never by the path it came from."""
+    return value if isinstance(value, str) else value.to_dict()
+
+
+def lens_option(value: str, *, flag: str = "--lens") -> str | LensPrescription:
+    """What a command line's ``--lens`` names: ``"thin"`` or a preset name (returned as it is), else the
+    design of an existing lens file (:func:`lfrefract.formats.paramfile.read_lens_file`, unscaled: :func:`main_lens`
+    scales and stops it to each camera, so a run records the lens by its table, not its path).
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is neither, naming ``flag`` and the value.
+    FileFormatError
+        If the lens file is invalid (naming ``flag``, the file and the key).
+    """
+    if value == THIN_LENS or value in LENS_PRESETS:
+        return value
+    problem = "an empty path" if not value else file_problem(value)
+    if problem is not None:
+        raise ParameterError(
+            f"{flag} {value!r} is neither {THIN_LENS!r}, a lens preset ({', '.join(sorted(LENS_PRESETS))}) "
+            f"nor a lens file, TOML or JSON ({problem})"
+        )
+    try:
+        return read_lens_file(value)
+    except FileFormatError as exc:
+        raise FileFormatError(f"{flag}: {exc}") from None
+
+
+def _camera(table: Any, base_dir: Path) -> tuple[LightFieldCamera, Pose, LensPrescription | None]:
     table = as_table("[camera]", table)
     pose_table = as_table("[camera.pose]", table.pop("pose")) if "pose" in table else {}
     if "position_m" in pose_table:  # the scene's bound first (lfrefract's Pose allows a wider one)
@@ -1030,7 +1096,7 @@ def _camera(table: Any) -> tuple[LightFieldCamera, Pose, LensPrescription | None
         camera = camera_preset(table["preset"])
     else:
         camera = LightFieldCamera.from_dict(table)
-    return camera, pose, main_lens(lens_value, camera)
+    return camera, pose, main_lens(lens_value, camera, base_dir=base_dir)
 
 
 def _port(table: Any, water: Water | None) -> FlatPort:
@@ -1070,7 +1136,7 @@ def parse_scene(data: dict, *, base_dir: Path | str = ".", source: str = "<memor
     reject_unknown_keys("scene", data, keys)
     if "camera" not in data:
         raise ParameterError("scene: missing [camera] table")
-    camera, pose, lens = _camera(data["camera"])
+    camera, pose, lens = _camera(data["camera"], base)
     water = Water.from_dict(data["water"]) if "water" in data else None
     port = _port(data["port"], water) if "port" in data else None
     render = _build(RenderSettings, data.get("render", {}), "render", base)

@@ -31,11 +31,11 @@ from lfrefract.errors import ParameterError
 from lfrefract.formats.jsonio import write_json
 from lfrefract.formats.lytro import write_f01_raw, write_illum_raw
 from lfrefract.formats.outputs import staged_directory
-from lfrefract.optics.lens import LENS_PRESETS
+from lfrefract.optics.lens import LENS_PRESETS, LensPrescription
 from lfrefract.optics.real_lens import RealLensCamera
-from lfrefract.validate import bounded_float, bounded_int
+from lfrefract.validate import bounded_float, bounded_int, shown
 from simulator import backend, groundtruth
-from simulator.config import RenderSettings, SensorSettings, embedded_scenes, load_scene, main_lens
+from simulator.config import RenderSettings, SensorSettings, embedded_scenes, lens_record, load_scene, main_lens
 from simulator.detector import lytro_settings
 from simulator.job import lens_steps, render_raw, sensor_mosaic
 
@@ -127,7 +127,7 @@ def render_whites(
     camera: LightFieldCamera,
     settings: Sequence[WhiteSetting],
     sensor: SensorSettings,
-    lens: str | None = None,
+    lens: str | LensPrescription | None = None,
     spp: int = 64,
     seed: int = 0,
     variant: str | None = None,
@@ -147,9 +147,10 @@ def render_whites(
         The sensor (built for ``camera``, :func:`simulator.config.sensor_model`); its ``frames``
         exposures are averaged (Lytro's whites average many). 10 bits give Illum ``.raw`` +
         ``.txt`` files, 12 bits F01 ``.raw`` + ``.json``.
-    lens : str, optional
-        A main-lens preset (``lfsim lenses``), rescaled to each setting's focal length; None: the
-        thin lens.
+    lens : str or LensPrescription, optional
+        A main-lens preset (``lfsim lenses``) or a design (a lens file's,
+        :func:`simulator.config.lens_option`), rescaled to each setting's focal length (``whites.json``
+        records a design by its table); None: the thin lens.
     spp, seed : int
         Samples per pixel of each white render and the render seed; setting ``k`` renders with
         seed ``seed + k`` and so draws its own noise.
@@ -173,8 +174,10 @@ def render_whites(
     bits = sensor.detector.bit_depth
     if bits not in (10, 12):
         raise ParameterError(f"sensor.bit_depth={bits}: Lytro white images hold 10-bit (Illum) or 12-bit (F01) counts")
-    if lens is not None and lens not in LENS_PRESETS:
+    if isinstance(lens, str) and lens not in LENS_PRESETS:
         raise ParameterError(f"lens={lens!r} is not a lens preset ({', '.join(sorted(LENS_PRESETS))})")
+    if lens is not None and not isinstance(lens, (str, LensPrescription)):
+        raise ParameterError(f"lens must be a lens preset's name or a LensPrescription, got {shown(lens)}")
     check_white_seed(seed, len(settings))
     base = load_scene(embedded_scenes()["white"])
     configs = []
@@ -223,7 +226,7 @@ def render_whites(
             {
                 "kind": WHITES_KIND,
                 "camera": camera.to_dict(),
-                "lens": "thin" if lens is None else lens,
+                "lens": "thin" if lens is None else lens_record(lens),
                 "sensor": sensor.to_dict(),
                 "spp": spp,
                 "seed": seed,

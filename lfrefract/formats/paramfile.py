@@ -1,4 +1,4 @@
-"""Camera and port files: the parameters of your own camera and port, written and read in one place.
+"""Camera, port and lens files: the parameters of your own camera, port and main lens, written and read in one place.
 
 A camera file or a port file is one of (the format is chosen by the file's suffix):
 
@@ -16,10 +16,16 @@ A camera file or a port file is one of (the format is chosen by the file's suffi
 * ``.txt`` (ports only): the one-line flat-port layout of Refractive COLMAP / calibmar
   (:mod:`lfrefract.formats.flatport`).
 
-The writers (:func:`write_camera_file`, :func:`write_port_file`) write exactly what
-:meth:`LightFieldCamera.to_dict` / :meth:`FlatPort.to_dict` hold (ports in TOML by their tilt
-angles in radians, so the values read back are the ones written, bit for bit), atomically; the
-readers give back an equal camera or port.
+A lens file (:func:`read_lens_file`) is a ``.toml`` file with a ``[lens]`` table (the table of
+:meth:`lfrefract.optics.lens.LensPrescription.to_dict`: ``name``, ``source``, ``[[lens.surfaces]]``)
+and an optional ``schema_version = 1``, else lfrefract JSON with a ``lens`` table (kind
+:data:`LENS_FILE_KIND`, or none); ``scenes/lenses/`` holds a family of published designs as lens files.
+
+The writers (:func:`write_camera_file`, :func:`write_port_file`, :func:`write_lens_file`) write
+exactly what :meth:`LightFieldCamera.to_dict` / :meth:`FlatPort.to_dict` /
+``LensPrescription.to_dict`` hold (ports in TOML by their tilt angles in radians, so the values read
+back are the ones written, bit for bit), atomically; the readers give back an equal camera, port or
+lens.
 
 Every problem of a file (missing, not a regular file, larger than :data:`MAX_PARAMETER_FILE_BYTES`,
 not UTF-8, not valid TOML / JSON, an unknown or missing key, a value of the wrong type or out of
@@ -48,21 +54,26 @@ from lfrefract.formats.jsonio import (
     write_text_atomically,
 )
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.lens import LensPrescription, Surface
 from lfrefract.optics.port import FlatPort
 from lfrefract.validate import finite_vector, regular_file, reject_unknown_keys, require_keys, shown
 
 __all__ = [
     "CAMERA_FILE_KIND",
     "CAMERA_SUFFIXES",
+    "LENS_FILE_KIND",
+    "LENS_SUFFIXES",
     "MAX_PARAMETER_FILE_BYTES",
     "MLA_CALIBRATION_KIND",
     "PORT_FILE_KIND",
     "PORT_SUFFIXES",
     "check_kind",
     "read_camera_file",
+    "read_lens_file",
     "read_parameter_json",
     "read_port_file",
     "write_camera_file",
+    "write_lens_file",
     "write_port_file",
 ]
 
@@ -75,10 +86,14 @@ MAX_PARAMETER_FILE_BYTES = 64 * 2**20
 CAMERA_SUFFIXES = (".toml", ".json")
 #: Suffixes :func:`write_port_file` writes.
 PORT_SUFFIXES = (".toml", ".json", ".txt")
+#: Suffixes :func:`write_lens_file` writes.
+LENS_SUFFIXES = (".toml", ".json")
 
 #: ``kind`` of the JSON camera and port files written here.
 CAMERA_FILE_KIND = "lfrefract.camera"
 PORT_FILE_KIND = "lfrefract.port"
+#: ``kind`` of the JSON lens files written here.
+LENS_FILE_KIND = "lfrefract.lens"
 
 
 _PORT_SCALARS = ("distance_m", "thickness_m", "n_air", "n_glass", "n_water")
@@ -135,6 +150,7 @@ def _model_tables() -> dict[str, tuple[str, str]]:
     return {
         "correction": calibration,
         "correction_covariance": calibration,
+        "correction_spread": calibration,
         "mla": ("an MLA calibration (lfrefract calibrate mla output)", MLA_CALIBRATION_KIND),
         "ray_model": ("a port calibration (lfrefract calibrate port output)", PORT_CALIBRATION_KIND),
     }
@@ -168,7 +184,7 @@ def check_kind(path: str | os.PathLike, data: dict) -> None:
             f"{str(path)!r} is {holder} (key 'kind' is {kind!r}) but has no {required[kind]!r} table: the file "
             "is damaged or its kind was edited; write it again with the command that makes it"
         )
-    own = {CAMERA_FILE_KIND: "camera", PORT_FILE_KIND: "port"}
+    own = {CAMERA_FILE_KIND: "camera", PORT_FILE_KIND: "port", LENS_FILE_KIND: "lens"}
     if kind in own:
         extra = sorted(set(data) - {"schema_version", "kind", own[kind]})
         if extra:
@@ -287,6 +303,97 @@ def write_port_file(path: str | os.PathLike, port: FlatPort) -> Path:
         f"(total {math.degrees(port.total_tilt_rad):.9g} deg); normal [{normal}].",
     ]
     return _write_toml(path, header, {"schema_version": SCHEMA_VERSION, "port": data})
+
+
+# =============================================================================== lenses
+def read_lens_file(
+    path: str | os.PathLike, *, focal_length_m: float | None = None, f_number: float | None = None
+) -> LensPrescription:
+    """The main lens of a lens file (``.toml``, else lfrefract JSON with a ``lens`` table), optionally
+    scaled to a camera as :func:`lfrefract.optics.lens.lens_preset` scales a preset.
+
+    The ``lens`` table holds ``name``, ``source`` (optional: book and page, patent) and ``surfaces``,
+    a list of surface tables (``radius_m``, ``thickness_m``, ``medium``, ``semi_aperture_m``,
+    ``stop``; :meth:`lfrefract.optics.lens.Surface.from_dict`), metres; in TOML, ``[[lens.surfaces]]``.
+
+    Parameters
+    ----------
+    path : path-like
+        The lens file.
+    focal_length_m : float, optional
+        Scale the design to this d-line effective focal length (a camera's ``focal_length_m``).
+    f_number : float, optional
+        Resize the stop to this f-number; the other clear apertures stay, so opening a design beyond
+        its own f-number makes them cut the axial beam
+        (:meth:`lfrefract.optics.lens.LensPrescription.with_f_number`).
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, too large, not UTF-8 TOML or lfrefract JSON, has no ``lens`` table, or
+        does not hold a valid prescription; the message names the file and the key
+        (``lens.surfaces[2]``: the third surface table).
+    ParameterError
+        If the lens cannot be scaled or stopped as asked (a negative focal length, a stop larger
+        than its surface); the message names the file.
+    """
+    path = Path(path)
+    table = _toml_table(path, "lens") if _is_toml(path) else _json_table(path, "lens")
+    unknown = sorted(set(table) - {"name", "source", "surfaces"})
+    if unknown:
+        raise FileFormatError(f"{str(path)!r}: key 'lens' holds unknown keys {unknown} (name, source, surfaces)")
+    if "name" not in table:
+        raise FileFormatError(f"{str(path)!r}: key 'lens.name' is missing")
+    name, source, rows = table["name"], table.get("source", ""), table.get("surfaces")
+    for key, value in (("name", name), ("source", source)):
+        if not isinstance(value, str):
+            raise FileFormatError(f"{str(path)!r}: key 'lens.{key}' must be a string, got {shown(value)}")
+    if not isinstance(rows, list) or not rows:
+        raise FileFormatError(
+            f"{str(path)!r}: key 'lens.surfaces' must be a non-empty list of surface tables, got {shown(rows)}"
+        )
+    surfaces = []
+    for i, row in enumerate(rows):
+        try:
+            surfaces.append(Surface.from_dict(row))
+        except ParameterError as exc:
+            raise FileFormatError(f"{str(path)!r}: key 'lens.surfaces[{i}]': {exc}") from None
+    try:
+        lens = LensPrescription(name=name, source=source, surfaces=tuple(surfaces))
+    except ParameterError as exc:
+        key = "lens.name" if not name.strip() else "lens.surfaces"
+        raise FileFormatError(f"{str(path)!r}: key {key!r}: {exc}") from None
+    try:
+        if focal_length_m is not None:
+            lens = lens.scaled_to_focal_length(focal_length_m)
+        if f_number is not None:
+            lens = lens.with_f_number(f_number)
+    except ParameterError as exc:
+        raise ParameterError(f"lens file {str(path)!r}: {exc}") from None
+    return lens
+
+
+def write_lens_file(path: str | os.PathLike, lens: LensPrescription) -> Path:
+    """Write ``lens`` as a lens file, atomically: TOML or JSON by the suffix of ``path``.
+
+    Raises
+    ------
+    ParameterError
+        If ``lens`` is not a LensPrescription, or the suffix is not one of :data:`LENS_SUFFIXES`.
+    """
+    if not isinstance(lens, LensPrescription):
+        raise ParameterError(f"lens must be a LensPrescription, got {shown(lens)}")
+    path = Path(path)
+    suffix = _suffix(path, LENS_SUFFIXES, "lens file")
+    if suffix == ".json":
+        return write_json(path, {"kind": LENS_FILE_KIND, "lens": lens.to_dict()})
+    first = lens.first_order()
+    header = [
+        f"# lfrefract lens file: {lens.name!r}, {len(lens.surfaces)} surfaces in order from the object side.",
+        "# Lengths in metres; keys: docs/lenses.md, 'Lens files'.",
+        f"# First-order data (d line): f = {first.efl_m * 1e3:.6g} mm, f/{first.f_number:.4g}.",
+    ]
+    return _write_toml(path, header, {"schema_version": SCHEMA_VERSION, "lens": lens.to_dict()})
 
 
 # =============================================================================== common

@@ -40,7 +40,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import SIDECAR_NAME
 from lfrefract.formats.jsonio import write_json, write_text_atomically
 from lfrefract.optics.camera import LightFieldCamera
-from lfrefract.optics.lens import LENS_PRESETS
+from lfrefract.optics.lens import LENS_PRESETS, LensPrescription
 from lfrefract.optics.port import MAX_DISTANCE_M, MAX_THICKNESS_M
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import bounded_float, finite_float, one_of, positive_float, shown
@@ -127,11 +127,12 @@ class ExperimentOptions:
     f_numbers : tuple of float, optional
         Main-lens f-numbers that ``fov`` evaluates (each checked against the camera when it runs:
         the image-side f-number may not fall below the microlenses').
-    lens : str, optional
-        The main lens every camera of a stereo rig renders through: ``"thin"`` or a lens preset
-        (``lfsim lenses``), scaled and stopped to the camera. The core is not told: it keeps its
-        thin-lens model of the camera (what ``planes`` and ``objects`` then measure is the cost of
-        that assumption).
+    lens : str or LensPrescription, optional
+        The main lens every camera of a stereo rig renders through: ``"thin"``, a lens preset
+        (``lfsim lenses``) or a design (a lens file's, :func:`simulator.config.lens_option`), scaled
+        and stopped to the camera; ``meta.json`` records a design by its table. The core is not told:
+        it keeps its thin-lens model of the camera (what ``planes`` and ``objects`` then measure is
+        the cost of that assumption).
     """
 
     scale: str = "tiny"
@@ -141,7 +142,7 @@ class ExperimentOptions:
     thickness_m: float | None = None
     tilts_deg: tuple[float, ...] | None = None
     f_numbers: tuple[float, ...] | None = None
-    lens: str | None = None
+    lens: str | LensPrescription | None = None
 
     def __post_init__(self) -> None:
         one_of("scale", self.scale, SCALES)
@@ -171,7 +172,7 @@ class ExperimentOptions:
             object.__setattr__(self, "tilts_deg", _floats("tilts_deg", self.tilts_deg, _tilt_deg))
         if self.f_numbers is not None:
             object.__setattr__(self, "f_numbers", _floats("f_numbers", self.f_numbers, positive_float))
-        if self.lens is not None:
+        if self.lens is not None and not isinstance(self.lens, LensPrescription):
             one_of("lens", self.lens, (THIN_LENS, *sorted(LENS_PRESETS)))
 
     def given(self) -> tuple[str, ...]:
@@ -179,9 +180,11 @@ class ExperimentOptions:
         return tuple(f.name for f in fields(self) if f.name != "scale" and getattr(self, f.name) is not None)
 
     def to_dict(self) -> dict:
-        """Plain data for ``meta.json`` (the camera as its table)."""
+        """Plain data for ``meta.json`` (the camera, and a lens design, as their tables)."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["camera"] = None if self.camera is None else self.camera.to_dict()
+        if isinstance(self.lens, LensPrescription):
+            out["lens"] = self.lens.to_dict()
         return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
 
 

@@ -84,6 +84,7 @@ from lfrefract.formats.jsonio import read_json, write_text_atomically
 from lfrefract.formats.outputs import scratch_directory
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
@@ -98,6 +99,7 @@ from simulator.config import (
     RenderSettings,
     SceneConfig,
     SensorSettings,
+    lens_record,
     sensor_model,
 )
 from simulator.experiments import ExperimentOptions, ExperimentResult, complete_rows, register, write_table
@@ -300,7 +302,7 @@ def _focus_distance_m(camera: LightFieldCamera) -> float:
 
 
 def _air_board_scene(
-    table: dict, camera_scene: SceneConfig, lens: str, spp: int, seed: int, frames: int
+    table: dict, camera_scene: SceneConfig, lens: str | LensPrescription, spp: int, seed: int, frames: int
 ) -> SceneConfig:
     """An in-air board before ``camera_scene``'s camera, through ``lens``, with its sensor model
     averaging ``frames`` exposures."""
@@ -382,8 +384,8 @@ class _Rendered:
     ----------
     setup : PipelineSetup
         The scale's set-up.
-    lens : str
-        The real captures' main lens.
+    lens : str or LensPrescription
+        The real captures' main lens: a preset's name or a design (``ExperimentOptions.lens``).
     thin, real : RigConfig
         The oracle's rig (thin lens, no sensor model) and the real one (``lens``, the sensor model).
     jobs : list of (str, list)
@@ -399,7 +401,7 @@ class _Rendered:
     """
 
     setup: PipelineSetup
-    lens: str
+    lens: str | LensPrescription
     thin: RigConfig
     real: RigConfig
     jobs: list[tuple[str, list]]
@@ -468,7 +470,7 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
                 "camera": scene.camera.to_dict(),
                 "settings": [dataclasses.asdict(x) for x in settings],
                 "sensor": sensor.to_dict(),
-                "lens": lens,
+                "lens": lens_record(lens),
                 "spp": setup.white_spp,
                 "seed": white_seed,
             },
@@ -809,7 +811,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     rows = list(complete_rows(rows))
     write_table(complete_rows(by_depth), out_dir, stem="planes")
     write_text_atomically(out_dir / "commands.txt", "\n".join(log) + "\n")
-    title = f"pipeline ({scale}), {lens} lens, {setup.sensor} sensor: {rig_setup(real)}"
+    title = f"pipeline ({scale}), {lens if isinstance(lens, str) else lens.name} lens, {setup.sensor} sensor: "
+    title += rig_setup(real)
     figures = (
         out_dir / "pipeline_summary.png",
         *plane_figures(
@@ -825,7 +828,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         summary=_summary(rows),
         parameters={
             "rig": dataclasses.asdict(setup.rig),
-            "lens": lens,
+            "lens": lens_record(lens),
             "sensor": setup.sensor,
             "white_frames": setup.white_frames,
             "white_spp": setup.white_spp,
