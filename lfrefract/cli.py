@@ -111,6 +111,7 @@ from lfrefract.formats.capture import (
     check_lens_modelled,
     check_port_ray_model,
     correction_estimate_from_option,
+    correction_spread_from_option,
     mask_warp_map,
     mla_from_file,
     port_from_file,
@@ -127,7 +128,7 @@ from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
-from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection
+from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection, moved
 from lfrefract.synthesis.depth_aware import (
     FILLED_EXACT_GIVEN_DEPTH,
     DepthAwareOptions,
@@ -875,9 +876,13 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
     else:
         correction, model_file = ray_correction_from_option(args.camera), args.camera
+        model_views: list[list[BoardView]] = []
         if correction is not None:  # a calibrated camera: its rays, not the thin lens's
+            # The camera model's uncertainty: the views as each direction of its spread would correct them.
+            spread = correction_spread_from_option(args.camera)
+            model_views = [[corrected_view(v, moved(correction, f), view) for v in views] for f in spread]
             views = [corrected_view(v, correction, view) for v in views]
-        result = calibrate_port(view, views, **glass)
+        result = calibrate_port(view, views, model_views=model_views, **glass)
     data = {
         "kind": PORT_CALIBRATION_KIND,
         **boards.to_dict(),
@@ -897,9 +902,13 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         f"the port on the in-air model alone: distance {joint.sequential.port.distance_m * 1e3:.2f} mm), "
         f"wrote {args.refine_camera}"
     )
+    model_share = ""
+    if "camera_model" in result.covariance_parts and np.any(result.covariance_parts["camera_model"]):
+        share = result.covariance_parts["camera_model"][2, 2] / max(result.covariance[2, 2], 1e-300)
+        model_share = f"; the camera model's uncertainty makes {share:.0%} of the distance's variance"
     print(
         f"port normal {np.round(result.port.normal, 5).tolist()} (+- {result.normal_std_deg:.3f} deg), distance "
-        f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}), "
+        f"{result.port.distance_m * 1e3:.2f} mm (+- {result.distance_std_m * 1e3:.2f}){model_share}, "
         f"residual {result.rms_px:.3f} px RMS over {len(views)} captures{boards.left_out_note()}{refined}; "
         f"wrote {out} and {out.with_suffix('.txt')}"
     )

@@ -55,7 +55,8 @@ from scipy.spatial.transform import Rotation
 
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
 from lfrefract.calibration.port import BoardView, board_corners
-from lfrefract.calibration.ray_fit import CapacityScore, choose_capacity, fit_polynomial
+from lfrefract.calibration.ray_fit import CapacityScore, PolynomialFit, choose_capacity, fit_polynomial
+from lfrefract.calibration.uncertainty import larger_covariance, spread_factors
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
@@ -130,6 +131,12 @@ class CameraCalibration:
         captures do not determine it (see the module docstring), else empty.
     poses : tuple of tuple of float
         Each capture's board pose: rotation vector (rad) and translation (m), board to camera frame.
+    spread : ndarray, shape (k, n)
+        The model's uncertainty as directions of its :meth:`~RayCorrection.vector` (``n`` numbers):
+        its covariance is about ``spread.T @ spread``, the larger in every direction of the
+        Jacobian's and the capture-clustered one
+        (:func:`lfrefract.calibration.uncertainty.spread_factors`). A port calibrated on this model
+        propagates it (``model_views`` of :func:`lfrefract.calibration.calibrate_port`).
     capacity_scores : tuple of CapacityScore
         For the polynomial model: each capacity tried with its error on held-back captures
         (:func:`lfrefract.calibration.ray_fit.choose_capacity`); empty for the radial model. The
@@ -147,6 +154,7 @@ class CameraCalibration:
     clustered_std: tuple[float, ...]
     held: tuple[str, ...]
     poses: tuple[tuple[float, ...], ...]
+    spread: np.ndarray
     capacity_scores: tuple[CapacityScore, ...] = ()
 
     @property
@@ -165,6 +173,14 @@ class CameraCalibration:
             )
         return CorrectionEstimate(correction=self.correction, covariance=self.correction_covariance)
 
+    def spread_to_dict(self) -> dict:
+        """:attr:`spread` as plain data: its rows and what they mean."""
+        return {
+            "rows": self.spread.tolist(),
+            "meaning": "directions of the correction's parameter vector (the radial model's five parameters, or "
+            "the polynomial model's coefficients row by row) whose outer products sum to its covariance",
+        }
+
     def captured_rays(self, uv: np.ndarray | None = None) -> CapturedRays:
         """The calibrated ray of each raw pixel (``uv`` (N, 2) or every pixel, as
         :meth:`LightFieldCamera.captured_rays`)."""
@@ -181,6 +197,7 @@ class CameraCalibration:
                 "initial_ray_rms_m": self.initial_ray_rms_m,
                 "per_view_rms_m": list(self.per_view_rms_m),
                 "capacity_scores": [dataclasses.asdict(s) for s in self.capacity_scores],
+                "correction_spread": self.spread_to_dict(),
                 "poses": [list(p) for p in self.poses],
                 "model": "the thin-lens ray (a, t) becomes the ray through a + dO(a, t) on z = 0 with slopes "
                 "t + dT(a, t), dO and dT polynomials in (a / aperture_norm_m, t / slope_norm) with the "
@@ -198,6 +215,7 @@ class CameraCalibration:
             "correction_std_clustered": dict(zip(PARAMETERS, self.clustered_std, strict=True)),
             "held": list(self.held),
             "poses": [list(p) for p in self.poses],
+            "correction_spread": self.spread_to_dict(),
             "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * a, "
             "pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); lfrefract.optics.ray_correction",
         }
@@ -314,6 +332,7 @@ def calibrate_camera(
         clustered_std=tuple(float(x) for x in np.sqrt(np.diag(fit.clustered))),
         held=held,
         poses=tuple(tuple(float(x) for x in pose) for pose in fit.poses),
+        spread=spread_factors(larger_covariance(fit.covariance, fit.clustered)),
     )
 
 
@@ -359,8 +378,16 @@ def _calibrate_polynomial(
         clustered_std=tuple(float(x) for x in np.sqrt(np.diag(fit.clustered))),
         held=(),
         poses=tuple(tuple(float(x) for x in pose) for pose in fit.poses),
+        spread=_coefficient_spread(fit),
         capacity_scores=scores,
     )
+
+
+def _coefficient_spread(fit: PolynomialFit) -> np.ndarray:
+    """The polynomial fit's spread as directions of its coefficients (flattened row by row)."""
+    factors = spread_factors(larger_covariance(fit.covariance, fit.clustered))  # (k, P), free basis
+    norms = np.array([fit.correction.aperture_norm_m] * 2 + [fit.correction.slope_norm] * 2)
+    return np.stack([((fit.basis @ f).reshape(-1, 4) * norms).ravel() for f in factors])
 
 
 _PUPIL = PARAMETERS.index("pupil_scale")

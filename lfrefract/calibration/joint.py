@@ -175,7 +175,6 @@ def calibrate_port_and_camera(
     views = list(views)
     if not all(isinstance(v, BoardView) for v in views):
         raise ParameterError("views must be BoardView objects")
-    limits = {"max_normal_std_deg": max_normal_std_deg, "max_distance_std_m": max_distance_std_m}
     sequential = calibrate_port(
         camera,
         [corrected_view(v, prior.correction, camera) for v in views],
@@ -185,7 +184,8 @@ def calibrate_port_and_camera(
         n_water=n_water,
         distance_range_m=distance_range_m,
         names=names,
-        **limits,
+        max_normal_std_deg=max_normal_std_deg,
+        max_distance_std_m=max_distance_std_m,
     )
     template = sequential.port
     npar = len(PARAMETERS)
@@ -233,7 +233,8 @@ def calibrate_port_and_camera(
         problem.residuals_px(fit.x),
         problem.sizes,
         covariance[npar : npar + 3, npar : npar + 3],
-        **limits,
+        max_normal_std_deg=max_normal_std_deg,
+        max_distance_std_m=max_distance_std_m,
     )
     refined_covariance = covariance[:npar, :npar]
     try:

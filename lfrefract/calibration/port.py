@@ -28,6 +28,7 @@ limits is an error (degenerate views), not an answer.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import typing
@@ -44,6 +45,7 @@ from lfrefract.calibration.approx import detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
+from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance, propagated_covariance
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import PORT_CALIBRATION_KIND
 from lfrefract.optics.camera import LightFieldCamera
@@ -160,12 +162,19 @@ class PortCalibration:
     view_rms_px : ndarray, shape (V,)
         The same per view.
     covariance : ndarray, shape (3, 3)
-        Covariance of ``(tilt_x_rad, tilt_y_rad, distance_m)`` from the Jacobian at the solution,
-        scaled by the residual variance.
+        Covariance of ``(tilt_x_rad, tilt_y_rad, distance_m)``: the sum of :attr:`covariance_parts`
+        (from :func:`calibrate_port`: the larger of the Jacobian's and the capture-clustered one, plus
+        what the camera model's uncertainty adds), or the Jacobian's alone.
     normal_std_deg : float
         Standard deviation of the normal's direction (degrees): the larger axis of its covariance.
     distance_std_m : float
         Standard deviation of the port distance (metres).
+    covariance_parts : dict of str to ndarray (3, 3)
+        What :attr:`covariance` is made of: ``"pixel_noise"`` (from the fit's Jacobian, scaled by the
+        residual variance), ``"by_capture"`` (each capture's corners as one sample: errors the corners
+        of a capture share), ``"noise"`` (the larger of the two in every direction, which the total
+        takes) and ``"camera_model"`` (the camera's ray model's uncertainty, propagated; zero when none
+        was given). Empty where the covariance is the Jacobian's alone.
     """
 
     port: FlatPort
@@ -175,6 +184,7 @@ class PortCalibration:
     covariance: np.ndarray
     normal_std_deg: float
     distance_std_m: float
+    covariance_parts: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain data for a JSON file."""
@@ -187,6 +197,11 @@ class PortCalibration:
             "covariance_parameters": ["tilt_x_rad", "tilt_y_rad", "distance_m"],
             "normal_std_deg": self.normal_std_deg,
             "distance_std_m": self.distance_std_m,
+            **(
+                {"covariance_parts": {name: part.tolist() for name, part in self.covariance_parts.items()}}
+                if self.covariance_parts
+                else {}
+            ),
         }
 
 
@@ -622,6 +637,7 @@ def calibrate_port(
     max_normal_std_deg: float = 0.5,
     max_distance_std_m: float = 0.002,
     names: Sequence[str] | None = None,
+    model_views: Sequence[Sequence[BoardView]] = (),
 ) -> PortCalibration:
     """Estimate a flat port's normal and distance from underwater chessboard views.
 
@@ -640,10 +656,17 @@ def calibrate_port(
         and :class:`CalibrationError` is raised.
     names : sequence of str, optional
         How errors name the views (their files); default ``views[i]``.
+    model_views : sequence of sequences of BoardView, optional
+        The camera model's uncertainty, as the views would be with the model moved along each
+        direction of its spread (:func:`lfrefract.calibration.uncertainty.spread_factors`; e.g.
+        :func:`lfrefract.calibration.camera.corrected_view` with each perturbed correction): each a
+        list like ``views``. The port's covariance then includes what that uncertainty does to it.
 
     Returns
     -------
     PortCalibration
+        Its covariance is the larger (in every direction) of the Jacobian's and the capture-clustered
+        one, plus the camera model's share (:attr:`PortCalibration.covariance_parts`).
 
     Raises
     ------
@@ -726,9 +749,10 @@ def calibrate_port(
     _require_refraction(camera, views, residuals, sigma2)
     jac = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
     try:
-        cov_all = np.linalg.inv(jac.T @ jac) * sigma2
+        bread = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
+    parts = _covariance_parts(problem, fit.x, jac, residuals, bread, sigma2, model_views, template)
     # The bounded solver stays a little inside a bound it presses against (1e-8 m was seen): a
     # distance within DISTANCE_AT_BOUND_M of either end is the end of the range, not an answer.
     at_bound = fit.active_mask[2] != 0 or min(abs(fit.x[2] - lo), abs(hi - fit.x[2])) <= DISTANCE_AT_BOUND_M
@@ -742,10 +766,43 @@ def calibrate_port(
         fit.x[3:].reshape(-1, 6),
         residuals,
         problem.sizes,
-        cov_all[:3, :3],
+        parts["noise"] + parts["camera_model"],
         max_normal_std_deg=max_normal_std_deg,
         max_distance_std_m=max_distance_std_m,
+        parts=parts,
     )
+
+
+def _covariance_parts(
+    problem: _Problem,
+    x: np.ndarray,
+    jac: np.ndarray,
+    residuals: np.ndarray,
+    bread: np.ndarray,
+    sigma2: float,
+    model_views: Sequence[Sequence[BoardView]],
+    template: FlatPort,
+) -> dict[str, np.ndarray]:
+    """The port's covariance parts (:attr:`PortCalibration.covariance_parts`), port block (3, 3)."""
+    bounds = np.cumsum([0, *(2 * s for s in problem.sizes)])
+    scores = [jac[a:b].T @ residuals[a:b] for a, b in itertools.pairwise(bounds)]
+    pixel = (bread * sigma2)[:3, :3]
+    by_capture = clustered_covariance(bread, scores)[:3, :3]
+    changes = []
+    for k, moved in enumerate(model_views):
+        moved = list(moved)
+        if len(moved) != len(problem.views) or not all(isinstance(v, BoardView) for v in moved):
+            raise ParameterError(
+                f"model_views[{k}] must be {len(problem.views)} BoardView objects (one per view), got {len(moved)}"
+            )
+        changes.append(_Problem(problem.camera, moved, template).residuals(x) - residuals)
+    model = propagated_covariance(bread @ jac.T, changes)[:3, :3] if changes else np.zeros((3, 3))
+    return {
+        "pixel_noise": pixel,
+        "by_capture": by_capture,
+        "noise": larger_covariance(pixel, by_capture),
+        "camera_model": model,
+    }
 
 
 def _require_refraction(
@@ -780,6 +837,7 @@ def port_result(
     *,
     max_normal_std_deg: float,
     max_distance_std_m: float,
+    parts: dict[str, np.ndarray] | None = None,
 ) -> PortCalibration:
     """A fitted port as a :class:`PortCalibration`, after its uncertainty is checked.
 
@@ -796,6 +854,8 @@ def port_result(
         Covariance of ``(tilt_x_rad, tilt_y_rad, distance_m)``.
     max_normal_std_deg, max_distance_std_m : float
         As :func:`calibrate_port`.
+    parts : dict of str to ndarray, optional
+        :attr:`PortCalibration.covariance_parts`.
 
     Raises
     ------
@@ -833,4 +893,5 @@ def port_result(
         covariance=covariance,
         normal_std_deg=normal_std_deg,
         distance_std_m=distance_std_m,
+        covariance_parts={} if parts is None else dict(parts),
     )

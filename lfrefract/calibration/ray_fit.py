@@ -83,6 +83,8 @@ class PolynomialFit:
         over the poses, scaled by the residual variance.
     clustered : ndarray, shape (P, P)
         The same with each capture as one sample (sandwich estimate).
+    free : ndarray, shape (P,)
+        The fitted free coefficients (normalised, in ``basis``).
     basis : ndarray, shape (4 M, P)
         The basis that keeps the frame: normalised coefficients (row-major (M, 4)) are ``basis @ q``.
     """
@@ -93,6 +95,7 @@ class PolynomialFit:
     per_capture_rms_m: tuple[float, ...]
     covariance: np.ndarray
     clustered: np.ndarray
+    free: np.ndarray
     basis: np.ndarray
 
 
@@ -198,19 +201,23 @@ class _Problem:
             out.append(corners[:, :2] - (self.a[k] + delta[:, :2]) - corners[:, 2:3] * (self.t[k] + delta[:, 2:]))
         return out
 
-    def normal_equations(self, q: np.ndarray, poses: np.ndarray) -> list[tuple[np.ndarray, ...]]:
-        """Per capture, the Gauss-Newton blocks of its residuals ``r`` and Jacobians ``J_q`` (free
-        coefficients) and ``J_p`` (its pose): ``(J_q^T J_q, J_q^T r, J_p^T J_p, J_q^T J_p, J_p^T r)``.
+    def summed(self, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, ...]]]:
+        """The Gauss-Newton blocks of the residuals ``r`` and their Jacobians ``J_q`` (free coefficients)
+        and ``J_p`` (each capture's pose): ``J_q^T J_q`` (P, P) and ``J_q^T r`` (P,) summed over
+        captures, and per capture ``(J_p^T J_p, J_q^T J_p, J_p^T r, J_q^T r)``.
 
         ``J_q`` is never formed: a residual's x component depends only on the coefficients of ``dO_x``
-        (through the monomials) and ``dT_x`` (through ``X_z`` times them), so its blocks are the
-        monomials' Gram matrices weighted by 1, ``X_z`` and ``X_z^2``. The pose's rotation is
-        differentiated through SO(3)'s left Jacobian, exactly at any rotation.
+        (through the monomials) and ``dT_x`` (through ``X_z`` times them), so ``J_q^T J_q`` is made of
+        the monomials' Gram matrices weighted by 1, ``X_z`` and ``X_z^2``, summed over every corner
+        first. The pose's rotation is differentiated through SO(3)'s left Jacobian, exactly at any
+        rotation.
         """
         coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
         big_r, big_t = self.norms[0], self.norms[2]
         m = len(self.exponents)
-        out: list[tuple[np.ndarray, ...]] = []
+        grams = np.zeros((3, m, m))
+        per_capture: list[tuple[np.ndarray, ...]] = []
+        gq_total = np.zeros(self.n_free)
         for k in range(len(self.observed)):
             phi = self.phi[k]
             delta = phi @ coefficients
@@ -225,40 +232,30 @@ class _Problem:
             dx_dw = -_skew(rotated) @ _left_jacobian(poses[k : k + 1, :3])[0]  # X = exp(w) P + T
             jp = np.concatenate([de_dx @ dx_dw, de_dx], axis=2)  # (n, 2, 6)
             zphi = z[:, None] * phi
-            g0, g1, g2 = phi.T @ phi, phi.T @ zphi, zphi.T @ zphi
-            hqq = np.zeros((m, 4, m, 4))
+            grams[0] += phi.T @ phi
+            grams[1] += phi.T @ zphi
+            grams[2] += zphi.T @ zphi
             gq = np.zeros((m, 4))
             hqp = np.zeros((m, 4, 6))
             for axis in range(2):  # x: dO_x (column 0), dT_x (column 2); y: columns 1 and 3
-                o_col, t_col = axis, axis + 2
-                hqq[:, o_col, :, o_col] = big_r * big_r * g0
-                hqq[:, o_col, :, t_col] = big_r * big_t * g1
-                hqq[:, t_col, :, o_col] = big_r * big_t * g1.T
-                hqq[:, t_col, :, t_col] = big_t * big_t * g2
-                gq[:, o_col] = -big_r * (phi.T @ r[:, axis])
-                gq[:, t_col] = -big_t * (zphi.T @ r[:, axis])
-                hqp[:, o_col] = -big_r * (phi.T @ jp[:, axis])
-                hqp[:, t_col] = -big_t * (zphi.T @ jp[:, axis])
+                gq[:, axis] = -big_r * (phi.T @ r[:, axis])
+                gq[:, axis + 2] = -big_t * (zphi.T @ r[:, axis])
+                hqp[:, axis] = -big_r * (phi.T @ jp[:, axis])
+                hqp[:, axis + 2] = -big_t * (zphi.T @ jp[:, axis])
             jp_flat = jp.reshape(-1, 6)
-            out.append(
-                (
-                    hqq.reshape(4 * m, 4 * m),
-                    gq.ravel(),
-                    jp_flat.T @ jp_flat,
-                    self.basis.T @ hqp.reshape(4 * m, 6),
-                    jp_flat.T @ r.ravel(),
-                )
+            gq_free = self.basis.T @ gq.ravel()
+            gq_total += gq_free
+            per_capture.append(
+                (jp_flat.T @ jp_flat, self.basis.T @ hqp.reshape(4 * m, 6), jp_flat.T @ r.ravel(), gq_free)
             )
-        return out
-
-    def summed(self, q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, ...]]]:
-        """:meth:`normal_equations` with the coefficient blocks summed over captures and expressed in
-        the free basis: ``J_q^T J_q`` (P, P), ``J_q^T r`` (P,), and per capture ``(J_p^T J_p, J_q^T J_p,
-        J_p^T r)``."""
-        blocks = self.normal_equations(q, poses)
-        hqq = self.basis.T @ sum(b[0] for b in blocks) @ self.basis
-        gq = self.basis.T @ sum(b[1] for b in blocks)
-        return hqq, gq, [(b[2], b[3], b[4]) for b in blocks]
+        hqq = np.zeros((m, 4, m, 4))
+        for axis in range(2):
+            o_col, t_col = axis, axis + 2
+            hqq[:, o_col, :, o_col] = big_r * big_r * grams[0]
+            hqq[:, o_col, :, t_col] = big_r * big_t * grams[1]
+            hqq[:, t_col, :, o_col] = big_r * big_t * grams[1].T
+            hqq[:, t_col, :, t_col] = big_t * big_t * grams[2]
+        return self.basis.T @ hqq.reshape(4 * m, 4 * m) @ self.basis, gq_total, per_capture
 
 
 def _prior(problem: _Problem, noise_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -287,8 +284,9 @@ def _solve(
     stats: dict = {"iterations": 0}
     for iteration in range(_MAX_ITERATIONS):
         stats["iterations"] = iteration + 1
-        hqq, gq, blocks = problem.summed(q, poses)
+        hqq, gq, captures = problem.summed(q, poses)
         hqq, gq = (0.0 * hqq, 0.0 * gq) if fix_model else (hqq + prior_info, gq + prior_info @ q)
+        blocks = [c[:3] for c in captures]
         improved = False
         for _ in range(12):
             schur, rhs, inverses = hqq + damping * np.diag(np.diag(hqq) + 1e-30), gq.copy(), []
@@ -356,13 +354,13 @@ def _result(problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float)
     prior_info, _ = _prior(problem, noise_m)
     n_rows = sum(r.size for r in residuals)
     total = float(sum(np.sum(r * r) for r in residuals))
-    hqq, _, blocks = problem.summed(q, poses)
+    hqq, _, captures = problem.summed(q, poses)
     hqq = hqq + prior_info
     scores = []
-    for (_, gq_k, _, _, _), (hpp, hqp, gp) in zip(problem.normal_equations(q, poses), blocks, strict=True):
+    for hpp, hqp, gp, gq_k in captures:
         hqq -= hqp @ np.linalg.solve(hpp, hqp.T)
         # The capture's score on q with its pose optimal (its pose score is ~zero there).
-        scores.append(problem.basis.T @ gq_k - hqp @ np.linalg.solve(hpp, gp))
+        scores.append(gq_k - hqp @ np.linalg.solve(hpp, gp))
     dof = max(1, n_rows - problem.n_free - 6 * len(residuals))
     bread = np.linalg.inv(hqq)
     n = len(residuals)
@@ -374,6 +372,7 @@ def _result(problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float)
         per_capture_rms_m=tuple(math.sqrt(float(np.sum(r * r)) / len(r)) for r in residuals),
         covariance=bread * (total / dof),
         clustered=bread @ meat @ bread,
+        free=q,
         basis=problem.basis,
     )
 
@@ -446,6 +445,7 @@ def choose_capacity(
                 slope_norm=slope_norm,
                 poses=full.poses[keep],
                 noise_m=noise_m,
+                start=full.free,
             )
             for k in np.flatnonzero(folds == fold):
                 rms, count = held_back_rms(part.correction, observed[k], full.poses[k])

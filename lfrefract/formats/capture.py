@@ -72,7 +72,7 @@ from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
 from lfrefract.optics.ray_correction import Correction, CorrectionEstimate, RayCorrection, correction_from_dict
-from lfrefract.validate import file_problem, one_of
+from lfrefract.validate import file_problem, one_of, shown
 
 __all__ = [
     "CAPTURE_KIND",
@@ -94,6 +94,7 @@ __all__ = [
     "check_lens_modelled",
     "check_port_ray_model",
     "correction_estimate_from_option",
+    "correction_spread_from_option",
     "mask_warp_map",
     "mla_from_file",
     "port_from_file",
@@ -809,6 +810,42 @@ def ray_correction_from_option(value: str | os.PathLike | None) -> Correction | 
     """
     found = _camera_calibration(value)
     return None if found is None else _calibration_estimate(*found)[0]
+
+
+def correction_spread_from_option(value: str | os.PathLike) -> np.ndarray:
+    """The ``correction_spread`` rows (k, n) of a ``--camera`` camera calibration: its ray model's
+    uncertainty as directions of the correction's parameter vector; (0, n) where the file has none (a
+    file written before it was recorded: the port's covariance then leaves the camera model out).
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a camera calibration.
+    FileFormatError
+        If its ``correction_spread`` is not rows of the correction's parameter count of finite numbers.
+    """
+    found = _camera_calibration(value)
+    if found is None:
+        raise ParameterError(f"--camera {str(value)!r} is not a camera calibration (lfrefract calibrate camera output)")
+    path, data = found
+    correction, _ = _calibration_estimate(path, data)
+    n = correction.vector().size
+    if "correction_spread" not in data:
+        return np.zeros((0, n))
+    where = f"{str(path)!r}: correction_spread"
+    table = data["correction_spread"]
+    rows = table.get("rows") if isinstance(table, dict) else None
+    if not isinstance(rows, list) or not all(isinstance(r, list) and len(r) == n for r in rows):
+        raise FileFormatError(
+            f"{where}.rows must be rows of {n} numbers (the correction's parameters), got {shown(rows)}"
+        )
+    try:
+        spread = np.array(rows, dtype=np.float64).reshape(len(rows), n)
+    except (TypeError, ValueError):
+        raise FileFormatError(f"{where}.rows must hold numbers only") from None
+    if not np.all(np.isfinite(spread)):
+        raise FileFormatError(f"{where}.rows must be finite")
+    return spread
 
 
 def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | None:

@@ -26,6 +26,7 @@ Frames and units: camera frame (OpenCV axes), metres; slopes are dimensionless.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -56,6 +57,7 @@ __all__ = [
     "corrected_slopes",
     "correction_from_dict",
     "frame_directions",
+    "moved",
     "polynomial_exponents",
 ]
 
@@ -632,6 +634,17 @@ def frame_directions(exponents: np.ndarray) -> np.ndarray:
 
 #: Every member of the ray-model family: the thin lens is ``None`` (no correction).
 Correction = RayCorrection | PolynomialCorrection
+
+
+def moved(correction: Correction, delta: np.ndarray) -> Correction:
+    """``correction`` with ``delta`` added to its :meth:`vector` (same family and capacity): how a
+    direction of its spread (:func:`lfrefract.calibration.uncertainty.spread_factors`) moves it."""
+    step = np.asarray(delta, dtype=np.float64)
+    if step.shape != correction.vector().shape or not np.all(np.isfinite(step)):
+        raise ParameterError(f"delta must be {correction.vector().size} finite numbers, got shape {step.shape}")
+    if isinstance(correction, RayCorrection):
+        return RayCorrection.from_vector(correction.vector() + step)
+    return dataclasses.replace(correction, coefficients=correction.coefficients + step.reshape(-1, 4))
 
 
 def correction_from_dict(data: Any, *, where: str = "correction") -> Correction:

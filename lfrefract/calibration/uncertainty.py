@@ -1,0 +1,87 @@
+"""How well a calibration knows what it reports: covariances beyond pixel noise.
+
+A least-squares fit's covariance from its Jacobian, ``(J^T J)^-1 sigma^2``, counts every corner as an
+independent observation with the same noise. Board captures break that twice: the corners of one
+capture share their errors (the board's pose, what the model leaves of the lens), and a fit that
+builds on an earlier calibration inherits that calibration's errors. This module gives the pieces the
+calibrations combine:
+
+- :func:`clustered_covariance`: the "sandwich" estimate with each capture as one sample;
+- :func:`larger_covariance`: of two covariances, the larger in every direction;
+- :func:`spread_factors`: a covariance as a few directions ``f_j`` with ``C ~ sum_j f_j f_j^T``, so a
+  later fit can propagate it by re-fitting along each (:func:`propagated_covariance`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["clustered_covariance", "larger_covariance", "propagated_covariance", "spread_factors"]
+
+#: Most directions :func:`spread_factors` keeps, and the smallest variance kept, relative to the largest.
+MAX_SPREAD_DIRECTIONS = 40
+SPREAD_RELATIVE_FLOOR = 1e-6
+
+
+def clustered_covariance(bread: np.ndarray, scores: Sequence[np.ndarray]) -> np.ndarray:
+    """The capture-clustered ("sandwich") covariance ``B (n / (n - 1) sum_k s_k s_k^T) B``.
+
+    Parameters
+    ----------
+    bread : ndarray, shape (P, P)
+        ``(J^T J)^-1`` of the fit (without the residual variance).
+    scores : sequence of ndarray, shape (P,)
+        Each capture's score ``J_k^T r_k`` at the solution.
+    """
+    stacked = np.stack([np.asarray(s, dtype=float) for s in scores])
+    n = len(stacked)
+    meat = stacked.T @ stacked * (n / max(1, n - 1))
+    out = bread @ meat @ bread
+    return (out + out.T) / 2.0
+
+
+def larger_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The covariance that is the larger of ``a`` and ``b`` in every direction (a positive definite):
+    ``a^(1/2) U max(L, 1) U^T a^(1/2)`` with ``U L U^T`` the eigen-decomposition of
+    ``a^(-1/2) b a^(-1/2)``."""
+    values, vectors = np.linalg.eigh((a + a.T) / 2.0)
+    values = np.maximum(values, values.max(initial=0.0) * 1e-15 + 1e-300)
+    root = vectors * np.sqrt(values) @ vectors.T
+    inverse_root = vectors / np.sqrt(values) @ vectors.T
+    ratio_values, ratio_vectors = np.linalg.eigh(inverse_root @ ((b + b.T) / 2.0) @ inverse_root)
+    middle = ratio_vectors * np.maximum(ratio_values, 1.0) @ ratio_vectors.T
+    out = root @ middle @ root
+    return (out + out.T) / 2.0
+
+
+def spread_factors(covariance: np.ndarray, *, max_directions: int = MAX_SPREAD_DIRECTIONS) -> np.ndarray:
+    """Directions ``f_j`` (rows, (k, P)) with ``covariance ~ sum_j f_j f_j^T``: its largest principal
+    axes, each scaled by its standard deviation, down to :data:`SPREAD_RELATIVE_FLOOR` of the largest
+    variance and at most ``max_directions`` (the variance left out is reported by nothing: keep it small)."""
+    values, vectors = np.linalg.eigh((covariance + covariance.T) / 2.0)
+    order = np.argsort(values)[::-1]
+    values, vectors = values[order], vectors[:, order]
+    keep = values > SPREAD_RELATIVE_FLOOR * max(float(values[0]), 1e-300)
+    keep[max_directions:] = False
+    return (vectors[:, keep] * np.sqrt(values[keep])).T
+
+
+def propagated_covariance(bread_jt: np.ndarray, residual_changes: Sequence[np.ndarray]) -> np.ndarray:
+    """The covariance a fit inherits from an input known to ``sum_j f_j f_j^T``: for each direction,
+    the fit's first-order change ``-(J^T J)^-1 J^T dr_j`` with ``dr_j`` its residuals' change when the
+    input moves by ``f_j``; their outer products summed.
+
+    Parameters
+    ----------
+    bread_jt : ndarray, shape (P, R)
+        ``(J^T J)^-1 J^T`` of the fit.
+    residual_changes : sequence of ndarray, shape (R,)
+    """
+    p = bread_jt.shape[0]
+    out = np.zeros((p, p))
+    for change in residual_changes:
+        step = -bread_jt @ change
+        out += np.outer(step, step)
+    return out
