@@ -370,7 +370,7 @@ def synth(args: argparse.Namespace) -> int:
     if args.port is not None:
         check_port_ray_model(args.port, ray_correction, camera=args.camera)
     if depth_options is not None:
-        _depth_aware_takes(args, by_cfa, ray_correction is not None)
+        _depth_aware_takes(by_cfa)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
     prepare_output_files(synth_outputs(out, args.method), inputs=inputs, overwrite=args.overwrite)  # before the map
     options = dataclasses.replace(flag_options, ray_correction=ray_correction)
@@ -420,7 +420,11 @@ def synth(args: argparse.Namespace) -> int:
         if depth_options is not None:
             start = time.perf_counter()
             rays = trace_scene_rays(
-                camera, port, rim_margin_px=depth_options.rim_margin_px, compensate_port=depth_options.compensate_port
+                camera,
+                port,
+                rim_margin_px=depth_options.rim_margin_px,
+                compensate_port=depth_options.compensate_port,
+                correction=ray_correction,
             )
             rays_seconds = time.perf_counter() - start
         compile_seconds = warp.compile_for(capture.raw)  # numba's first compilation, apart from the apply
@@ -507,20 +511,13 @@ def synth(args: argparse.Namespace) -> int:
     return 0
 
 
-def _depth_aware_takes(args: argparse.Namespace, by_cfa: bool, ray_corrected: bool) -> None:
+def _depth_aware_takes(by_cfa: bool) -> None:
     """Refuse what ``synth --method depth-aware`` cannot take: a Lytro capture's colours from their own
-    Bayer sites (``--colour cfa``), and a camera calibration's ray correction (its rays are the thin
-    lens's captured rays)."""
+    Bayer sites (``--colour cfa``)."""
     if by_cfa:
         raise ParameterError(
             "--colour cfa does not apply to --method depth-aware: it searches the depth and renders on the "
             "demosaiced image (use --colour demosaic)"
-        )
-    if ray_corrected:
-        raise ParameterError(
-            f"--method depth-aware traces the thin lens's captured rays, without the ray correction of the camera "
-            f"calibration {args.camera!r}: give the camera without it (a preset or camera file), or use --method "
-            "proposed"
         )
 
 

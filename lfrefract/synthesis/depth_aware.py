@@ -65,6 +65,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
+from lfrefract.optics.ray_correction import Correction, correction_from_dict
 from lfrefract.synthesis._depth_kernels import render_at_depth, sweep_cost
 from lfrefract.synthesis.empty import masked_reason, require_a_value
 from lfrefract.synthesis.warp_map import (
@@ -302,8 +303,20 @@ class SceneRays:
         return values, keep
 
 
+def warp_correction(warp: WarpMap) -> Correction | None:
+    """The ray model a warp map was built on (its metadata's ``options.ray_correction``; None: the
+    thin lens): the depth-aware rays must be that model's too."""
+    recorded = warp.meta.get("options", {}).get("ray_correction")
+    return None if recorded is None else correction_from_dict(recorded, where="warp map options.ray_correction")
+
+
 def trace_scene_rays(
-    camera: LightFieldCamera, port: FlatPort | None, *, rim_margin_px: float = 0.71, compensate_port: bool = True
+    camera: LightFieldCamera,
+    port: FlatPort | None,
+    *,
+    rim_margin_px: float = 0.71,
+    compensate_port: bool = True,
+    correction: Correction | None = None,
 ) -> SceneRays:
     """Trace every usable captured ray of ``camera`` into the water behind ``port``.
 
@@ -311,6 +324,10 @@ def trace_scene_rays(
     ----------
     camera : LightFieldCamera
         A thin-lens light-field camera (its captured-ray model: pixel -> microlens centre -> main lens).
+    correction : RayCorrection or PolynomialCorrection, optional
+        The camera's calibrated ray model (:func:`lfrefract.calibration.calibrate_camera`): each
+        pixel's ray is its thin-lens ray corrected (which pixels are usable is still decided on the
+        thin-lens aperture point, as the warp map does). Default: the thin-lens rays.
     port : FlatPort or None
         The port; None continues the rays straight (the estimator without refraction handling).
     rim_margin_px : float
@@ -335,8 +352,10 @@ def trace_scene_rays(
         index = np.arange(first, min(first + _TRACE_BLOCK, height * width), dtype=np.int64)
         uv = np.stack([index % width, index // width], axis=1).astype(np.float64)
         rays = camera.captured_rays(uv)
+        keep = np.sum(rays.origins_cam[:, :2] ** 2, axis=1) <= radius**2
+        if correction is not None:
+            rays = correction.corrected(rays)
         origins, directions = rays.origins_cam, rays.directions_cam
-        keep = np.sum(origins[:, :2] ** 2, axis=1) <= radius**2
         origins, directions, index = origins[keep], directions[keep], index[keep]
         gain = np.ones(len(index))
         if port is not None:
@@ -670,7 +689,11 @@ class DepthAwareSynthesis:
                 if json.dumps(warp.meta.get(what), sort_keys=True) != json.dumps(given, sort_keys=True):
                     raise ParameterError(f"the warp map was built for another {what} than the one given")
         rays = trace_scene_rays(
-            camera, port, rim_margin_px=options.rim_margin_px, compensate_port=options.compensate_port
+            camera,
+            port,
+            rim_margin_px=options.rim_margin_px,
+            compensate_port=options.compensate_port,
+            correction=warp_correction(warp),
         )
         return cls(warp=warp, rays=rays, options=options)
 

@@ -14,6 +14,7 @@ import pytest
 from lfrefract.cli import SYNTH_DEPTH_ROLE, build_parser, main, synth_outputs
 from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import write_json
+from lfrefract.optics.port import FlatPort
 from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH, DepthAwareOptions, trace_scene_rays
 from lfrefract.synthesis.warp_map import FILLED_APPROXIMATED, FILLED_EMPTY, FILLED_EXACT
 from tests.lfrefract.test_cli import PORT, TINY, commands, make_capture, refused
@@ -257,22 +258,41 @@ def test_depth_aware_gives_masked_raw_pixels_no_weight(tmp_path, capsys):
     assert np.array_equal(np.isnan(image).any(axis=2), classes == FILLED_EMPTY)
 
 
-def test_depth_aware_refuses_a_camera_calibrations_ray_correction(tmp_path, capsys):
+def test_depth_aware_takes_a_camera_calibrations_ray_model(tmp_path):
+    """A camera calibration's ray model (here a radial one that scales the pupil by 1.1) is the model of
+    both the warp map and the depth-aware rays (it was refused before, the rays being the thin lens's)."""
     from lfrefract.optics.ray_correction import RayCorrection
 
     raw = make_capture(tmp_path / "R")
+    correction = RayCorrection(pupil_scale=1.1)
     calibration = write_json(
         tmp_path / "camera.json",
-        {
-            "kind": "lfrefract.calibrate.camera",
-            "camera": TINY.to_dict(),
-            "correction": RayCorrection(pupil_scale=1.1).to_dict(),
-        },
+        {"kind": "lfrefract.calibrate.camera", "camera": TINY.to_dict(), "correction": correction.to_dict()},
     )
-    argv = [*commands(raw, tmp_path / "out")["synth"], "--camera", str(calibration)]
-    err = refused(capsys, [*argv, *DEPTH_AWARE])
-    assert "without the ray correction of the camera calibration" in err, err
-    assert not (tmp_path / "out").exists()
+    run([*commands(raw, tmp_path / "out")["synth"], "--camera", str(calibration), *DEPTH_AWARE, "--quiet"])
+    meta = sidecar(tmp_path / "out")
+    assert meta["method"] == "depth-aware"
+    assert meta["options"]["ray_correction"] == correction.to_dict()
+
+
+def test_depth_aware_rays_are_the_calibrated_models():
+    """trace_scene_rays with a ray model: each pixel's ray is its thin-lens ray corrected, the same
+    pixels kept (their thin-lens aperture point decides); warp_correction reads a map's model back."""
+    from lfrefract.optics.ray_correction import RayCorrection
+    from lfrefract.synthesis.depth_aware import trace_scene_rays, warp_correction
+    from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
+
+    correction = RayCorrection(pupil_scale=1.1, k1=0.2)
+    thin = trace_scene_rays(TINY, None)
+    model = trace_scene_rays(TINY, None, correction=correction)
+    assert np.array_equal(thin.raw_index, model.raw_index)
+    expected = correction.corrected(TINY.captured_rays()).origins_cam[thin.raw_index]
+    np.testing.assert_allclose(model.origins_cam, expected.astype(np.float32), rtol=0, atol=1e-9)
+    assert not np.allclose(model.origins_cam, thin.origins_cam, rtol=0, atol=1e-6)
+    port = FlatPort(distance_m=0.02, thickness_m=0.003, tilt_x_rad=0.2)
+    warp = build_warp_map(TINY, port, options=SynthesisOptions(ray_correction=correction))
+    assert warp_correction(warp) == correction
+    assert warp_correction(build_warp_map(TINY, port)) is None
 
 
 def test_overwrite_replaces_only_depth_aware_outputs(tmp_path, synthesized, capsys):
