@@ -97,8 +97,15 @@ def _slopes_seeing(truth, a, corners, port: FlatPort | None) -> np.ndarray:
         h = 1e-7
         step_x, step_y = np.array([h, 0.0]), np.array([0.0, h])
         jac = np.stack([(miss(t + step_x) - r) / h, (miss(t + step_y) - r) / h], axis=2)
-        with np.errstate(invalid="ignore"):
-            t = t - np.linalg.solve(jac, r[:, :, None])[:, :, 0]
+        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            step = (
+                np.column_stack(
+                    [jac[:, 1, 1] * r[:, 0] - jac[:, 0, 1] * r[:, 1], jac[:, 0, 0] * r[:, 1] - jac[:, 1, 0] * r[:, 0]]
+                )
+                / det[:, None]
+            )  # the 2 x 2 inverse; a singular row becomes NaN, refused below
+            t = t - step
     return np.where(np.all(np.abs(miss(t)) < 1e-9, axis=1)[:, None], t, np.nan)
 
 

@@ -15,7 +15,7 @@ The camera the chain works with is the thin-lens camera with the micro-image lat
 from a white image measures (``lfrefract calibrate mla``), taken here from the truth so that only the
 ray model is measured.
 
-    python benchmarks/measure_ray_models.py [--lenses double-gauss scenes/lenses/tessar.toml] [--spp 16]
+    python benchmarks/measure_ray_models.py [--lenses double-gauss scenes/lenses/tessar.toml] [--spp 16] [--cache DIR]
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import argparse
 import dataclasses
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -65,6 +66,7 @@ def main() -> int:
     parser.add_argument("--lenses", nargs="*", default=["double-gauss"])
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--outer-ring", action="store_true", help="twenty in-air boards (both rings)")
+    parser.add_argument("--cache", type=Path, help="folder keeping the renders (raw .npy by lens and board) for reruns")
     args = parser.parse_args()
     mi = load_mitsuba()
     nominal = camera_preset(boards.CAMERA)
@@ -79,8 +81,15 @@ def main() -> int:
         camera = dataclasses.replace(nominal, mla=dataclasses.replace(nominal.mla, pitch_m=nominal.mla.pitch_m * scale))
         view = virtual_camera_for(camera)
         views = []
-        for table in boards.in_air_boards(virtual_camera_for(nominal), outer_ring=args.outer_ring):
-            raw = render_raw(mi, boards.in_air_board_scene(table, lens=lens, spp=args.spp), progress=False)
+        for number, table in enumerate(boards.in_air_boards(virtual_camera_for(nominal), outer_ring=args.outer_ring)):
+            kept = None if args.cache is None else args.cache / f"{lens.name}-{args.spp}spp-{number}.npy"
+            if kept is not None and kept.is_file():
+                raw = np.load(kept)
+            else:
+                raw = render_raw(mi, boards.in_air_board_scene(table, lens=lens, spp=args.spp), progress=False)
+                if kept is not None:
+                    kept.parent.mkdir(parents=True, exist_ok=True)
+                    np.save(kept, raw)
             found = board_view_from_light_field(
                 camera, raw, pattern=boards.PATTERN, square_size_m=table["square_size_m"], view=view
             )

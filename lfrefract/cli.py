@@ -1062,9 +1062,7 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
         )
         terms = f"pupil scale {c.pupil_scale:.5f}, slope scale {slope}, k1 {c.k1:.4g}, k2 {c.k2:.4g}"
     else:
-        chosen = next(
-            s for s in result.capacity_scores if (s.degree, s.aperture_degree) == (c.degree, c.aperture_degree)
-        )
+        chosen = next(s for s in result.capacity_scores if s.capacity == c.capacity)
         terms = (
             f"{c.name} ({len(c.exponents)} terms), chosen by the held-back captures' error "
             f"{chosen.held_back_rms_m * 1e3:.4f} mm"

@@ -1069,8 +1069,8 @@ POLY_INVERSE_M = 1e-12
 # Noise-free boards seen along a (3, 1) model: the fit returns it to rounding (its frame kept): 1e-9 m
 # 25 mm out (measured about 1e-13 m).
 POLY_NOISE_FREE_RAY_M = 1e-9
-# The synthetic field-curvature camera, polynomial model chosen among (3, 1) and (5, 1): 0.0085 mm and
-# 0.077 mrad measured (radial model: 0.045 mm, 0.39 mrad); bounds between, so a capacity choice that
-# stayed at (3, 1) (0.067 mm, 0.78 mrad) fails.
-POLY_SYNTHETIC_RAY_M = 0.02e-3
-POLY_SYNTHETIC_ANGLE_RAD = 0.2e-3
+# The synthetic field-curvature camera, polynomial model chosen among symmetric-3, symmetric-5 and the
+# generic (5, 1): symmetric-5, 0.0008 mm and 0.025 mrad measured (radial model: 0.045 mm, 0.39 mrad);
+# the bounds fail the radial model and a choice of the generic (5, 1) (0.0085 mm, 0.077 mrad).
+POLY_SYNTHETIC_RAY_M = 0.005e-3
+POLY_SYNTHETIC_ANGLE_RAD = 0.1e-3

@@ -43,7 +43,6 @@ dimensionless; the board's own frame has its corners on z = 0.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -64,6 +63,7 @@ from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import (
     PARAMETERS,
     POLYNOMIAL_CAPACITIES,
+    Capacity,
     Correction,
     CorrectionEstimate,
     PolynomialCorrection,
@@ -196,7 +196,7 @@ class CameraCalibration:
                 "ray_rms_m": self.ray_rms_m,
                 "initial_ray_rms_m": self.initial_ray_rms_m,
                 "per_view_rms_m": list(self.per_view_rms_m),
-                "capacity_scores": [dataclasses.asdict(s) for s in self.capacity_scores],
+                "capacity_scores": [s.to_dict() for s in self.capacity_scores],
                 "correction_spread": self.spread_to_dict(),
                 "poses": [list(p) for p in self.poses],
                 "model": "the thin-lens ray (a, t) becomes the ray through a + dO(a, t) on z = 0 with slopes "
@@ -247,7 +247,7 @@ def calibrate_camera(
     view: PinholeCamera,
     names: Sequence[str] | None = None,
     ray_model: str = "radial",
-    capacities: Sequence[tuple[int, int]] = POLYNOMIAL_CAPACITIES,
+    capacities: Sequence[Capacity | tuple[int, int]] = POLYNOMIAL_CAPACITIES,
     progress: Callable[[str], None] | None = None,
 ) -> CameraCalibration:
     """Fit the ray model of ``camera`` to chessboard light fields taken in air.
@@ -266,7 +266,7 @@ def calibrate_camera(
     ray_model : {"radial", "polynomial"}
         Which member of the family to fit (:data:`RAY_MODELS`): the five-parameter radial model, or
         the generic polynomial model, its capacity chosen by the error on held-back captures.
-    capacities : sequence of (int, int)
+    capacities : sequence of Capacity or (int, int)
         The polynomial model's capacities to choose among, smallest first (default
         :data:`~lfrefract.optics.ray_correction.POLYNOMIAL_CAPACITIES`).
     progress : callable, optional
@@ -340,7 +340,7 @@ def _calibrate_polynomial(
     camera: LightFieldCamera,
     observed: list,
     start: _Fit,
-    capacities: Sequence[tuple[int, int]],
+    capacities: Sequence[Capacity | tuple[int, int]],
     progress: Callable[[str], None] | None,
 ) -> CameraCalibration:
     """:func:`calibrate_camera` for the polynomial model: its capacity by held-back captures."""
@@ -351,8 +351,7 @@ def _calibrate_polynomial(
     # of a mid-sized model (the thin lens's includes the lens's departure from it).
     first = fit_polynomial(
         observed,
-        degree=3,
-        aperture_degree=1,
+        capacity=Capacity(5, 5, symmetric=True),
         aperture_norm_m=r_norm,
         slope_norm=t_norm,
         poses=start.poses,

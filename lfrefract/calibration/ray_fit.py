@@ -43,9 +43,11 @@ from scipy.spatial.transform import Rotation
 from lfrefract.errors import CalibrationError
 from lfrefract.optics.ray_correction import (
     POLYNOMIAL_CAPACITIES,
+    Capacity,
     PolynomialCorrection,
     frame_directions,
     polynomial_exponents,
+    symmetric_directions,
 )
 
 __all__ = ["COEFFICIENT_PRIOR", "CapacityScore", "PolynomialFit", "choose_capacity", "fit_polynomial"]
@@ -105,7 +107,7 @@ class CapacityScore:
 
     Attributes
     ----------
-    degree, aperture_degree : int
+    capacity : Capacity
     held_back_rms_m : float
         RMS offset of the held-back captures' corners from the rays of the model fitted without them.
     standard_error_m : float
@@ -114,11 +116,19 @@ class CapacityScore:
         The RMS of the fit to every capture.
     """
 
-    degree: int
-    aperture_degree: int
+    capacity: Capacity
     held_back_rms_m: float
     standard_error_m: float
     fit_rms_m: float
+
+    def to_dict(self) -> dict:
+        """Plain data: the capacity's fields and the three figures (metres)."""
+        return {
+            **self.capacity._asdict(),
+            "held_back_rms_m": self.held_back_rms_m,
+            "standard_error_m": self.standard_error_m,
+            "fit_rms_m": self.fit_rms_m,
+        }
 
 
 def _left_jacobian(rotvec: np.ndarray) -> np.ndarray:
@@ -146,13 +156,13 @@ class _Problem:
     def __init__(
         self,
         observed: Sequence[Observed],
-        degree: int,
-        aperture_degree: int,
+        capacity: Capacity,
         aperture_norm_m: float,
         slope_norm: float,
     ) -> None:
+        degree, aperture_degree, symmetric = capacity
         self.exponents = polynomial_exponents(degree, aperture_degree)
-        self.degree, self.aperture_degree = degree, aperture_degree
+        self.degree, self.aperture_degree, self.symmetric = degree, aperture_degree, symmetric
         self.norms = np.array([aperture_norm_m, aperture_norm_m, slope_norm, slope_norm])
         self.template = PolynomialCorrection(
             degree=degree,
@@ -161,10 +171,17 @@ class _Problem:
             slope_norm=slope_norm,
             coefficients=np.zeros((len(self.exponents), 4)),
         )
-        fixed = frame_directions(self.exponents)
-        _, singular, vt = np.linalg.svd(fixed)
-        rank = int(np.sum(singular > 1e-9))
-        self.basis = vt[rank:].T  # (4M, P): no component along the frame's directions
+        fixed = frame_directions(self.exponents)  # orthonormal rows
+        if symmetric:
+            # The symmetric terms, less their components along the frame's directions, orthonormalised.
+            table = symmetric_directions(degree, aperture_degree)
+            table = table - (table @ fixed.T) @ fixed
+            _, singular, vt = np.linalg.svd(table, full_matrices=False)
+            self.basis = vt[singular > 1e-9 * singular.max()].T
+        else:
+            _, singular, vt = np.linalg.svd(fixed)
+            rank = int(np.sum(singular > 1e-9))
+            self.basis = vt[rank:].T  # (4M, P): no component along the frame's directions
         self.observed = list(observed)
         self.points = [p for p, _, _ in self.observed]
         self.a = [a for _, a, _ in self.observed]
@@ -189,6 +206,7 @@ class _Problem:
             aperture_norm_m=self.template.aperture_norm_m,
             slope_norm=self.template.slope_norm,
             coefficients=coefficients,
+            symmetric=self.symmetric,
         )
 
     def residuals(self, q: np.ndarray, poses: np.ndarray) -> list[np.ndarray]:
@@ -317,8 +335,7 @@ def _solve(
 def fit_polynomial(
     observed: Sequence[Observed],
     *,
-    degree: int,
-    aperture_degree: int,
+    capacity: Capacity | tuple[int, int],
     aperture_norm_m: float,
     slope_norm: float,
     poses: np.ndarray,
@@ -332,8 +349,8 @@ def fit_polynomial(
     observed : sequence of (ndarray, ndarray, ndarray)
         Per capture: board points (N, 3, board frame, metres), the thin-lens rays' aperture points
         (N, 2, metres) and slopes (N, 2) along which each was seen.
-    degree, aperture_degree : int
-        The capacity.
+    capacity : Capacity or (int, int)
+        The capacity (a pair: a generic one of that degree and aperture degree).
     aperture_norm_m, slope_norm : float
         The model's scales ``R`` and ``T``.
     poses : ndarray, shape (n, 6)
@@ -343,7 +360,7 @@ def fit_polynomial(
     start : ndarray, optional
         Starting free coefficients (default zero: the thin lens).
     """
-    problem = _Problem(observed, degree, aperture_degree, aperture_norm_m, slope_norm)
+    problem = _Problem(observed, Capacity(*capacity), aperture_norm_m, slope_norm)
     q0 = np.zeros(problem.n_free) if start is None else start
     q, fitted, _ = _solve(problem, q0, np.array(poses, dtype=float), noise_m)
     return _result(problem, q, fitted, noise_m)
@@ -384,7 +401,7 @@ def held_back_rms(
 ) -> tuple[float, int]:
     """RMS offset (metres) of one capture's corners from a fixed model's rays, its pose fitted
     alone (from ``pose``), and the number of corners."""
-    problem = _Problem([observed], 1, 0, 1.0, 1.0)  # a zero model: the fixed model enters as the rays
+    problem = _Problem([observed], Capacity(1, 0), 1.0, 1.0)  # a zero model: the fixed model enters as the rays
     fixed = correction.origins_and_slopes if isinstance(correction, PolynomialCorrection) else correction
     origins, slopes = fixed(observed[1], observed[2])
     problem.a, problem.t = [origins], [slopes]
@@ -394,6 +411,11 @@ def held_back_rms(
     return math.sqrt(float(np.sum(residual * residual)) / len(residual)), len(residual)
 
 
+def problem_size(fit: PolynomialFit) -> int:
+    """The number of free coefficients of a fit."""
+    return int(fit.basis.shape[1])
+
+
 def choose_capacity(
     observed: Sequence[Observed],
     *,
@@ -401,7 +423,7 @@ def choose_capacity(
     slope_norm: float,
     poses: np.ndarray,
     noise_m: float,
-    capacities: Sequence[tuple[int, int]] = POLYNOMIAL_CAPACITIES,
+    capacities: Sequence[Capacity | tuple[int, int]] = POLYNOMIAL_CAPACITIES,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[PolynomialFit, tuple[CapacityScore, ...]]:
     """The capacity with the smallest error on held-back captures (one standard error rule), fitted
@@ -424,11 +446,11 @@ def choose_capacity(
     scores: list[CapacityScore] = []
     fits: list[PolynomialFit] = []
     worse_in_a_row = 0
-    for degree, aperture_degree in capacities:
+    for given in capacities:
+        capacity = Capacity(*given)
         full = fit_polynomial(
             observed,
-            degree=degree,
-            aperture_degree=aperture_degree,
+            capacity=capacity,
             aperture_norm_m=aperture_norm_m,
             slope_norm=slope_norm,
             poses=poses,
@@ -439,8 +461,7 @@ def choose_capacity(
             keep = np.flatnonzero(folds != fold)
             part = fit_polynomial(
                 [observed[k] for k in keep],
-                degree=degree,
-                aperture_degree=aperture_degree,
+                capacity=capacity,
                 aperture_norm_m=aperture_norm_m,
                 slope_norm=slope_norm,
                 poses=full.poses[keep],
@@ -456,8 +477,7 @@ def choose_capacity(
         # Standard error of the pooled RMS over captures (delta method on the mean square).
         se = math.sqrt(float(np.var(err**2, ddof=1)) / n) / (2.0 * math.sqrt(mean_sq)) if n > 1 else 0.0
         score = CapacityScore(
-            degree=degree,
-            aperture_degree=aperture_degree,
+            capacity=capacity,
             held_back_rms_m=math.sqrt(mean_sq),
             standard_error_m=se,
             fit_rms_m=full.rms_m,
@@ -466,7 +486,8 @@ def choose_capacity(
         fits.append(full)
         if progress is not None:
             progress(
-                f"ray model polynomial-{degree}-{aperture_degree}: held-back {score.held_back_rms_m * 1e6:.2f} um "
+                f"ray model {full.correction.name} ({problem_size(full)} free): held-back "
+                f"{score.held_back_rms_m * 1e6:.2f} um "
                 f"(+- {se * 1e6:.2f}), fit {full.rms_m * 1e6:.2f} um"
             )
         best = min(s.held_back_rms_m for s in scores)

@@ -30,7 +30,7 @@ import dataclasses
 import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -49,6 +49,7 @@ from lfrefract.validate import (
 __all__ = [
     "PARAMETERS",
     "POLYNOMIAL_CAPACITIES",
+    "Capacity",
     "Correction",
     "CorrectionEstimate",
     "PolynomialCorrection",
@@ -59,6 +60,7 @@ __all__ = [
     "frame_directions",
     "moved",
     "polynomial_exponents",
+    "symmetric_directions",
 ]
 
 #: Newton steps :meth:`RayCorrection.thin_lens_rays` takes at most (3 on the Illum's calibrated
@@ -301,22 +303,34 @@ def corrected_slopes(p: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- the generic member
 
-#: The capacities :func:`lfrefract.calibration.calibrate_camera` tries, smallest first: (total degree
-#: of the polynomial in the thin-lens ray's four coordinates, its largest degree in the aperture
-#: point). Measured on true rays (tiny-2x, every 2nd pixel, fitted directly): (3, 1) leaves the
+
+class Capacity(NamedTuple):
+    """A :class:`PolynomialCorrection`'s capacity: its total degree, its largest degree in the aperture
+    point, and whether it is rotationally symmetric (:func:`symmetric_directions`)."""
+
+    degree: int
+    aperture_degree: int
+    symmetric: bool = False
+
+
+#: The capacities :func:`lfrefract.calibration.calibrate_camera` tries, by their number of free
+#: coefficients: the rotationally symmetric members (any centred lens: 15, 39 and 79 free coefficients
+#: at degrees 3, 5 and 7), then the generic ones (a decentred lens: from 118 at (3, 1) to 822 at
+#: (7, 3)). Measured on true rays (tiny-2x, every 2nd pixel, fitted directly): (3, 1) leaves the
 #: double Gauss 0.03 mm / 0.46 mrad from the true rays 25 mm out, (5, 3) 0.002 mm / 0.09 mrad, the
 #: retrofocus wide angle 0.002 mm / 0.02 mrad; which one a camera gets is decided by the error on
 #: held-back board captures, never by its lens.
-POLYNOMIAL_CAPACITIES: tuple[tuple[int, int], ...] = (
-    (1, 1),
-    (2, 1),
-    (3, 1),
-    (4, 1),
-    (5, 1),
-    (5, 2),
-    (6, 2),
-    (7, 2),
-    (7, 3),
+POLYNOMIAL_CAPACITIES: tuple[Capacity, ...] = (
+    Capacity(3, 3, symmetric=True),
+    Capacity(5, 5, symmetric=True),
+    Capacity(7, 7, symmetric=True),
+    Capacity(3, 1),
+    Capacity(4, 1),
+    Capacity(5, 1),
+    Capacity(5, 2),
+    Capacity(6, 2),
+    Capacity(7, 2),
+    Capacity(7, 3),
 )
 
 #: The columns of :attr:`PolynomialCorrection.coefficients`: what each term adds to.
@@ -405,6 +419,9 @@ class PolynomialCorrection:
     ----------
     degree, aperture_degree : int
         Total degree (1 to 8) and degree in ``a`` (0 to ``degree``).
+    symmetric : bool
+        The coefficients are a rotationally symmetric member's (:func:`symmetric_directions`): what
+        the fit was restricted to; a file that says so is checked. Default False.
     aperture_norm_m : float
         ``R``: the aperture coordinates' scale, metres (the aperture radius).
     slope_norm : float
@@ -419,6 +436,7 @@ class PolynomialCorrection:
     aperture_norm_m: float
     slope_norm: float
     coefficients: np.ndarray
+    symmetric: bool = False
 
     def __post_init__(self) -> None:
         degree = bounded_int("degree", self.degree, 1, _MAX_DEGREE)
@@ -440,6 +458,17 @@ class PolynomialCorrection:
             )
         coef.setflags(write=False)
         object.__setattr__(self, "coefficients", coef)
+        if not isinstance(self.symmetric, bool):
+            raise ParameterError(f"symmetric must be true or false, got {shown(self.symmetric)}")
+        if self.symmetric:
+            normalised = (coef / np.array([self.aperture_norm_m] * 2 + [self.slope_norm] * 2)).ravel()
+            table = symmetric_directions(degree, self.aperture_degree)
+            left = normalised - table.T @ np.linalg.lstsq(table.T, normalised, rcond=None)[0]
+            if np.max(np.abs(left), initial=0.0) > 1e-9 * max(1.0, float(np.max(np.abs(normalised), initial=0.0))):
+                raise ParameterError(
+                    "symmetric is true but the coefficients are not a rotationally symmetric model's "
+                    f"(largest departure {np.max(np.abs(left)):.3g} in normalised units)"
+                )
 
     @property
     def exponents(self) -> np.ndarray:
@@ -448,8 +477,15 @@ class PolynomialCorrection:
 
     @property
     def name(self) -> str:
-        """``"polynomial-D-Da"``: how reports name the model."""
+        """``"polynomial-D-Da"`` (``"symmetric-D"`` for a symmetric member): how reports name the model."""
+        if self.symmetric:
+            return f"symmetric-{self.degree}"
         return f"polynomial-{self.degree}-{self.aperture_degree}"
+
+    @property
+    def capacity(self) -> Capacity:
+        """Its :class:`Capacity`."""
+        return Capacity(self.degree, self.aperture_degree, self.symmetric)
 
     def _normalised(self, a: np.ndarray, t: np.ndarray) -> np.ndarray:
         return np.column_stack([a / self.aperture_norm_m, t / self.slope_norm])
@@ -557,6 +593,7 @@ class PolynomialCorrection:
             "family": "polynomial",
             "degree": self.degree,
             "aperture_degree": self.aperture_degree,
+            "symmetric": self.symmetric,
             "aperture_norm_m": self.aperture_norm_m,
             "slope_norm": self.slope_norm,
             "columns": list(POLYNOMIAL_COLUMNS),
@@ -569,7 +606,7 @@ class PolynomialCorrection:
         """From :meth:`to_dict`'s data; its ``columns`` and ``exponents`` are checked against the capacity."""
         table: Any = data
         keys = {"family", "degree", "aperture_degree", "aperture_norm_m", "slope_norm", "columns", "exponents"}
-        reject_unknown_keys(where, table, keys | {"coefficients"})
+        reject_unknown_keys(where, table, keys | {"coefficients", "symmetric"})
         require_keys(where, table, keys | {"coefficients"})
         if table["family"] != "polynomial":
             raise ParameterError(f"{where}.family must be 'polynomial', got {shown(table['family'])}")
@@ -592,6 +629,7 @@ class PolynomialCorrection:
             return cls(
                 degree=degree,
                 aperture_degree=aperture,
+                symmetric=table.get("symmetric", False),
                 aperture_norm_m=table["aperture_norm_m"],
                 slope_norm=table["slope_norm"],
                 coefficients=np.array(values).reshape(-1, 4),
@@ -630,6 +668,66 @@ def frame_directions(exponents: np.ndarray) -> np.ndarray:
     out = table.reshape(len(directions), -1)
     norms = np.linalg.norm(out, axis=1, keepdims=True)
     return out[norms[:, 0] > 0] / norms[norms[:, 0] > 0]
+
+
+def _poly_product(p: dict, q: dict) -> dict:
+    """The product of two polynomials given as ``{exponents (4-tuple): coefficient}``."""
+    out: dict = {}
+    for ep, cp in p.items():
+        for eq, cq in q.items():
+            key = tuple(i + j for i, j in zip(ep, eq, strict=True))
+            out[key] = out.get(key, 0.0) + cp * cq
+    return out
+
+
+@functools.cache
+def _symmetric_table(degree: int, aperture_degree: int) -> np.ndarray:
+    exponents = polynomial_exponents(degree, aperture_degree)
+    index = {tuple(int(v) for v in e): m for m, e in enumerate(exponents)}
+    ax, ay, tx, ty = (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1)
+    invariants = (
+        {(2, 0, 0, 0): 1.0, (0, 2, 0, 0): 1.0},  # |a|^2
+        {(0, 0, 2, 0): 1.0, (0, 0, 0, 2): 1.0},  # |t|^2
+        {(1, 0, 1, 0): 1.0, (0, 1, 0, 1): 1.0},  # a.t
+    )
+    rows = []
+    top = (degree - 1) // 2
+    for i in range(top + 1):
+        for j in range(top + 1 - i):
+            for k in range(top + 1 - i - j):
+                scalar: dict = {(0, 0, 0, 0): 1.0}
+                for power, invariant in zip((i, j, k), invariants, strict=True):
+                    for _ in range(power):
+                        scalar = _poly_product(scalar, invariant)
+                # dO and dT, each along a and along t: (column of x, column of y, the vector's x and y).
+                for o_col, vector in ((0, (ax, ay)), (0, (tx, ty)), (2, (ax, ay)), (2, (tx, ty))):
+                    row = np.zeros((len(exponents), 4))
+                    fits = True
+                    for axis in range(2):
+                        for key, value in _poly_product(scalar, {vector[axis]: 1.0}).items():
+                            if key not in index:
+                                fits = False
+                                break
+                            row[index[key], o_col + axis] += value
+                    if fits:
+                        rows.append(row.ravel())
+    table = np.array(rows).reshape(-1, 4 * len(exponents))
+    table.setflags(write=False)
+    return table
+
+
+def symmetric_directions(degree: int, aperture_degree: int) -> np.ndarray:
+    """The coefficient directions (S, M * 4) of the rotationally symmetric members of
+    :class:`PolynomialCorrection` (normalised coefficients, row-major (M, 4)).
+
+    A centred lens (every surface on one axis, any design) maps a ray turned about the axis to the
+    turned ray, and a mirrored ray to the mirrored one. Its ``dO`` and ``dT`` are then sums of
+    ``a s(a, t)`` and ``t s(a, t)``, with ``s`` a polynomial in the invariants ``|a|^2``, ``|t|^2`` and
+    ``a . t`` (the ray-aberration expansion of a centred system: distortion, pupil aberration,
+    field curvature, coma, spherical aberration and their higher orders). Each row is one such term
+    whose monomials lie within the capacity (degree, aperture degree).
+    """
+    return _symmetric_table(int(degree), int(aperture_degree))
 
 
 #: Every member of the ray-model family: the thin lens is ``None`` (no correction).

@@ -22,11 +22,13 @@ from lfrefract.formats.capture import correction_estimate_from_option, ray_corre
 from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import (
+    Capacity,
     PolynomialCorrection,
     RayCorrection,
     correction_from_dict,
     frame_directions,
     polynomial_exponents,
+    symmetric_directions,
 )
 from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 from tests.lfrefract.test_calibrate_camera import (
@@ -137,7 +139,7 @@ def test_fit_recovers_a_model_of_its_capacity_from_noise_free_boards():
             t = t + (corners[:, :2] - o - corners[:, 2:3] * s) / corners[:, 2:3]
         exact.append((points, a, t))
     start = poses + np.array([0.01, -0.01, 0.005, 0.002, -0.001, 0.004])
-    fit = fit_polynomial(exact, degree=3, aperture_degree=1, aperture_norm_m=R, slope_norm=T, poses=start, noise_m=1e-9)
+    fit = fit_polynomial(exact, capacity=(3, 1), aperture_norm_m=R, slope_norm=T, poses=start, noise_m=1e-9)
     a, t = _samples()
     o0, s0 = truth.origins_and_slopes(a, t)
     o1, s1 = fit.correction.origins_and_slopes(a, t)
@@ -147,21 +149,53 @@ def test_fit_recovers_a_model_of_its_capacity_from_noise_free_boards():
 
 def test_polynomial_calibration_finds_the_term_the_radial_model_lacks():
     """The synthetic camera's field curvature (slopes gain c |t|^2 a): the radial model leaves its
-    rays 0.045 mm / 0.39 mrad from the true ones (25 mm out); the polynomial model, its capacity
-    chosen by held-back boards among (3, 1) and (5, 1), picks (5, 1) (held-back 7.9 um against 20.6
-    um) and comes within 0.009 mm / 0.08 mrad."""
+    rays 0.045 mm / 0.39 mrad from the true ones (25 mm out). Chosen by held-back boards among
+    symmetric-3, symmetric-5 and the generic (5, 1), the model is symmetric-5 (held-back 7.3 um,
+    symmetric-3 18.7 um, (5, 1) 7.9 um), 0.0008 mm / 0.025 mrad from the true rays; the generic (5, 1)
+    alone came within 0.0085 mm / 0.077 mrad."""
     views, _ = _board_views(square_at_015_m=6 * 2.1e-3)
     a, t = _samples()
     radial = calibrate_camera(CAMERA, views, view=VIEW)
     origins, directions = radial.correction.apply(a, t)
     radial_errors = _errors(origins[:, :2], directions[:, :2] / directions[:, 2:3], a, t)
-    generic = calibrate_camera(CAMERA, views, view=VIEW, ray_model="polynomial", capacities=((3, 1), (5, 1)))
+    ladder = (Capacity(3, 3, symmetric=True), Capacity(5, 5, symmetric=True), Capacity(5, 1))
+    generic = calibrate_camera(CAMERA, views, view=VIEW, ray_model="polynomial", capacities=ladder)
     assert isinstance(generic.correction, PolynomialCorrection)
-    assert generic.correction.name == "polynomial-5-1"
-    assert [(s.degree, s.aperture_degree) for s in generic.capacity_scores] == [(3, 1), (5, 1)]
+    assert generic.correction.name == "symmetric-5"
+    assert [s.capacity for s in generic.capacity_scores] == list(ladder)
     position, angle = _errors(*generic.correction.origins_and_slopes(a, t), a, t)
     assert position < POLY_SYNTHETIC_RAY_M < radial_errors[0]
     assert angle < POLY_SYNTHETIC_ANGLE_RAD < radial_errors[1]
+
+
+def test_symmetric_members_commute_with_turns_and_mirrors():
+    """A model made of symmetric_directions turns and mirrors with the ray: a centred lens's."""
+    exponents = polynomial_exponents(5, 5)
+    rng = np.random.default_rng(8)
+    table = symmetric_directions(5, 5)
+    normalised = (rng.normal(0.0, 0.01, len(table)) @ table).reshape(-1, 4)
+    model = PolynomialCorrection(
+        degree=5,
+        aperture_degree=5,
+        aperture_norm_m=R,
+        slope_norm=T,
+        coefficients=normalised * np.array([R, R, T, T]),
+        symmetric=True,
+    )
+    assert len(exponents) == len(model.coefficients)
+    a, t = _samples(200)
+    angle = 0.7
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    mirror = np.diag([1.0, -1.0])
+    for move in (turn, mirror):
+        o1, s1 = model.origins_and_slopes(a @ move.T, t @ move.T)
+        o0, s0 = model.origins_and_slopes(a, t)
+        np.testing.assert_allclose(o1, o0 @ move.T, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(s1, s0 @ move.T, rtol=0, atol=1e-13)
+    asymmetric = model.coefficients.copy()
+    asymmetric[1, 0] += 1e-4 * R
+    with pytest.raises(ParameterError, match="not a rotationally symmetric"):
+        dataclasses.replace(model, coefficients=asymmetric)
 
 
 def test_choose_capacity_needs_captures_to_hold_back():
