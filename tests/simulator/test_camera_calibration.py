@@ -151,7 +151,10 @@ def test_the_port_is_calibrated_on_the_calibrated_model(mi, double_gauss):
         assert found is not None
         views.append(found)
     known = {"thickness_m": truth.thickness_m, "n_glass": truth.n_glass, "n_water": truth.n_water}
-    thin = calibrate_port(VIEW, views, **known).port
+    # On the thin-lens model the boards disagree with each other (its normal's spread by capture is 1.1
+    # deg, beyond calibrate_port's default limit of 0.5, which refuses it): the limits are raised here to
+    # see how far off it is.
+    thin = calibrate_port(VIEW, views, **known, max_normal_std_deg=5.0, max_distance_std_m=0.05).port
     fitted = calibrate_port(VIEW, [corrected_view(v, double_gauss.correction, VIEW) for v in views], **known).port
 
     def normal_error_deg(port):
