@@ -868,10 +868,11 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     }
     joint = None
     correction: Correction | None
-    if prior is not None:  # the port and the camera's ray model together
+    if prior is not None:  # the port and the camera's ray model together, kept if held-back boards say so
         joint = calibrate_port_and_camera(view, views, prior=prior, **glass)
+    if joint is not None and joint.accepted:
         result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
-    else:
+    else:  # the in-air model (--camera's), also where the refinement was rejected
         correction, model_file = ray_correction_from_option(args.camera), args.camera
         model_views: list[list[BoardView]] = []
         if correction is not None:  # a calibrated camera: its rays, not the thin lens's
@@ -892,13 +893,18 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         write_json(Path(args.refine_camera), _refined_camera(args, joint, out, boards))
     write_json(out, data)
     write_flat_port(flat_port, result.port)
-    refined = (
-        ""
-        if joint is None
-        else f"; camera refined with it (moved {math.sqrt(joint.prior_chi2):.1f} sigma of its in-air estimate; "
-        f"the port on the in-air model alone: distance {joint.sequential.port.distance_m * 1e3:.2f} mm), "
-        f"wrote {args.refine_camera}"
-    )
+    refined = ""
+    if joint is not None and joint.accepted:
+        refined = (
+            f"; camera refined with it (moved {math.sqrt(joint.prior_chi2):.1f} sigma of its in-air estimate; "
+            f"the port on the in-air model alone: distance {joint.sequential.port.distance_m * 1e3:.2f} mm; "
+            f"kept: {joint.check.reason}), wrote {args.refine_camera}"
+        )
+    elif joint is not None:
+        refined = (
+            f"; the in-air camera model kept, its refinement with the port rejected ({joint.check.reason}); "
+            f"wrote {args.refine_camera} as {args.camera} with the refinement's record"
+        )
     model_share = ""
     if "camera_model" in result.covariance_parts and np.any(result.covariance_parts["camera_model"]):
         share = result.covariance_parts["camera_model"][2, 2] / max(result.covariance[2, 2], 1e-300)
@@ -915,19 +921,34 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out: Path, boards: _BoardViews) -> dict:
     """The camera calibration of ``--camera`` with the ray model ``calibrate port --refine-camera``
     refined: the same file's data, its correction and covariance replaced, the in-air ones kept
-    under ``refinement``."""
+    under ``refinement``; where the held-back check rejected the refinement, the same file's data
+    unchanged, the rejected model and the reason under ``refinement``."""
     data = read_json(Path(args.camera))
     data.pop("schema_version", None)  # write_json stamps its own
-    refined = joint.correction
-    data["correction"] = refined.correction.to_dict()
-    data["correction_std"] = dict(zip(PARAMETERS, refined.std.tolist(), strict=True))
-    data["correction_covariance"] = refined.covariance_to_dict()
-    data["refinement"] = {
+    refined = joint.joint_correction
+    record = {
         "by": "lfrefract calibrate port --refine-camera",
         "camera": str(args.camera),
         "port": str(port_out),
         **boards.to_dict(),
+        "accepted": joint.accepted,
+        "held_back": joint.check.to_dict(),
         "prior_chi2": joint.prior_chi2,
+    }
+    if not joint.accepted:
+        data["refinement"] = {
+            **record,
+            "rejected_correction": refined.correction.to_dict(),
+            "rejected_correction_covariance": refined.covariance_to_dict(),
+            "note": "the refined ray model did not lower the error on held-back boards (held_back.reason): this "
+            "file's ray model is the in-air one of camera, unchanged",
+        }
+        return data
+    data["correction"] = refined.correction.to_dict()
+    data["correction_std"] = dict(zip(PARAMETERS, refined.std.tolist(), strict=True))
+    data["correction_covariance"] = refined.covariance_to_dict()
+    data["refinement"] = {
+        **record,
         "in_air_correction": joint.prior.correction.to_dict(),
         "in_air_correction_covariance": joint.prior.covariance_to_dict(),
         "note": "ray_rms_m, initial_ray_rms_m, per_view_rms_m, poses, correction_std_clustered and held are the "

@@ -17,7 +17,7 @@ from lfrefract.calibration.joint import (
 )
 from lfrefract.calibration.port import BoardView
 from lfrefract.optics.ray_correction import CorrectionEstimate, RayCorrection, apply_correction
-from tests.tolerances import JOINT_DISTANCE_M, JOINT_NORMAL_DEG
+from tests.tolerances import HELD_BACK_NOISE_FACTOR, JOINT_DISTANCE_M, JOINT_NORMAL_DEG
 
 CAMERA = PinholeCamera(focal_px=600.0, cx_px=399.5, cy_px=299.5, width_px=800, height_px=600)
 TRUE = RayCorrection(pupil_scale=0.985, slope_scale=1.0, k1=0.08, k2=0.1, pupil_drift_m=-0.006)
@@ -36,11 +36,12 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b)))
 
 
-def _views(n: int, noise_px: float, seed: int) -> list[BoardView]:
-    """``n`` boards at random poses 0.15-0.35 m away, each seen from every aperture point at a 7 x 5
-    grid of pixels around its centre; the board points are where the true rays land on the board."""
+def _views(n: int, noise_px: float, seed: int, *, grid: tuple[int, int] = (7, 5)) -> list[BoardView]:
+    """``n`` boards at random poses 0.15-0.35 m away, each seen from every aperture point at a
+    ``grid`` (columns, rows) of pixels around its centre; the board points are where the true rays
+    land on the board."""
     rng = np.random.default_rng(seed)
-    uu, vv = np.meshgrid(np.linspace(-60.0, 60.0, 7), np.linspace(-45.0, 45.0, 5))
+    uu, vv = np.meshgrid(np.linspace(-60.0, 60.0, grid[0]), np.linspace(-45.0, 45.0, grid[1]))
     grid = np.stack([uu.ravel(), vv.ravel()], axis=1)
     a = np.repeat(APERTURE_M, len(grid), axis=0)
     views = []
@@ -80,9 +81,60 @@ def test_the_refinement_finds_the_port_that_the_in_air_model_misses():
     # The refined covariance is tighter than the prior's: the underwater boards said something.
     assert np.all(result.correction.std < PRIOR_STD)
     assert result.port.rms_px < result.sequential.rms_px
+    # The held-back check keeps it: boards left out of the fit are predicted to their noise (0.02 px
+    # in the image, n_air / n_water of it as the port's geometric residual), on the in-air model not.
+    check, noise_px = result.check, 0.02 / 1.333
+    assert result.accepted
+    assert check.kept == "joint"
+    assert check.folds == 5
+    assert result.port is result.joint_port
+    assert result.correction is result.joint_correction
+    assert check.joint_rms_px < HELD_BACK_NOISE_FACTOR * noise_px < check.in_air_rms_px / HELD_BACK_NOISE_FACTOR
+    assert check.in_air_rms_px - check.joint_rms_px > 2 * check.standard_error_px
+    assert len(check.board_joint_rms_px) == 6
+    assert max(check.board_joint_rms_px) < HELD_BACK_NOISE_FACTOR * noise_px
     data = result.to_dict()
     assert data["in_air_correction"] == PRIOR.correction.to_dict()
     assert data["correction"] == result.correction.correction.to_dict()
+    assert data["kept"] == "joint"
+    assert data["held_back"]["joint_rms_px"] == check.joint_rms_px
+
+
+def test_a_refinement_that_does_not_predict_held_back_boards_better_is_rejected():
+    # The in-air model is the truth: the joint fit moves it within its covariance to fit the boards'
+    # noise, and predicts boards it did not see no better. The port on the in-air model is kept.
+    truth = CorrectionEstimate(correction=TRUE, covariance=PRIOR.covariance)
+    result = calibrate_port_and_camera(
+        CAMERA, _views(4, 0.02, seed=2, grid=(4, 3)), prior=truth, thickness_m=PORT.thickness_m
+    )
+    check = result.check
+    assert not result.accepted
+    assert check.kept == "in-air"
+    assert check.folds == 4  # one board held back in each
+    assert result.port is result.sequential
+    assert result.correction is truth
+    assert result.joint_correction.correction != TRUE  # the joint fit moved it; not kept
+    assert check.in_air_rms_px - check.joint_rms_px <= check.standard_error_px
+    assert check.joint_rms_px >= check.in_air_rms_px  # fitted to noise, it predicts worse than the truth
+    assert "with the in-air model" in check.reason
+    assert "standard error" in check.reason
+    assert _angle_deg(result.port.port.normal, PORT.normal) < JOINT_NORMAL_DEG
+    data = result.to_dict()
+    assert data["kept"] == "in-air"
+    assert data["held_back"]["reason"] == check.reason
+
+
+def test_fewer_than_four_boards_keep_the_in_air_model():
+    # A fold's fits would rest on two boards: the check does not run, and what is not checked is not kept.
+    result = calibrate_port_and_camera(
+        CAMERA, _views(3, 0.02, seed=1, grid=(4, 3)), prior=PRIOR, thickness_m=PORT.thickness_m
+    )
+    assert not result.accepted
+    assert result.port is result.sequential
+    assert result.correction is PRIOR
+    assert result.check.folds == 0
+    assert result.check.in_air_rms_px is None
+    assert "needs at least 4 boards, got 3" in result.check.reason
 
 
 def test_a_step_to_no_port_costs_much_and_does_not_fail():
