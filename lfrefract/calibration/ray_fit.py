@@ -33,6 +33,7 @@ Frames and units: camera frame (OpenCV axes), metres; slopes dimensionless.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lfrefract.calibration.uncertainty import clustered_covariance
 from lfrefract.errors import CalibrationError
 from lfrefract.optics.ray_correction import (
     POLYNOMIAL_CAPACITIES,
@@ -131,6 +133,25 @@ class CapacityScore:
         }
 
 
+@functools.cache
+def free_basis(capacity: Capacity) -> np.ndarray:
+    """The free coefficients' basis of a capacity, (4 M, P) with orthonormal columns (normalised
+    coefficients, row-major (M, 4)): the symmetric terms (:func:`symmetric_directions`) or every
+    monomial's, less the frame's directions (:func:`frame_directions`)."""
+    degree, aperture_degree, symmetric = capacity
+    fixed = frame_directions(polynomial_exponents(degree, aperture_degree))  # orthonormal rows
+    if symmetric:
+        table = symmetric_directions(degree, aperture_degree)
+        table = table - (table @ fixed.T) @ fixed
+        _, singular, vt = np.linalg.svd(table, full_matrices=False)
+        basis = vt[singular > 1e-9 * singular.max()].T
+    else:
+        _, singular, vt = np.linalg.svd(fixed)
+        basis = vt[int(np.sum(singular > 1e-9)) :].T
+    basis.setflags(write=False)
+    return basis
+
+
 def _left_jacobian(rotvec: np.ndarray) -> np.ndarray:
     """SO(3)'s left Jacobian at each rotation vector (n, 3) -> (n, 3, 3): d exp(w) / dw = [.]x J_l(w)."""
     theta = np.linalg.norm(rotvec, axis=1)
@@ -171,22 +192,15 @@ class _Problem:
             slope_norm=slope_norm,
             coefficients=np.zeros((len(self.exponents), 4)),
         )
-        fixed = frame_directions(self.exponents)  # orthonormal rows
-        if symmetric:
-            # The symmetric terms, less their components along the frame's directions, orthonormalised.
-            table = symmetric_directions(degree, aperture_degree)
-            table = table - (table @ fixed.T) @ fixed
-            _, singular, vt = np.linalg.svd(table, full_matrices=False)
-            self.basis = vt[singular > 1e-9 * singular.max()].T
-        else:
-            _, singular, vt = np.linalg.svd(fixed)
-            rank = int(np.sum(singular > 1e-9))
-            self.basis = vt[rank:].T  # (4M, P): no component along the frame's directions
+        self.basis = free_basis(Capacity(degree, aperture_degree, symmetric))
         self.observed = list(observed)
         self.points = [p for p, _, _ in self.observed]
         self.a = [a for _, a, _ in self.observed]
         self.t = [t for _, _, t in self.observed]
         self.phi = [self.template.monomials(a, t) for _, a, t in self.observed]
+        # Each free coefficient's effect on dO_x, dO_y, dT_x, dT_y at each observation: (4, n, P), fixed.
+        columns = self.basis.reshape(len(self.exponents), 4, -1)
+        self.effects = [np.stack([phi @ columns[:, c, :] * self.norms[c] for c in range(4)]) for phi in self.phi]
         # The slope scale: the normalised coefficients of dT_x along t_x and dT_y along t_y, averaged.
         index = {tuple(int(v) for v in e): m for m, e in enumerate(self.exponents)}
         scale_row = np.zeros((len(self.exponents), 4))
@@ -224,56 +238,34 @@ class _Problem:
         and ``J_p`` (each capture's pose): ``J_q^T J_q`` (P, P) and ``J_q^T r`` (P,) summed over
         captures, and per capture ``(J_p^T J_p, J_q^T J_p, J_p^T r, J_q^T r)``.
 
-        ``J_q`` is never formed: a residual's x component depends only on the coefficients of ``dO_x``
-        (through the monomials) and ``dT_x`` (through ``X_z`` times them), so ``J_q^T J_q`` is made of
-        the monomials' Gram matrices weighted by 1, ``X_z`` and ``X_z^2``, summed over every corner
-        first. The pose's rotation is differentiated through SO(3)'s left Jacobian, exactly at any
-        rotation.
+        A residual's x component moves with the free coefficients as ``-(dO_x' + X_z dT_x')``, the
+        primes their effects (:attr:`effects`, fixed by the observations), so ``J_q`` is formed from
+        them and the corners' depths. The pose's rotation is differentiated through SO(3)'s left
+        Jacobian, exactly at any rotation.
         """
-        coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
-        big_r, big_t = self.norms[0], self.norms[2]
-        m = len(self.exponents)
-        grams = np.zeros((3, m, m))
-        per_capture: list[tuple[np.ndarray, ...]] = []
+        hqq_total = np.zeros((self.n_free, self.n_free))
         gq_total = np.zeros(self.n_free)
-        for k in range(len(self.observed)):
-            phi = self.phi[k]
-            delta = phi @ coefficients
+        per_capture: list[tuple[np.ndarray, ...]] = []
+        for k, effects in enumerate(self.effects):
+            delta = np.einsum("cnp,p->nc", effects, q)
             slopes = self.t[k] + delta[:, 2:]
             rotated = Rotation.from_rotvec(poses[k, :3]).apply(self.points[k])
             corners = rotated + poses[k, 3:]
             z = corners[:, 2]
             r = corners[:, :2] - (self.a[k] + delta[:, :2]) - z[:, None] * slopes  # (n, 2)
+            jq = -np.stack([effects[0] + z[:, None] * effects[2], effects[1] + z[:, None] * effects[3]], axis=1)
+            jq = jq.reshape(-1, self.n_free)  # rows x0, y0, x1, ...
             de_dx = np.zeros((len(z), 2, 3))  # d e / d X
             de_dx[:, 0, 0] = de_dx[:, 1, 1] = 1.0
             de_dx[:, :, 2] = -slopes
             dx_dw = -_skew(rotated) @ _left_jacobian(poses[k : k + 1, :3])[0]  # X = exp(w) P + T
-            jp = np.concatenate([de_dx @ dx_dw, de_dx], axis=2)  # (n, 2, 6)
-            zphi = z[:, None] * phi
-            grams[0] += phi.T @ phi
-            grams[1] += phi.T @ zphi
-            grams[2] += zphi.T @ zphi
-            gq = np.zeros((m, 4))
-            hqp = np.zeros((m, 4, 6))
-            for axis in range(2):  # x: dO_x (column 0), dT_x (column 2); y: columns 1 and 3
-                gq[:, axis] = -big_r * (phi.T @ r[:, axis])
-                gq[:, axis + 2] = -big_t * (zphi.T @ r[:, axis])
-                hqp[:, axis] = -big_r * (phi.T @ jp[:, axis])
-                hqp[:, axis + 2] = -big_t * (zphi.T @ jp[:, axis])
-            jp_flat = jp.reshape(-1, 6)
-            gq_free = self.basis.T @ gq.ravel()
-            gq_total += gq_free
-            per_capture.append(
-                (jp_flat.T @ jp_flat, self.basis.T @ hqp.reshape(4 * m, 6), jp_flat.T @ r.ravel(), gq_free)
-            )
-        hqq = np.zeros((m, 4, m, 4))
-        for axis in range(2):
-            o_col, t_col = axis, axis + 2
-            hqq[:, o_col, :, o_col] = big_r * big_r * grams[0]
-            hqq[:, o_col, :, t_col] = big_r * big_t * grams[1]
-            hqq[:, t_col, :, o_col] = big_r * big_t * grams[1].T
-            hqq[:, t_col, :, t_col] = big_t * big_t * grams[2]
-        return self.basis.T @ hqq.reshape(4 * m, 4 * m) @ self.basis, gq_total, per_capture
+            jp = np.concatenate([de_dx @ dx_dw, de_dx], axis=2).reshape(-1, 6)
+            flat = r.ravel()
+            gq = jq.T @ flat
+            hqq_total += jq.T @ jq
+            gq_total += gq
+            per_capture.append((jp.T @ jp, jq.T @ jp, jp.T @ flat, gq))
+        return hqq_total, gq_total, per_capture
 
 
 def _prior(problem: _Problem, noise_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -380,15 +372,14 @@ def _result(problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float)
         scores.append(gq_k - hqp @ np.linalg.solve(hpp, gp))
     dof = max(1, n_rows - problem.n_free - 6 * len(residuals))
     bread = np.linalg.inv(hqq)
-    n = len(residuals)
-    meat = np.stack(scores).T @ np.stack(scores) * (n / max(1, n - 1))
+    bread = (bread + bread.T) / 2.0
     return PolynomialFit(
         correction=problem.correction(q),
         poses=poses,
         rms_m=math.sqrt(total / (n_rows / 2)),
         per_capture_rms_m=tuple(math.sqrt(float(np.sum(r * r)) / len(r)) for r in residuals),
         covariance=bread * (total / dof),
-        clustered=bread @ meat @ bread,
+        clustered=clustered_covariance(bread, scores),
         free=q,
         basis=problem.basis,
     )

@@ -462,8 +462,8 @@ class PolynomialCorrection:
             raise ParameterError(f"symmetric must be true or false, got {shown(self.symmetric)}")
         if self.symmetric:
             normalised = (coef / np.array([self.aperture_norm_m] * 2 + [self.slope_norm] * 2)).ravel()
-            table = symmetric_directions(degree, self.aperture_degree)
-            left = normalised - table.T @ np.linalg.lstsq(table.T, normalised, rcond=None)[0]
+            orthonormal = _symmetric_orthonormal(degree, self.aperture_degree)
+            left = normalised - orthonormal @ (orthonormal.T @ normalised)
             if np.max(np.abs(left), initial=0.0) > 1e-9 * max(1.0, float(np.max(np.abs(normalised), initial=0.0))):
                 raise ParameterError(
                     "symmetric is true but the coefficients are not a rotationally symmetric model's "
@@ -714,6 +714,15 @@ def _symmetric_table(degree: int, aperture_degree: int) -> np.ndarray:
     table = np.array(rows).reshape(-1, 4 * len(exponents))
     table.setflags(write=False)
     return table
+
+
+@functools.cache
+def _symmetric_orthonormal(degree: int, aperture_degree: int) -> np.ndarray:
+    """An orthonormal basis (M * 4, S') of the span of :func:`symmetric_directions`."""
+    _, singular, vt = np.linalg.svd(symmetric_directions(degree, aperture_degree), full_matrices=False)
+    basis = vt[singular > 1e-9 * singular.max()].T
+    basis.setflags(write=False)
+    return basis
 
 
 def symmetric_directions(degree: int, aperture_degree: int) -> np.ndarray:
