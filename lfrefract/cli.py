@@ -152,7 +152,7 @@ from lfrefract.synthesis.warp_map import (
     uses_kdtree,
     warp_map_key,
 )
-from lfrefract.validate import fields_by_flag
+from lfrefract.validate import fields_by_flag, positive_float
 
 #: How ``synth`` takes the colours of a Lytro capture: from the demosaiced image, or from each
 #: colour's own Bayer sites. Demosaicing first is the default: on the tiny camera's capture it
@@ -849,6 +849,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         FlatPort(distance_m=1.0, thickness_m=thickness, n_air=n_air, n_glass=n_glass, n_water=n_water)
     except ParameterError as exc:
         raise ParameterError(f"--thickness-m / --n-glass / --n-water: {exc}") from None
+    positive_float("--max-normal-std-deg", args.max_normal_std_deg)
+    positive_float("--max-distance-std-m", args.max_distance_std_m)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     step = args.subaperture_offset_px
     if step != 0 and args.corners != "views":
@@ -864,6 +866,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         "n_glass": n_glass,
         "n_water": n_water,
         "distance_range_m": tuple(args.distance_range_m),
+        "max_normal_std_deg": args.max_normal_std_deg,
+        "max_distance_std_m": args.max_distance_std_m,
         "names": boards.sources,
     }
     joint = None
@@ -1372,6 +1376,19 @@ def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
         metavar=("MIN", "MAX"),
         default=list(_default_of(calibrate_port, "distance_range_m")),
         help="range searched for the port's distance (its air-side face along its normal), metres",
+    )
+    parser.add_argument(
+        "--max-normal-std-deg",
+        type=float,
+        default=_default_of(calibrate_port, "max_normal_std_deg"),
+        help="refuse a port whose normal's standard deviation (noise and the camera model's uncertainty) exceeds "
+        "this, degrees",
+    )
+    parser.add_argument(
+        "--max-distance-std-m",
+        type=float,
+        default=_default_of(calibrate_port, "max_distance_std_m"),
+        help="refuse a port whose distance's standard deviation exceeds this, metres",
     )
     corners = _default_of(board_view_from_light_field, "method")
     parser.add_argument(
