@@ -188,34 +188,30 @@ class CameraCalibration:
 
     def to_dict(self) -> dict:
         """Plain data for the JSON file (``kind`` :data:`CAMERA_CALIBRATION_KIND`)."""
-        if isinstance(self.correction, PolynomialCorrection):
-            return {
-                "kind": CAMERA_CALIBRATION_KIND,
-                "camera": self.camera.to_dict(),
-                "correction": self.correction.to_dict(),
-                "ray_rms_m": self.ray_rms_m,
-                "initial_ray_rms_m": self.initial_ray_rms_m,
-                "per_view_rms_m": list(self.per_view_rms_m),
-                "capacity_scores": [s.to_dict() for s in self.capacity_scores],
-                "correction_spread": self.spread_to_dict(),
-                "poses": [list(p) for p in self.poses],
-                "model": "the thin-lens ray (a, t) becomes the ray through a + dO(a, t) on z = 0 with slopes "
-                "t + dT(a, t), dO and dT polynomials in (a / aperture_norm_m, t / slope_norm) with the "
-                "exponents and coefficients given; lfrefract.optics.ray_correction.PolynomialCorrection",
-            }
-        return {
+        common = {
             "kind": CAMERA_CALIBRATION_KIND,
             "camera": self.camera.to_dict(),
             "correction": self.correction.to_dict(),
             "ray_rms_m": self.ray_rms_m,
             "initial_ray_rms_m": self.initial_ray_rms_m,
             "per_view_rms_m": list(self.per_view_rms_m),
+            "poses": [list(p) for p in self.poses],
+            "correction_spread": self.spread_to_dict(),
+        }
+        if isinstance(self.correction, PolynomialCorrection):
+            return {
+                **common,
+                "capacity_scores": [s.to_dict() for s in self.capacity_scores],
+                "model": "the thin-lens ray (a, t) becomes the ray through a + dO(a, t) on z = 0 with slopes "
+                "t + dT(a, t), dO and dT polynomials in (a / aperture_norm_m, t / slope_norm) with the "
+                "exponents and coefficients given; lfrefract.optics.ray_correction.PolynomialCorrection",
+            }
+        return {
+            **common,
             "correction_std": dict(zip(PARAMETERS, self.correction_std, strict=True)),
             "correction_covariance": self.estimate.covariance_to_dict(),
             "correction_std_clustered": dict(zip(PARAMETERS, self.clustered_std, strict=True)),
             "held": list(self.held),
-            "poses": [list(p) for p in self.poses],
-            "correction_spread": self.spread_to_dict(),
             "model": "slopes t' = slope_scale * t * (1 + k1 |t|^2 + k2 |t|^4) through (pupil_scale * a, "
             "pupil_drift_m * |t'|^2) for the thin-lens ray (a, t); lfrefract.optics.ray_correction",
         }

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -199,14 +199,7 @@ class RayCorrection:
 
     def corrected(self, rays: CapturedRays) -> CapturedRays:
         """``rays`` (thin-lens captured rays) with the correction applied; masks and lenses kept."""
-        d = rays.directions_cam
-        origins, directions = self.apply(rays.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
-        return CapturedRays(
-            origins_cam=origins,
-            directions_cam=directions,
-            in_aperture=rays.in_aperture,
-            lens_indices=rays.lens_indices,
-        )
+        return _corrected(self.apply, rays)
 
     def to_dict(self) -> dict:
         """Plain data: :data:`PARAMETERS` and their values."""
@@ -282,6 +275,21 @@ def _checked_covariance(cov: np.ndarray, where: str) -> np.ndarray:
     if np.linalg.eigvalsh(cov)[0] <= 0.0:
         raise ParameterError(f"{where} must be positive definite (every parameter determined)")
     return cov
+
+
+def _corrected(
+    apply: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]], rays: CapturedRays
+) -> CapturedRays:
+    """Thin-lens captured rays mapped by a model's ``apply`` (aperture points, slopes -> origins,
+    directions); the aperture mask and the lens indices kept."""
+    d = rays.directions_cam
+    origins, directions = apply(rays.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
+    return CapturedRays(
+        origins_cam=origins,
+        directions_cam=directions,
+        in_aperture=rays.in_aperture,
+        lens_indices=rays.lens_indices,
+    )
 
 
 def apply_correction(p: np.ndarray, a: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -574,14 +582,7 @@ class PolynomialCorrection:
 
     def corrected(self, rays: CapturedRays) -> CapturedRays:
         """``rays`` (thin-lens captured rays) with the model applied; masks and lenses kept."""
-        d = rays.directions_cam
-        origins, directions = self.apply(rays.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
-        return CapturedRays(
-            origins_cam=origins,
-            directions_cam=directions,
-            in_aperture=rays.in_aperture,
-            lens_indices=rays.lens_indices,
-        )
+        return _corrected(self.apply, rays)
 
     def vector(self) -> np.ndarray:
         """The coefficients, flattened row by row (M * 4,)."""
