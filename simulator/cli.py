@@ -5,7 +5,8 @@
     lfsim rig [RIG] --out DIR [--spp N] [--seed S] [--overwrite]
     lfsim experiment NAME --out DIR [--scale tiny|illum] [--methods M1,M2] [--camera CAMERA] [--lens LENS]
                      [--port-distance-m D] [--thickness-m T] [--tilts-deg T1,T2] [--f-numbers N1,N2]
-                     [--renders DIR] [--overwrite]
+                     [--port-tilt-x-deg A] [--port-tilt-y-deg B] [--n-glass N] [--n-water N]
+                     [--ray-model radial|polynomial] [--renders DIR] [--overwrite]
     lfsim whites --out DIR [--camera PRESET] [--sensor PRESET] [--lens LENS] [--focal-lengths-mm F1,F2]
                  [--focus-m D1,inf] [--frames N] [--spp N] [--seed S] [--overwrite]
     lfsim demo [--out DIR] [--overwrite]
@@ -252,6 +253,26 @@ def _parser() -> argparse.ArgumentParser:
     )
     exp.add_argument("--f-numbers", type=_numbers, help="main-lens f-numbers, separated by commas")
     exp.add_argument(
+        "--port-tilt-x-deg",
+        type=float,
+        metavar="DEG",
+        help="the rig wall's tilt about x, degrees (positive: its normal turned up; default: the rig's)",
+    )
+    exp.add_argument(
+        "--port-tilt-y-deg",
+        type=float,
+        metavar="DEG",
+        help="the rig wall's tilt about y, degrees (positive: its normal turned right; default: the rig's)",
+    )
+    exp.add_argument("--n-glass", type=float, help="refractive index of the rig wall's glass (default: the rig's)")
+    exp.add_argument("--n-water", type=float, help="refractive index of the water (default: the rig's)")
+    exp.add_argument(
+        "--ray-model",
+        metavar="MODEL",
+        help="the camera ray model the data-only chain calibrates: radial or polynomial (lfrefract calibrate "
+        "camera --ray-model; default: radial)",
+    )
+    exp.add_argument(
         "--lens",
         metavar="LENS",
         help=f"main lens every rig camera renders through (the core still assumes a thin lens): {LENS_HELP}",
@@ -385,6 +406,11 @@ def _experiment(args: argparse.Namespace) -> int:
         "tilts_deg": args.tilts_deg,
         "f_numbers": args.f_numbers,
         "lens": None if args.lens is None else lens_option(args.lens),
+        "port_tilt_x_deg": args.port_tilt_x_deg,
+        "port_tilt_y_deg": args.port_tilt_y_deg,
+        "n_glass": args.n_glass,
+        "n_water": args.n_water,
+        "ray_model": args.ray_model,
     }
     options = ExperimentOptions(
         scale=args.scale,

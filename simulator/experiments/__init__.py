@@ -36,12 +36,13 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from lfrefract.calibration.camera import RAY_MODELS
 from lfrefract.errors import ParameterError
 from lfrefract.formats.capture import SIDECAR_NAME
 from lfrefract.formats.jsonio import write_json, write_text_atomically
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.lens import LENS_PRESETS, LensPrescription
-from lfrefract.optics.port import MAX_DISTANCE_M, MAX_THICKNESS_M
+from lfrefract.optics.port import MAX_DISTANCE_M, MAX_THICKNESS_M, N_MAX, N_MIN
 from lfrefract.optics.presets import camera_preset
 from lfrefract.validate import bounded_float, finite_float, one_of, positive_float, shown
 from simulator.config import THIN_LENS
@@ -77,6 +78,11 @@ OPTION_FLAGS = {
     "tilts_deg": "--tilts-deg",
     "f_numbers": "--f-numbers",
     "lens": "--lens",
+    "port_tilt_x_deg": "--port-tilt-x-deg",
+    "port_tilt_y_deg": "--port-tilt-y-deg",
+    "n_glass": "--n-glass",
+    "n_water": "--n-water",
+    "ray_model": "--ray-model",
 }
 
 
@@ -133,6 +139,16 @@ class ExperimentOptions:
         and stopped to the camera; ``meta.json`` records a design by its table. The core is not told:
         it keeps its thin-lens model of the camera (what ``planes`` and ``objects`` then measure is
         the cost of that assumption).
+    port_tilt_x_deg, port_tilt_y_deg : float, optional
+        The tilts of a rig's wall, degrees, each in (-90, 90): its normal (into the water, world frame)
+        is ``R_y(tilt_y) R_x(tilt_x) (0, 0, 1)``, the port's convention (docs/conventions.md), so a
+        positive ``tilt_x`` turns it up and a positive ``tilt_y`` right; one left out keeps the rig's
+        own. Each camera sees the wall through its own pose (its port's tilts differ from the wall's).
+    n_glass, n_water : float, optional
+        Refractive indices of a rig's wall glass and of the water behind it, each in [1, 5].
+    ray_model : str, optional
+        The camera ray model a data-only chain calibrates (``lfrefract calibrate camera --ray-model``;
+        one of :data:`lfrefract.calibration.camera.RAY_MODELS`); default ``"radial"``.
     """
 
     scale: str = "tiny"
@@ -143,6 +159,11 @@ class ExperimentOptions:
     tilts_deg: tuple[float, ...] | None = None
     f_numbers: tuple[float, ...] | None = None
     lens: str | LensPrescription | None = None
+    port_tilt_x_deg: float | None = None
+    port_tilt_y_deg: float | None = None
+    n_glass: float | None = None
+    n_water: float | None = None
+    ray_model: str | None = None
 
     def __post_init__(self) -> None:
         one_of("scale", self.scale, SCALES)
@@ -174,6 +195,14 @@ class ExperimentOptions:
             object.__setattr__(self, "f_numbers", _floats("f_numbers", self.f_numbers, positive_float))
         if self.lens is not None and not isinstance(self.lens, LensPrescription):
             one_of("lens", self.lens, (THIN_LENS, *sorted(LENS_PRESETS)))
+        for name in ("port_tilt_x_deg", "port_tilt_y_deg"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _tilt_deg(name, getattr(self, name)))
+        for name in ("n_glass", "n_water"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, bounded_float(name, getattr(self, name), N_MIN, N_MAX))
+        if self.ray_model is not None:
+            one_of("ray_model", self.ray_model, RAY_MODELS)
 
     def given(self) -> tuple[str, ...]:
         """Names of the fields set (not ``None``), ``scale`` left out."""

@@ -52,6 +52,11 @@ triangulated, as in ``planes``. Columns (units in the names):
 - ``test_boards_found``: of the test boards' views, how many the method's images show the board in;
   ``boards_left_out``: the board captures (relative to ``delivered/``) that the method's camera and
   port calibrations left out, their board not located (``lfrefract calibrate``'s ``left_out``).
+- ``ray_model``: each camera's ray model as its port and synthesis used it (:func:`ray_model_name`).
+
+``ports.csv`` has a row per calibrated port (method and camera): its normal's and distance's errors
+against the true port beside the standard deviations its port file states, and the error's length in
+that file's covariance (``port_error_sigmas``).
 
 The output directory keeps what the core wrote that a user would keep (``calibration/<camera>/``:
 ``mla.json``, ``camera.json``, ``camera-refined.json``, ``port.json``, ``port-thin-lens.json``) and
@@ -88,6 +93,7 @@ from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
+from lfrefract.optics.ray_correction import PolynomialCorrection
 from lfrefract.optics.real_lens import RealLensCamera
 from lfrefract.synthesis.warp_map import PAPER_K
 from simulator import boards as board_scenes
@@ -115,6 +121,7 @@ from simulator.experiments.planes import (
 )
 from simulator.experiments.rigstereo import (
     MATCHERS,
+    WALL_OPTIONS,
     Capture,
     PreparedMethod,
     RigSetup,
@@ -135,13 +142,16 @@ from simulator.whites import render_whites, white_settings
 
 __all__ = [
     "DEFAULT_LENS",
+    "DEFAULT_RAY_MODEL",
     "MEASURES",
     "METHODS",
     "RAY_PIXEL_STEP",
     "SENSORS",
     "TEST_BOARD_DEPTHS_M",
     "PipelineSetup",
+    "ray_model_name",
     "run_pipeline",
+    "scene_signature",
     "setup_for_pipeline",
     "summary_figure",
 ]
@@ -174,6 +184,13 @@ TEST_BOARD_ROTATION_XYZ_DEG = board_scenes.SLANT_XYZ_DEG
 RAY_PIXEL_STEP = {"tiny": 2, "illum": 8}
 #: The data-only chain's camera calibration refined with its port (``calibrate port --refine-camera``).
 REFINED_CAMERA_NAME = "camera-refined.json"
+#: The ray models ``calibrate port --refine-camera`` refines (it refuses a polynomial camera file: the
+#: core uses that model as calibrated, docs/calibration.md).
+REFINED_RAY_MODELS = ("radial",)
+#: The data-only chain's ray model unless ``ExperimentOptions.ray_model`` says otherwise.
+DEFAULT_RAY_MODEL = "radial"
+#: How the core's command line starts its error message on standard error.
+ERROR_PREFIX = "lfrefract: error:"
 #: File suffixes a Lytro camera gives (captures and its white images); nothing else is delivered.
 LYTRO_SUFFIXES = (".lfr", ".raw", ".txt")
 
@@ -336,6 +353,8 @@ class _Core:
             status = core_cli.main(argv_list)
         if status != 0:
             message = " ".join(err.getvalue().split()) or f"exit status {status}"
+            # the refusal itself, not the notes on every capture before it (the calibration files keep those)
+            message = message[message.rfind(ERROR_PREFIX) :] if ERROR_PREFIX in message else message
             raise RuntimeError(f"lfrefract {argv_list[0]} {argv_list[1] if len(argv_list) > 1 else ''}: {message}")
         return out.getvalue()
 
@@ -362,7 +381,11 @@ def run_pipeline(
 
     ``options``: the scale, ``lens`` (the real captures' main lens, default :data:`DEFAULT_LENS`;
     ``"thin"`` makes the data-only chain calibrate a camera that is what the core models),
-    ``port_distance_m`` and ``thickness_m`` (the rig's wall). ``renders_dir``: keep the renders there
+    ``port_distance_m``, ``thickness_m``, ``port_tilt_x_deg``, ``port_tilt_y_deg``, ``n_glass`` and
+    ``n_water`` (the rig's wall: :func:`~simulator.experiments.rigstereo.wall_with_options`) and
+    ``ray_model`` (the data-only chain's, default :data:`DEFAULT_RAY_MODEL`; the ``ray_model``
+    column and ``ports.csv``, each calibrated port against the truth with its stated standard
+    deviations, say what was used and found). ``renders_dir``: keep the renders there
     and reuse those that match on a later run (default: a temporary directory, deleted).
     """
     options = options if options is not None else ExperimentOptions()
@@ -435,6 +458,7 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
     scale = options.scale
     setup = setup_for_pipeline(scale)
     lens = options.lens if options.lens is not None else DEFAULT_LENS
+    experiment_rig(setup.rig, options)  # the user's options alone first: an impossible rig names only their flags
     thin = experiment_rig(setup.rig, dataclasses.replace(options, lens=THIN_LENS))
     real = _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
     jobs, squares = _rig_jobs(thin, setup.rig, scale)
@@ -509,12 +533,19 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
     return _Rendered(setup, lens, thin, real, jobs, squares, air_squares, port_squares, oracle, captures)
 
 
+def scene_signature(config: SceneConfig) -> dict:
+    """What a kept render of one scene (a calibration board's) is recorded and reused by: the whole
+    scene as plain data (camera, main lens, port, objects, lights, render and sensor settings), its
+    source file left out."""
+    return {k: v for k, v in config.to_dict().items() if k != "source"}
+
+
 def _render_and_deliver(config: SceneConfig, folder: Path, delivered: Path) -> None:
     """Render ``config`` into ``folder`` (kept if it holds this scene's render) and copy its Lytro file
     into ``delivered`` as ``<folder name>.lfr``."""
     _once(
         folder,
-        {k: v for k, v in config.to_dict().items() if k != "source"},
+        scene_signature(config),
         lambda: render_job(config, folder, progress=False, write_previews=False, write_lfr=True, overwrite=True),
     )
     delivered.mkdir(parents=True, exist_ok=True)
@@ -568,6 +599,16 @@ class _Models:
     error: str | None = None
     #: Board captures its calibrations left out (board not located), relative to ``delivered/``.
     left_out: list[str] = dataclasses.field(default_factory=list)
+    #: Each camera's port calibration file (``lfrefract calibrate port --out``).
+    port_files: dict[str, Path] = dataclasses.field(default_factory=dict)
+    #: Each camera's ray model as the chain's port and synthesis used it (:func:`ray_model_name`).
+    ray_models: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    def fail(self, camera: str, exc: BaseException) -> None:
+        """Note that the chain failed for ``camera`` (the other cameras' chains still run, so that each
+        camera's calibrations are reported)."""
+        failure = f"{camera}: {describe_error(exc)}"
+        self.error = failure if self.error is None else f"{self.error}; {failure}"
 
     def note_left_out(self, calibration: Path, delivered: Path) -> None:
         """Add the captures that the calibration file ``calibration`` lists as left out."""
@@ -580,8 +621,33 @@ def _numbered(folder: Path) -> list[Path]:
     return sorted(folder.glob("board-*.lfr"), key=lambda p: int(p.stem.split("-")[-1]))
 
 
-def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, runs: dict) -> dict[str, _Models]:
-    """The data-only and thin-lens-assumed chains, per camera, on the delivered files only."""
+def ray_model_name(camera_file: Path) -> str:
+    """The ray model of a camera calibration file as reports name it: ``"radial"``, or the generic
+    model's member its calibration chose (:attr:`PolynomialCorrection.name`: ``"symmetric-D"`` or
+    ``"polynomial-D-Da"``, total degree ``D`` and degree ``Da`` in the aperture point, the file's
+    ``correction.degree`` and ``correction.aperture_degree``)."""
+    correction = ray_correction_from_option(camera_file)
+    return correction.name if isinstance(correction, PolynomialCorrection) else "radial"
+
+
+def _refinement_note(refined: Path | None) -> str:
+    """How a ray model relates to its port, for the ``ray_model`` column: ``""`` (no refinement asked),
+    ``" refined with the port"``, or ``" in-air (its refinement rejected)"`` where ``calibrate port
+    --refine-camera`` kept the in-air model (the refined one did no better on held-back boards; the
+    file's ``refinement.accepted``)."""
+    if refined is None:
+        return ""
+    accepted = read_json(refined).get("refinement", {}).get("accepted", True)
+    return " refined with the port" if accepted else " in-air (its refinement rejected)"
+
+
+def _core_stage(
+    core: _Core, delivered: Path, products: Path, cal_out: Path, runs: dict, *, ray_model: str
+) -> dict[str, _Models]:
+    """The data-only and thin-lens-assumed chains, per camera, on the delivered files only; the
+    data-only chain's camera with ``ray_model`` (``calibrate camera --ray-model``), refined with its
+    port where the core takes it (the radial model: ``calibrate port --refine-camera``; the core
+    uses the polynomial model as calibrated)."""
     models = {"data-only": _Models(), "thin-lens-assumed": _Models()}
     board_args = ["--squares", *map(str, board_scenes.SQUARES)]
     for camera, run in runs.items():
@@ -595,14 +661,12 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
             core("calibrate", "mla", white, "--camera", run["preset"], "--out", mla)
         except Exception as exc:  # both chains need the MLA
             for chain in models.values():
-                chain.error = chain.error or describe_error(exc)
+                chain.fail(camera, exc)
             continue
         air = _numbered(delivered / "air" / camera)
         chains = {"data-only": camera_json, "thin-lens-assumed": mla}
         for method, model in chains.items():
             chain = models[method]
-            if chain.error is not None:
-                continue
             try:
                 if method == "data-only":
                     sizes = [str(s) for s in run["air_squares"]]
@@ -617,6 +681,8 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                         *board_args,
                         "--square-size-m",
                         *sizes,
+                        "--ray-model",
+                        ray_model,
                         "--out",
                         camera_json,
                     )
@@ -624,8 +690,10 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                 port = out / ("port.json" if method == "data-only" else "port-thin-lens.json")
                 boards = _numbered(delivered / "port" / camera)
                 sizes = [str(s) for s in run["port_squares"]]
-                # data-only: the ray model refined with the port (what the underwater boards say of it)
-                refine = ["--refine-camera", out / REFINED_CAMERA_NAME] if method == "data-only" else []
+                # data-only: the ray model refined with the port (what the underwater boards say of it),
+                # where the core refines it (the radial model)
+                refined = method == "data-only" and ray_model in REFINED_RAY_MODELS
+                refine = ["--refine-camera", out / REFINED_CAMERA_NAME] if refined else []
                 # The thin-lens baseline is the old core on a real lens: its boards disagree with each other and
                 # the port's honest uncertainty is beyond calibrate port's default limits; as the old core
                 # did, it is accepted whatever its spread, and its errors are what the table shows.
@@ -655,12 +723,17 @@ def _core_stage(core: _Core, delivered: Path, products: Path, cal_out: Path, run
                 args = ["--white", whites, "--camera", model, "--port", port]
                 _synth_all(core, captures, args, products / "synth" / method / camera, products / "maps")
                 chain.ports[camera] = port_from_file(port)
+                chain.port_files[camera] = port
+                if method == "data-only":
+                    chain.ray_models[camera] = ray_model_name(model) + _refinement_note(model if refine else None)
+                else:
+                    chain.ray_models[camera] = "thin lens"
                 lf = camera_from_option(model)
                 rays = lf.captured_rays(run["uv"])
                 correction = ray_correction_from_option(model) if method == "data-only" else None
                 chain.rays[camera] = rays if correction is None else correction.corrected(rays)
             except Exception as exc:  # a failing chain is a table row, not a failed run
-                chain.error = describe_error(exc)
+                chain.fail(camera, exc)
     return models
 
 
@@ -673,6 +746,7 @@ def _oracle_stage(core: _Core, oracle: dict[str, Capture], thin: RigConfig, prod
             _synth_all(core, captures, [], products / "synth" / "oracle" / camera.name, products / "maps")
             models.ports[camera.name] = camera.scene.port
             models.rays[camera.name] = camera.scene.camera.captured_rays(uv)
+            models.ray_models[camera.name] = "true thin lens"
     except Exception as exc:  # a failing chain is a table row, not a failed run
         models.error = describe_error(exc)
     return models
@@ -699,6 +773,44 @@ def _port_errors(ports: dict[str, FlatPort], truth: RigConfig) -> tuple[float, f
         angles.append(math.degrees(math.acos(float(np.clip(np.dot(true.normal, port.normal), -1.0, 1.0)))))
         distances.append(abs(port.distance_m - true.distance_m) * 1e3)
     return max(angles), max(distances)
+
+
+def _port_rows(models: dict[str, _Models], truth: RigConfig) -> list[dict]:
+    """Each calibrated port (the methods that calibrate one) against its camera's true one, with the
+    uncertainty its calibration states: one row per method and camera (the columns of ``ports.csv``)."""
+    rows = []
+    for method in METHODS:
+        chain = models[method]
+        for camera in truth.cameras:
+            if camera.name not in chain.port_files:
+                continue
+            true, port = camera.scene.port, chain.ports[camera.name]
+            if true is None:  # a rig camera's scene has the wall as its port
+                raise ParameterError(f"rig camera {camera.name!r} has no port to measure its calibration against")
+            data = read_json(chain.port_files[camera.name])
+            # (tilt_x_rad, tilt_y_rad, distance_m): the order of the port file's covariance
+            delta = np.array([port.tilt_x_rad, port.tilt_y_rad, port.distance_m])
+            delta -= np.array([true.tilt_x_rad, true.tilt_y_rad, true.distance_m])
+            covariance = np.asarray(data["covariance"], dtype=np.float64)
+            parts = data.get("covariance_parts", {})
+            model_part = np.asarray(parts.get("camera_model", np.zeros((3, 3))), dtype=np.float64)
+            rows.append(
+                {
+                    "method": method,
+                    "camera": camera.name,
+                    "ray_model": chain.ray_models[camera.name],
+                    "port_normal_err_deg": math.degrees(
+                        math.acos(float(np.clip(np.dot(true.normal, port.normal), -1.0, 1.0)))
+                    ),
+                    "port_normal_std_deg": float(data["normal_std_deg"]),
+                    "port_distance_err_mm": delta[2] * 1e3,
+                    "port_distance_std_mm": float(data["distance_std_m"]) * 1e3,
+                    "port_error_sigmas": float(np.sqrt(delta @ np.linalg.lstsq(covariance, delta, rcond=None)[0])),
+                    "camera_model_distance_share": float(model_part[2, 2] / covariance[2, 2]),
+                    "port_rms_px": float(data["rms_px"]),
+                }
+            )
+    return rows
 
 
 def _ray_measures(rays: dict[str, CapturedRays], true: dict[str, CapturedRays], truth: RigConfig) -> dict:
@@ -771,7 +883,8 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     models = {"oracle": _oracle_stage(core, oracle, thin, products, uv)}
     seconds["oracle_core_s"] = time.perf_counter() - start
     start = time.perf_counter()
-    models |= _core_stage(core, delivered, products, out_dir / "calibration", runs)
+    ray_model = options.ray_model if options.ray_model is not None else DEFAULT_RAY_MODEL
+    models |= _core_stage(core, delivered, products, out_dir / "calibration", runs, ray_model=ray_model)
     seconds["data_core_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -787,6 +900,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         chain, shots = models[method], oracle if method == "oracle" else captures
         row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan)
         row |= {"test_boards_found": "", "boards_left_out": " ".join(chain.left_out)}
+        row["ray_model"] = ", ".join(f"{camera} {name}" for camera, name in chain.ray_models.items())
         prepared = PreparedMethod(name=method, error=chain.error)
         if chain.error is None:
             images = _images(products / "synth" / method, names, jobs[0][0])
@@ -816,7 +930,10 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         rows.append(row)
     seconds["measure_s"] = time.perf_counter() - start
     rows = list(complete_rows(rows))
+    ports = _port_rows(models, thin)
     write_table(complete_rows(by_depth), out_dir, stem="planes")
+    if ports:
+        write_table(complete_rows(ports), out_dir, stem="ports")
     write_text_atomically(out_dir / "commands.txt", "\n".join(log) + "\n")
     title = f"pipeline ({scale}), {lens if isinstance(lens, str) else lens.name} lens, {setup.sensor} sensor: "
     title += rig_setup(real)
@@ -832,7 +949,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         scale=scale,
         rows=tuple(rows),
         figures=figures,
-        summary=_summary(rows),
+        summary=_summary(rows, ports),
         parameters={
             "rig": dataclasses.asdict(setup.rig),
             "lens": lens_record(lens),
@@ -842,6 +959,9 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
             "board_spp": setup.board_spp,
             "board_frames": setup.board_frames,
             "wall": real.wall.to_dict(),
+            "ports": {c.name: None if c.scene.port is None else c.scene.port.to_dict() for c in real.cameras},
+            "ray_model": ray_model,
+            "ray_models": {method: dict(models[method].ray_models) for method in METHODS},
             "plane_depths_m": list(plane_depths),
             "test_board_depths_m": list(TEST_BOARD_DEPTHS_M[scale]),
             "ray_pixel_step": step,
@@ -852,16 +972,32 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     )
 
 
-def _summary(rows: Sequence[dict]) -> str:
-    """The table as markdown, for the terminal and meta.json."""
+def _summary(rows: Sequence[dict], ports: Sequence[dict] = ()) -> str:
+    """The table as markdown, for the terminal and meta.json; then each calibrated port's errors
+    against its stated standard deviations."""
     keys = ("corner_rms_px", "plane_rmse_mm", "truth_error_mm", "port_normal_err_deg", "port_distance_err_mm")
     keys += ("ray_rms_mm",)
     lines = ["| method | " + " | ".join(keys) + " | status |", "|---|" + "---:|" * len(keys) + "---|"]
     for row in rows:
         cells = [f"{row[k]:.3f}" if isinstance(row[k], float) and math.isfinite(row[k]) else "-" for k in keys]
         lines.append(f"| {row['method']} | " + " | ".join(cells) + f" | {row['status']} |")
+    if ports:
+        lines += ["", "| port | ray model | " + " | ".join(PORT_KEYS) + " |", "|---|---|" + "---:|" * len(PORT_KEYS)]
+    for port in ports:
+        cells = [f"{port[k]:.3f}" for k in PORT_KEYS]
+        lines.append(f"| {port['method']} {port['camera']} | {port['ray_model']} | " + " | ".join(cells) + " |")
     failed = [f"- {r['method']}: {r['error']}" for r in rows if r["status"] != "ok"]
     return "\n".join(lines + (["", "failed:", *failed] if failed else []))
+
+
+#: The port columns :func:`_summary` shows.
+PORT_KEYS = (
+    "port_normal_err_deg",
+    "port_normal_std_deg",
+    "port_distance_err_mm",
+    "port_distance_std_mm",
+    "port_error_sigmas",
+)
 
 
 def summary_figure(rows: Sequence[dict], *, setup: str):
@@ -905,7 +1041,11 @@ def summary_figure(rows: Sequence[dict], *, setup: str):
     return fig
 
 
-@register("pipeline", options=("lens", "port_distance_m", "thickness_m"), keeps_renders=True)
+@register(
+    "pipeline",
+    options=("lens", "port_distance_m", "thickness_m", *WALL_OPTIONS, "ray_model"),
+    keeps_renders=True,
+)
 def run(
     out_dir: Path, options: ExperimentOptions, *, progress: bool, renders_dir: Path | None = None
 ) -> ExperimentResult:

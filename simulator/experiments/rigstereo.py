@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import traceback
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from lfrefract.formats.capture import DEPTH_NAME, IDEAL_NAME, RAW_NAME
 from lfrefract.formats.exr import read_exr
 from lfrefract.methods import CalibrationViews
 from lfrefract.optics.pinhole import virtual_camera_for
+from lfrefract.optics.port import FlatPort
 from lfrefract.stereo.geometry import Rectification, StereoCalibration, calibrate_stereo, rectify
 from lfrefract.stereo.matching import sgbm_disparity, zncc_disparity
 from lfrefract.synthesis.warp_map import PAPER_K, SynthesisOptions, WarpMap, build_warp_map
@@ -45,7 +47,7 @@ from simulator.experiments.methods import (
     check_result,
     method_factories,
 )
-from simulator.rig import RigCamera, RigConfig, load_rig
+from simulator.rig import RigCamera, RigConfig, Wall, load_rig
 from simulator.rig_render import render_rig
 
 __all__ = [
@@ -53,12 +55,14 @@ __all__ = [
     "LIGHTS",
     "MATCHERS",
     "METHOD_NAMES",
+    "WALL_OPTIONS",
     "Capture",
     "PreparedMethod",
     "RigSetup",
     "aim",
     "board_points_m",
     "calibrate_method_rig",
+    "capture_signature",
     "chessboards",
     "exact_coverage",
     "experiment_rig",
@@ -69,6 +73,7 @@ __all__ = [
     "render_captures",
     "rig_setup",
     "square_size_m",
+    "wall_with_options",
     "warp_maps",
     "with_objects",
 ]
@@ -153,8 +158,9 @@ def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) ->
     """The embedded rig ``setup.rig`` with the experiment's lights (:data:`LIGHTS`), render settings
     (``setup.spp``, seed 0), no objects, and the options that apply: ``camera`` replaces every
     camera's optics; ``lens`` its main lens (scaled and stopped to the camera); ``port_distance_m``
-    / ``thickness_m`` move the wall's air-side plane / change its glass (each camera's port follows
-    from its pose).
+    / ``thickness_m`` move the wall's air-side plane / change its glass, ``port_tilt_x_deg`` /
+    ``port_tilt_y_deg`` turn it (:func:`wall_with_options`), ``n_glass`` / ``n_water`` set its indices
+    (each camera's port follows from its pose).
 
     Raises
     ------
@@ -164,19 +170,50 @@ def experiment_rig(setup: RigSetup, options: ExperimentOptions | None = None) ->
     """
     rig = load_rig(setup.rig)
     options = options if options is not None else ExperimentOptions()
-    with named_options(options, "port_distance_m", "thickness_m", "camera", "lens"):
+    names = ("port_distance_m", "thickness_m", *WALL_OPTIONS, "camera", "lens")
+    with named_options(options, *names):
         return _rig_with_options(rig, setup, options)
 
 
-def _rig_with_options(rig: RigConfig, setup: RigSetup, options: ExperimentOptions) -> RigConfig:
-    wall = rig.wall
-    changes = {
+#: The :class:`ExperimentOptions` fields that turn a rig's wall or change its indices.
+WALL_OPTIONS = ("port_tilt_x_deg", "port_tilt_y_deg", "n_glass", "n_water")
+
+
+def wall_with_options(wall: Wall, options: ExperimentOptions) -> Wall:
+    """``wall`` as ``options`` change it: ``port_distance_m`` (its air-side plane's offset from the
+    world origin), ``thickness_m``, ``n_glass``, ``n_water``, and its tilts ``port_tilt_x_deg`` /
+    ``port_tilt_y_deg`` (degrees; the normal ``R_y(tilt_y) R_x(tilt_x) (0, 0, 1)`` in the world frame,
+    the port's convention; a tilt not given keeps the wall's own, ``FlatPort.from_normal``'s inverse).
+    The very ``wall`` where none is given.
+
+    Raises
+    ------
+    ParameterError
+        For a wall the options make impossible (no glass, an index out of range).
+    """
+    changes: dict = {
         key: value
-        for key, value in (("distance_m", options.port_distance_m), ("thickness_m", options.thickness_m))
+        for key, value in (
+            ("distance_m", options.port_distance_m),
+            ("thickness_m", options.thickness_m),
+            ("n_glass", options.n_glass),
+            ("n_water", options.n_water),
+        )
         if value is not None
     }
-    if changes:
-        wall = dataclasses.replace(wall, **changes)
+    if options.port_tilt_x_deg is not None or options.port_tilt_y_deg is not None:
+        own = FlatPort.from_normal(np.asarray(wall.normal), distance_m=1.0)
+        tilts = {
+            "tilt_x_deg": math.degrees(own.tilt_x_rad) if options.port_tilt_x_deg is None else options.port_tilt_x_deg,
+            "tilt_y_deg": math.degrees(own.tilt_y_rad) if options.port_tilt_y_deg is None else options.port_tilt_y_deg,
+        }
+        changes["normal"] = tuple(FlatPort.from_degrees(distance_m=1.0, **tilts).normal.tolist())
+    return dataclasses.replace(wall, **changes) if changes else wall
+
+
+def _rig_with_options(rig: RigConfig, setup: RigSetup, options: ExperimentOptions) -> RigConfig:
+    wall = wall_with_options(rig.wall, options)
+    changes = wall is not rig.wall
     cameras = []
     for camera in rig.cameras:
         scene = camera.scene
@@ -266,12 +303,18 @@ def _signature(rig: RigConfig) -> list:
     return json.loads(json.dumps({"wall": rig.wall.to_dict(), "scenes": scenes}))
 
 
+def capture_signature(rig: RigConfig, *, write_lfr: bool = False) -> dict:
+    """What a kept capture of ``rig`` (:func:`render_capture`) is recorded and reused by, as plain JSON
+    data: the wall and each camera's whole scene (its port among them), and ``write_lfr``."""
+    return {"rig": _signature(rig), "lfr": write_lfr}
+
+
 def render_capture(rig: RigConfig, folder: Path, *, write_lfr: bool = False) -> Capture:
     """Render ``rig`` into ``folder``, kept if it already holds a render of this very rig (the same
     wall and scenes: cameras, ports, objects, lights, render settings, sensors) with its files as they
     were rendered (:func:`simulator.experiments.kept.kept_render`: sizes and SHA-256s).
     ``write_lfr``: every camera also writes its Lytro file (its scene needs a ``[sensor]``)."""
-    signature = {"rig": _signature(rig), "lfr": write_lfr}
+    signature = capture_signature(rig, write_lfr=write_lfr)
     kept_render(
         folder,
         signature,

@@ -1,0 +1,146 @@
+"""``lfsim experiment pipeline``'s port and ray-model options: checked at the boundary (errors name the
+flag and value), turning the rig's wall by the port's tilt convention, and keying the kept renders.
+
+Nothing here renders: the options are checked before any work, and a kept render's key is its scene.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lfrefract.errors import ParameterError
+from lfrefract.optics.pinhole import virtual_camera_for
+from simulator import boards as board_scenes
+from simulator import cli as sim_cli
+from simulator.experiments import OPTION_FLAGS, ExperimentOptions, load_experiments
+from simulator.experiments.kept import differs, keep
+from simulator.experiments.pipeline import (
+    _air_board_scene,
+    _port_board_scene,
+    _with_sensor,
+    scene_signature,
+    setup_for_pipeline,
+)
+from simulator.experiments.rigstereo import (
+    WALL_OPTIONS,
+    capture_signature,
+    chessboards,
+    experiment_rig,
+    wall_with_options,
+    with_objects,
+)
+from tests.tolerances import FLOAT64_ANGLE_DEG, FLOAT64_UNIT
+
+SETUP = setup_for_pipeline("tiny")
+NEW_FLAGS = ("--port-tilt-x-deg", "--port-tilt-y-deg", "--n-glass", "--n-water", "--ray-model")
+
+
+def _tilts_deg(port) -> tuple[float, float]:
+    return math.degrees(port.tilt_x_rad), math.degrees(port.tilt_y_rad)
+
+
+def test_the_pipeline_takes_the_port_and_ray_model_options_and_others_refuse_them(tmp_path, capsys):
+    pipeline = load_experiments()["pipeline"]
+    assert {OPTION_FLAGS[o] for o in pipeline.options} >= {"--port-distance-m", "--thickness-m", *NEW_FLAGS}
+    out = tmp_path / "x"
+    assert sim_cli.main(["experiment", "planes", "--out", str(out), "--ray-model", "polynomial"]) == 2
+    assert (
+        "option --ray-model (ray_model='polynomial') does not apply to experiment 'planes'" in capsys.readouterr().err
+    )
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--port-tilt-x-deg", "90"], "--port-tilt-x-deg: port_tilt_x_deg must lie in (-90, 90) deg, got 90"),
+        (["--port-tilt-y-deg=-95"], "--port-tilt-y-deg: port_tilt_y_deg must lie in (-90, 90) deg, got -95"),
+        (["--port-tilt-y-deg=nan"], "--port-tilt-y-deg: port_tilt_y_deg must be finite, got nan"),
+        (["--n-glass", "0.5"], "--n-glass: n_glass must lie in [1, 5], got 0.5"),
+        (["--n-water", "13.3"], "--n-water: n_water must lie in [1, 5], got 13.3"),
+        (["--ray-model", "spline"], "--ray-model: ray_model must be one of ['radial', 'polynomial'], got 'spline'"),
+        # Valid each, but the wall turned 80 deg about y passes between the right camera and the rig's origin:
+        # 15 mm - 30 mm sin(80 deg) = -14.54 mm.
+        (
+            ["--port-tilt-x-deg", "0", "--port-tilt-y-deg", "80"],
+            "--port-tilt-x-deg, --port-tilt-y-deg: camera at position_m=[0.03, 0.0, 0.0] is 14.54 mm on the water side",
+        ),
+    ],
+)
+def test_invalid_port_and_ray_model_values_name_the_flag_before_any_work(tmp_path, capsys, argv, message):
+    out = tmp_path / "x"
+    assert sim_cli.main(["experiment", "pipeline", "--out", str(out), "--quiet", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert "--lens" not in err  # the experiment's own lens is not the user's
+    assert not out.exists()
+
+
+def test_options_hold_the_checked_values():
+    options = ExperimentOptions(
+        port_tilt_x_deg=20, port_tilt_y_deg=10, n_glass=1.52, n_water=1.34, ray_model="polynomial"
+    )
+    assert (options.port_tilt_x_deg, options.port_tilt_y_deg) == (20.0, 10.0)
+    assert options.given() == ("port_tilt_x_deg", "port_tilt_y_deg", "n_glass", "n_water", "ray_model")
+    assert options.to_dict()["ray_model"] == "polynomial"
+    with pytest.raises(ParameterError, match="ray_model must be one of"):
+        ExperimentOptions(ray_model="Radial")
+
+
+def test_no_option_keeps_the_rig_as_it_was():
+    rig = experiment_rig(SETUP.rig)
+    assert wall_with_options(rig.wall, ExperimentOptions()) is rig.wall
+    assert experiment_rig(SETUP.rig, ExperimentOptions(ray_model="polynomial")) == rig
+
+
+def test_the_wall_turns_by_the_ports_tilt_convention_and_each_camera_sees_it_through_its_pose():
+    """The tiny rig's cameras are turned 3 deg inwards about y (left +3, right -3), so a wall turned 10 deg
+    about y is, in their frames, a port turned 7 and 13 deg, at 20 deg about x for both (rotations about
+    y compose); the normal is R_y(10) R_x(20) (0, 0, 1) in the rig's frame."""
+    rig = experiment_rig(SETUP.rig, ExperimentOptions(port_tilt_x_deg=20.0, port_tilt_y_deg=10.0))
+    tx, ty = math.radians(20.0), math.radians(10.0)
+    expected = [math.sin(ty) * math.cos(tx), -math.sin(tx), math.cos(ty) * math.cos(tx)]
+    np.testing.assert_allclose(rig.wall.normal, expected, atol=FLOAT64_UNIT)
+    tilts = {c.name: _tilts_deg(c.scene.port) for c in rig.cameras}
+    np.testing.assert_allclose(tilts["left"], (20.0, 7.0), atol=FLOAT64_ANGLE_DEG)
+    np.testing.assert_allclose(tilts["right"], (20.0, 13.0), atol=FLOAT64_ANGLE_DEG)
+
+
+def test_a_tilt_left_out_keeps_the_rigs_own_and_the_indices_reach_every_port():
+    own = experiment_rig(SETUP.rig)
+    options = ExperimentOptions(port_tilt_y_deg=-5.0, n_glass=1.52, n_water=1.34)
+    rig = experiment_rig(SETUP.rig, options)
+    for before, after in zip(own.cameras, rig.cameras, strict=True):
+        (x0, y0), (x1, y1) = _tilts_deg(before.scene.port), _tilts_deg(after.scene.port)
+        assert x1 == pytest.approx(x0, abs=FLOAT64_ANGLE_DEG)  # the rig's 20 deg about x
+        assert y1 - y0 == pytest.approx(-5.0, abs=FLOAT64_ANGLE_DEG)
+        assert (after.scene.port.n_glass, after.scene.port.n_water) == (1.52, 1.34)
+    assert (rig.wall.distance_m, rig.wall.thickness_m) == (own.wall.distance_m, own.wall.thickness_m)
+
+
+@pytest.mark.parametrize("option", [*WALL_OPTIONS, "port_distance_m", "thickness_m"])
+def test_a_kept_render_is_not_reused_behind_another_port(tmp_path, option):
+    """Each port option changes the key of the kept rig captures and port boards (rendered again), not
+    that of the in-air boards (no port in them: reused)."""
+    value = {"port_tilt_x_deg": 25.0, "port_tilt_y_deg": 10.0, "n_glass": 1.52, "n_water": 1.34}
+    value |= {"port_distance_m": 0.02, "thickness_m": 0.006}
+    keys = {}
+    for name, options in (("own", ExperimentOptions()), ("moved", ExperimentOptions(**{option: value[option]}))):
+        rig = _with_sensor(experiment_rig(SETUP.rig, options), SETUP.sensor)  # as the pipeline's real captures
+        camera = rig.cameras[0].scene
+        table = board_scenes.port_boards(camera.port, virtual_camera_for(camera.camera))[0]
+        air = board_scenes.in_air_boards(virtual_camera_for(camera.camera))[0]
+        keys[name] = {
+            "rig": capture_signature(with_objects(rig, chessboards(rig, SETUP.rig, 0.3)[:1]), write_lfr=True),
+            "port": scene_signature(_port_board_scene(camera, table, spp=8, seed=1, frames=2)),
+            "air": scene_signature(_air_board_scene(air, camera, "double-gauss", spp=8, seed=1, frames=2)),
+        }
+    for kind, reused in (("rig", False), ("port", False), ("air", True)):
+        folder = tmp_path / kind
+        folder.mkdir()
+        keep(folder, keys["own"][kind])
+        assert differs(folder, keys["own"][kind]) is None
+        assert differs(folder, keys["moved"][kind]) == (None if reused else "rendered for another scene"), kind
