@@ -30,11 +30,9 @@ import time
 import numpy as np
 
 from lfrefract import virtual_camera_for
-from lfrefract.calibration import calibrate_camera, calibrate_port
-from lfrefract.calibration.camera import corrected_view
+from lfrefract.calibration import calibrate_camera
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import moved
-from simulator.lens_family import board_views, truth_model
+from simulator.lens_family import board_views, port_on_model, truth_model
 
 
 def main() -> int:
@@ -74,15 +72,7 @@ def main() -> int:
             else:
                 calibration = calibrate_camera(camera, in_air, view=view, ray_model=args.ray_model)
                 correction, spread = calibration.correction, calibration.spread
-            model_views = [[corrected_view(v, moved(correction, f), view) for v in water] for f in spread]
-            result = calibrate_port(
-                view,
-                [corrected_view(v, correction, view) for v in water],
-                thickness_m=port.thickness_m,
-                n_water=port.n_water,
-                n_glass=port.n_glass,
-                model_views=model_views,
-            )
+            result = port_on_model(view, water, correction, spread, port)
             normal_error = math.degrees(math.acos(min(1.0, float(result.port.normal @ port.normal))))
             distance_error = result.port.distance_m - port.distance_m
             z_normal = normal_error / result.normal_std_deg

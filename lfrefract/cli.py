@@ -111,11 +111,11 @@ from lfrefract.formats.capture import (
     check_lens_modelled,
     check_port_ray_model,
     correction_estimate_from_option,
-    correction_spread_from_option,
     mask_warp_map,
     mla_from_file,
     port_from_file,
     ray_correction_from_option,
+    ray_model_from_option,
     read_capture,
     read_sidecar,
 )
@@ -877,11 +877,10 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     if joint is not None and joint.accepted:
         result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
     else:  # the in-air model (--camera's), also where the refinement was rejected
-        correction, model_file = ray_correction_from_option(args.camera), args.camera
+        (correction, spread), model_file = ray_model_from_option(args.camera), args.camera
         model_views: list[list[BoardView]] = []
-        if correction is not None:  # a calibrated camera: its rays, not the thin lens's
+        if correction is not None and spread is not None:  # a calibrated camera: its rays, not the thin lens's
             # The camera model's uncertainty: the views as each direction of its spread would correct them.
-            spread = correction_spread_from_option(args.camera)
             model_views = [[corrected_view(v, moved(correction, f), view) for v in views] for f in spread]
             views = [corrected_view(v, correction, view) for v in views]
         result = calibrate_port(view, views, model_views=model_views, **glass)

@@ -1039,17 +1039,22 @@ def main_lens(value: Any, camera: LightFieldCamera, *, base_dir: Path | str = ".
         if value in LENS_PRESETS:
             return lens_preset(value, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
         path = Path(value) if Path(value).is_absolute() else Path(base_dir) / value
-        problem = "an empty path" if not value else file_problem(path)
-        if problem is not None:
-            raise ParameterError(
-                f"camera.lens={value!r} is neither {THIN_LENS!r}, a lens preset ({', '.join(sorted(LENS_PRESETS))}) "
-                f"nor a lens file ({problem})"
-            )
+        _require_lens_file(f"camera.lens={value!r}", value, path)
         try:
             return read_lens_file(path, focal_length_m=camera.focal_length_m, f_number=camera.f_number)
         except (FileFormatError, ParameterError) as exc:
             raise ParameterError(f"camera.lens={value!r}: {exc}") from None
     return LensPrescription.from_dict(as_table("[camera.lens]", value))
+
+
+def _require_lens_file(what: str, value: str, path: Path) -> None:
+    """Refuse a lens value that names no lens file at ``path``, naming ``what`` and why."""
+    problem = "an empty path" if not value else file_problem(path)
+    if problem is not None:
+        raise ParameterError(
+            f"{what} is neither {THIN_LENS!r}, a lens preset ({', '.join(sorted(LENS_PRESETS))}) "
+            f"nor a lens file, TOML or JSON ({problem})"
+        )
 
 
 def lens_record(value: str | LensPrescription) -> str | dict:
@@ -1072,12 +1077,7 @@ def lens_option(value: str, *, flag: str = "--lens") -> str | LensPrescription:
     """
     if value == THIN_LENS or value in LENS_PRESETS:
         return value
-    problem = "an empty path" if not value else file_problem(value)
-    if problem is not None:
-        raise ParameterError(
-            f"{flag} {value!r} is neither {THIN_LENS!r}, a lens preset ({', '.join(sorted(LENS_PRESETS))}) "
-            f"nor a lens file, TOML or JSON ({problem})"
-        )
+    _require_lens_file(f"{flag} {value!r}", value, Path(value))
     try:
         return read_lens_file(value)
     except FileFormatError as exc:

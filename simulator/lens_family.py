@@ -22,15 +22,22 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lfrefract import camera_preset
-from lfrefract.calibration.port import BoardView
+from lfrefract.calibration.camera import corrected_view
+from lfrefract.calibration.port import BoardView, PortCalibration, calibrate_port
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import PolynomialCorrection, frame_directions, polynomial_exponents
+from lfrefract.optics.ray_correction import (
+    Correction,
+    PolynomialCorrection,
+    frame_directions,
+    moved,
+    polynomial_exponents,
+)
 from lfrefract.optics.real_lens import RealLensCamera
 from simulator.config import main_lens
 
-__all__ = ["APERTURE_FRACTION", "PATTERN", "board_views", "truth_model"]
+__all__ = ["APERTURE_FRACTION", "PATTERN", "board_views", "port_on_model", "truth_model"]
 
 #: Where the four outer aperture points lie, as a fraction of the aperture radius: inside the pupil
 #: of the designs that vignette their axial beam at the camera's f-number (working at about twice it).
@@ -165,3 +172,18 @@ def board_views(
             )
         )
     return views
+
+
+def port_on_model(
+    view: PinholeCamera, water: list[BoardView], correction: Correction, spread: np.ndarray, port: FlatPort
+) -> PortCalibration:
+    """The port calibrated from ``water`` boards on the camera model ``correction`` (the glass and
+    indices of ``port`` known), the model's ``spread`` (k, n) propagated into its covariance."""
+    return calibrate_port(
+        view,
+        [corrected_view(v, correction, view) for v in water],
+        thickness_m=port.thickness_m,
+        n_water=port.n_water,
+        n_glass=port.n_glass,
+        model_views=[[corrected_view(v, moved(correction, f), view) for v in water] for f in spread],
+    )

@@ -61,6 +61,7 @@ from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import (
+    HELD_SLOPE_SCALE_STD,
     PARAMETERS,
     POLYNOMIAL_CAPACITIES,
     Capacity,
@@ -74,6 +75,7 @@ from lfrefract.validate import one_of
 
 __all__ = [
     "CAMERA_CALIBRATION_KIND",
+    "HELD_SLOPE_SCALE_STD",
     "RAY_MODELS",
     "CameraCalibration",
     "RayCorrection",
@@ -94,10 +96,6 @@ MIN_VIEWS = 3
 #: fit's and the capture-clustered one): beyond, the views do not determine the scale. The slope scale
 #: is then held at its nominal value; an undetermined pupil scale is an error.
 MAX_SCALE_STD = 0.01
-#: The relative standard deviation given to a slope scale held at 1 (the focal length a capture's
-#: file records taken as the main lens's to 1 %): what a joint refinement with the port
-#: (:func:`lfrefract.calibration.joint.calibrate_port_and_camera`) may move it by.
-HELD_SLOPE_SCALE_STD = 0.01
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

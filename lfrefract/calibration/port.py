@@ -685,6 +685,12 @@ def calibrate_port(
     require_distinct_corners(
         [board_corners(v) for v in views], view_names(names, len(views), "views"), what="a port calibration"
     )
+    model_views = [list(moved) for moved in model_views]
+    for k, moved in enumerate(model_views):
+        if len(moved) != len(views) or not all(isinstance(v, BoardView) for v in moved):
+            raise ParameterError(
+                f"model_views[{k}] must be {len(views)} BoardView objects (one per view), got {len(moved)}"
+            )
     lo = positive_float("distance_range_m[0]", distance_range_m[0])
     hi = positive_float("distance_range_m[1]", distance_range_m[1])
     if not lo < hi:
@@ -788,14 +794,7 @@ def _covariance_parts(
     scores = [jac[a:b].T @ residuals[a:b] for a, b in itertools.pairwise(bounds)]
     pixel = (bread * sigma2)[:3, :3]
     by_capture = clustered_covariance(bread, scores)[:3, :3]
-    changes = []
-    for k, moved in enumerate(model_views):
-        moved = list(moved)
-        if len(moved) != len(problem.views) or not all(isinstance(v, BoardView) for v in moved):
-            raise ParameterError(
-                f"model_views[{k}] must be {len(problem.views)} BoardView objects (one per view), got {len(moved)}"
-            )
-        changes.append(_Problem(problem.camera, moved, template).residuals(x) - residuals)
+    changes = [_Problem(problem.camera, list(moved), template).residuals(x) - residuals for moved in model_views]
     model = propagated_covariance(bread @ jac.T, changes)[:3, :3] if changes else np.zeros((3, 3))
     return {
         "pixel_noise": pixel,

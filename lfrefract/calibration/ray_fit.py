@@ -18,7 +18,7 @@ would absorb.
 Two priors keep the problem determined without choosing the answer: every normalised coefficient has
 a weak zero-mean prior of :data:`COEFFICIENT_PRIOR` (the ray moves by at most about the aperture
 radius or the field's largest slope), and the slope scale (``dT`` along ``t``, the focal length) has
-the prior :data:`~lfrefract.calibration.camera.HELD_SLOPE_SCALE_STD` that the file's focal length is
+the prior :data:`~lfrefract.optics.ray_correction.HELD_SLOPE_SCALE_STD` that the file's focal length is
 right to 1 %: boards spanning a few degrees cannot tell a focal length from a distance (see
 :mod:`lfrefract.calibration.camera`).
 
@@ -44,6 +44,7 @@ from scipy.spatial.transform import Rotation
 from lfrefract.calibration.uncertainty import clustered_covariance
 from lfrefract.errors import CalibrationError
 from lfrefract.optics.ray_correction import (
+    HELD_SLOPE_SCALE_STD,
     POLYNOMIAL_CAPACITIES,
     Capacity,
     PolynomialCorrection,
@@ -223,12 +224,15 @@ class _Problem:
             symmetric=self.symmetric,
         )
 
+    def _delta(self, k: int, q: np.ndarray) -> np.ndarray:
+        """Capture ``k``'s ``(dO_x, dO_y, dT_x, dT_y)`` at the free coefficients ``q``: (N_k, 4)."""
+        return np.einsum("cnp,p->nc", self.effects[k], q)
+
     def residuals(self, q: np.ndarray, poses: np.ndarray) -> list[np.ndarray]:
         """Each capture's residuals (N_k, 2), metres."""
-        coefficients = (self.basis @ q).reshape(-1, 4) * self.norms
         out = []
         for k in range(len(self.observed)):
-            delta = self.phi[k] @ coefficients
+            delta = self._delta(k, q)
             corners = Rotation.from_rotvec(poses[k, :3]).apply(self.points[k]) + poses[k, 3:]
             out.append(corners[:, :2] - (self.a[k] + delta[:, :2]) - corners[:, 2:3] * (self.t[k] + delta[:, 2:]))
         return out
@@ -247,7 +251,7 @@ class _Problem:
         gq_total = np.zeros(self.n_free)
         per_capture: list[tuple[np.ndarray, ...]] = []
         for k, effects in enumerate(self.effects):
-            delta = np.einsum("cnp,p->nc", effects, q)
+            delta = self._delta(k, q)
             slopes = self.t[k] + delta[:, 2:]
             rotated = Rotation.from_rotvec(poses[k, :3]).apply(self.points[k])
             corners = rotated + poses[k, 3:]
@@ -268,22 +272,18 @@ class _Problem:
         return hqq_total, gq_total, per_capture
 
 
-def _prior(problem: _Problem, noise_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """The prior's information matrix (P, P) and its mean's (zero) pull: rows of ``q / sigma``
-    in units of the corners' noise ``noise_m``."""
-    from lfrefract.calibration.camera import HELD_SLOPE_SCALE_STD  # its definition lives with the radial model
-
+def _prior(problem: _Problem, noise_m: float) -> np.ndarray:
+    """The zero-mean prior's information matrix (P, P), in units of the corners' noise ``noise_m``."""
     info = np.eye(problem.n_free) * (noise_m / COEFFICIENT_PRIOR) ** 2
-    info += np.outer(problem.scale_row, problem.scale_row) * (noise_m / HELD_SLOPE_SCALE_STD) ** 2
-    return info, np.zeros(problem.n_free)
+    return info + np.outer(problem.scale_row, problem.scale_row) * (noise_m / HELD_SLOPE_SCALE_STD) ** 2
 
 
 def _solve(
     problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float, *, fix_model: bool = False
-) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Levenberg-Marquardt with the poses eliminated (Schur complement). ``fix_model``: only poses."""
-    prior_info, _ = _prior(problem, noise_m)
-    n = len(problem.observed)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt with the poses eliminated (Schur complement). ``fix_model``: only poses.
+    Returns the free coefficients and the poses."""
+    prior_info = _prior(problem, noise_m)
 
     def cost(q_: np.ndarray, poses_: np.ndarray) -> float:
         r = sum(float(np.sum(e * e)) for e in problem.residuals(q_, poses_))
@@ -291,9 +291,7 @@ def _solve(
 
     current = cost(q, poses)
     damping = 1e-3
-    stats: dict = {"iterations": 0}
-    for iteration in range(_MAX_ITERATIONS):
-        stats["iterations"] = iteration + 1
+    for _ in range(_MAX_ITERATIONS):
         hqq, gq, captures = problem.summed(q, poses)
         hqq, gq = (0.0 * hqq, 0.0 * gq) if fix_model else (hqq + prior_info, gq + prior_info @ q)
         blocks = [c[:3] for c in captures]
@@ -319,9 +317,7 @@ def _solve(
             damping *= 10.0
         if not improved or decrease < _TOLERANCE:
             break
-    stats["cost"] = current
-    stats["n"] = n
-    return q, poses, stats
+    return q, poses
 
 
 def fit_polynomial(
@@ -354,13 +350,13 @@ def fit_polynomial(
     """
     problem = _Problem(observed, Capacity(*capacity), aperture_norm_m, slope_norm)
     q0 = np.zeros(problem.n_free) if start is None else start
-    q, fitted, _ = _solve(problem, q0, np.array(poses, dtype=float), noise_m)
+    q, fitted = _solve(problem, q0, np.array(poses, dtype=float), noise_m)
     return _result(problem, q, fitted, noise_m)
 
 
 def _result(problem: _Problem, q: np.ndarray, poses: np.ndarray, noise_m: float) -> PolynomialFit:
     residuals = problem.residuals(q, poses)
-    prior_info, _ = _prior(problem, noise_m)
+    prior_info = _prior(problem, noise_m)
     n_rows = sum(r.size for r in residuals)
     total = float(sum(np.sum(r * r) for r in residuals))
     hqq, _, captures = problem.summed(q, poses)
@@ -392,12 +388,11 @@ def held_back_rms(
 ) -> tuple[float, int]:
     """RMS offset (metres) of one capture's corners from a fixed model's rays, its pose fitted
     alone (from ``pose``), and the number of corners."""
-    problem = _Problem([observed], Capacity(1, 0), 1.0, 1.0)  # a zero model: the fixed model enters as the rays
     fixed = correction.origins_and_slopes if isinstance(correction, PolynomialCorrection) else correction
-    origins, slopes = fixed(observed[1], observed[2])
-    problem.a, problem.t = [origins], [slopes]
+    # The fixed model's rays as the observations of a zero model: only the pose moves.
+    problem = _Problem([(observed[0], *fixed(observed[1], observed[2]))], Capacity(1, 0), 1.0, 1.0)
     q = np.zeros(problem.n_free)
-    _, fitted, _stats = _solve(problem, q, np.array([pose], dtype=float), 1.0, fix_model=True)
+    _, fitted = _solve(problem, q, np.array([pose], dtype=float), 1.0, fix_model=True)
     residual = problem.residuals(q, fitted)[0]
     return math.sqrt(float(np.sum(residual * residual)) / len(residual)), len(residual)
 

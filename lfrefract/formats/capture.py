@@ -94,11 +94,11 @@ __all__ = [
     "check_lens_modelled",
     "check_port_ray_model",
     "correction_estimate_from_option",
-    "correction_spread_from_option",
     "mask_warp_map",
     "mla_from_file",
     "port_from_file",
     "ray_correction_from_option",
+    "ray_model_from_option",
     "read_capture",
     "read_ground_truth",
     "read_lytro_capture",
@@ -812,26 +812,27 @@ def ray_correction_from_option(value: str | os.PathLike | None) -> Correction | 
     return None if found is None else _calibration_estimate(*found)[0]
 
 
-def correction_spread_from_option(value: str | os.PathLike) -> np.ndarray:
-    """The ``correction_spread`` rows (k, n) of a ``--camera`` camera calibration: its ray model's
-    uncertainty as directions of the correction's parameter vector; (0, n) where the file has none (a
-    file written before it was recorded: the port's covariance then leaves the camera model out).
+def ray_model_from_option(value: str | os.PathLike | None) -> tuple[Correction | None, np.ndarray | None]:
+    """The calibrated ray correction a ``--camera`` option carries (as :func:`ray_correction_from_option`)
+    and its ``correction_spread`` rows (k, n): the model's uncertainty as directions of the correction's
+    parameter vector, (0, n) where the file has none (written before it was recorded: a port's
+    covariance then leaves the camera model out). ``(None, None)`` for a camera that is no camera
+    calibration. The file is read once.
 
     Raises
     ------
-    ParameterError
-        If ``value`` is not a camera calibration.
     FileFormatError
-        If its ``correction_spread`` is not rows of the correction's parameter count of finite numbers.
+        As :func:`ray_correction_from_option`, or if its ``correction_spread`` is not rows of the
+        correction's parameter count of finite numbers.
     """
     found = _camera_calibration(value)
     if found is None:
-        raise ParameterError(f"--camera {str(value)!r} is not a camera calibration (lfrefract calibrate camera output)")
+        return None, None
     path, data = found
     correction, _ = _calibration_estimate(path, data)
     n = correction.vector().size
     if "correction_spread" not in data:
-        return np.zeros((0, n))
+        return correction, np.zeros((0, n))
     where = f"{str(path)!r}: correction_spread"
     table = data["correction_spread"]
     rows = table.get("rows") if isinstance(table, dict) else None
@@ -845,7 +846,7 @@ def correction_spread_from_option(value: str | os.PathLike) -> np.ndarray:
         raise FileFormatError(f"{where}.rows must hold numbers only") from None
     if not np.all(np.isfinite(spread)):
         raise FileFormatError(f"{where}.rows must be finite")
-    return spread
+    return correction, spread
 
 
 def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | None:

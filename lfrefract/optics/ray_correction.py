@@ -47,6 +47,7 @@ from lfrefract.validate import (
 )
 
 __all__ = [
+    "HELD_SLOPE_SCALE_STD",
     "PARAMETERS",
     "POLYNOMIAL_CAPACITIES",
     "Capacity",
@@ -69,6 +70,13 @@ _INVERSE_MAX_STEPS = 50
 
 #: Relative residual of the slope equation below which a root counts as found (a few ulps).
 _INVERSE_TOLERANCE = 1e-14
+
+#: The relative standard deviation of the slope scale (a focal-length correction) when the captures
+#: do not determine it: the focal length a capture's file records taken as the main lens's to 1 %.
+#: The radial model's calibration holds the scale at 1 with it
+#: (:func:`lfrefract.calibration.calibrate_camera`), a joint refinement with the port may move it by
+#: it, and the polynomial model's fit takes it as the slope scale's prior.
+HELD_SLOPE_SCALE_STD = 0.01
 
 #: The parameters, in the order of :meth:`RayCorrection.vector`.
 PARAMETERS = ("pupil_scale", "slope_scale", "k1", "k2", "pupil_drift_m")

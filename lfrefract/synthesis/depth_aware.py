@@ -353,10 +353,9 @@ def trace_scene_rays(
         uv = np.stack([index % width, index // width], axis=1).astype(np.float64)
         rays = camera.captured_rays(uv)
         keep = np.sum(rays.origins_cam[:, :2] ** 2, axis=1) <= radius**2
-        if correction is not None:
-            rays = correction.corrected(rays)
-        origins, directions = rays.origins_cam, rays.directions_cam
-        origins, directions, index = origins[keep], directions[keep], index[keep]
+        origins, directions, index = rays.origins_cam[keep], rays.directions_cam[keep], index[keep]
+        if correction is not None:  # only the rays kept: the model costs per ray
+            origins, directions = correction.apply(origins[:, :2], directions[:, :2] / directions[:, 2:3])
         gain = np.ones(len(index))
         if port is not None:
             trace = port.trace_from_air(origins, directions)

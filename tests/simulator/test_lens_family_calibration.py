@@ -15,11 +15,10 @@ import numpy as np
 import pytest
 
 from lfrefract import virtual_camera_for
-from lfrefract.calibration import calibrate_camera, calibrate_port
-from lfrefract.calibration.camera import corrected_view
+from lfrefract.calibration import calibrate_camera
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import POLYNOMIAL_CAPACITIES, moved
-from simulator.lens_family import board_views, truth_model
+from lfrefract.optics.ray_correction import POLYNOMIAL_CAPACITIES
+from simulator.lens_family import board_views, port_on_model, truth_model
 from tests.tolerances import LENS_FAMILY_NORMAL_DEG, LENS_FAMILY_RAY_M
 
 LENS = str(Path(__file__).resolve().parents[2] / "scenes" / "lenses" / "heliar.toml")
@@ -37,14 +36,7 @@ def chain():
     calibration = calibrate_camera(camera, in_air, view=view, ray_model="polynomial", capacities=SYMMETRIC)
     correction = calibration.correction
     water = board_views(truth, camera, view, rng, n=10, depths=(0.2, 0.5), port=PORT, noise_px=0.05)
-    port = calibrate_port(
-        view,
-        [corrected_view(v, correction, view) for v in water],
-        thickness_m=PORT.thickness_m,
-        n_glass=PORT.n_glass,
-        n_water=PORT.n_water,
-        model_views=[[corrected_view(v, moved(correction, f), view) for v in water] for f in calibration.spread],
-    )
+    port = port_on_model(view, water, correction, calibration.spread, PORT)
     return camera, truth, calibration, port
 
 
