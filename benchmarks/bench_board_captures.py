@@ -25,7 +25,7 @@ import sys
 import time
 
 from lfrefract.calibration.port import board_view_from_light_field
-from lfrefract.formats.capture import camera_from_option, read_capture
+from lfrefract.formats.capture import camera_model_from_option, read_capture
 from lfrefract.optics.pinhole import virtual_camera_for
 
 
@@ -41,7 +41,7 @@ def main() -> int:
     sizes = args.square_size_m * len(args.boards) if len(args.square_size_m) == 1 else args.square_size_m
     if len(sizes) != len(args.boards):
         parser.error(f"--square-size-m takes one size or one per board ({len(args.boards)}), got {len(sizes)}")
-    camera = camera_from_option(args.camera)
+    camera = camera_model_from_option(args.camera).camera
     view = virtual_camera_for(camera)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     print(

@@ -106,16 +106,13 @@ from lfrefract.formats.capture import (
     SIDECAR_NAME,
     Capture,
     CaptureParameters,
-    camera_from_option,
+    camera_model_from_option,
     capture_parameters,
     check_lens_modelled,
     check_port_ray_model,
-    correction_estimate_from_option,
     mask_warp_map,
     mla_from_file,
     port_from_file,
-    ray_correction_from_option,
-    ray_model_from_option,
     read_capture,
     read_sidecar,
 )
@@ -128,7 +125,8 @@ from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
-from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection, moved
+from lfrefract.optics.camera_model import CameraModel
+from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection
 from lfrefract.synthesis.depth_aware import (
     FILLED_EXACT_GIVEN_DEPTH,
     DepthAwareOptions,
@@ -221,9 +219,14 @@ def describe(camera: LightFieldCamera, port: FlatPort | None = None) -> dict:
     return out
 
 
-def _given_camera(args: argparse.Namespace) -> LightFieldCamera | None:
-    """The camera of ``--camera``, if given."""
-    return camera_from_option(args.camera) if args.camera is not None else None
+def _given_model(args: argparse.Namespace) -> CameraModel | None:
+    """The camera model of ``--camera``, if given (its file read once: a command reads it here only)."""
+    return camera_model_from_option(args.camera) if args.camera is not None else None
+
+
+def _camera_of(model: CameraModel | None) -> LightFieldCamera | None:
+    """The camera of a given model (None: none given, a capture's own camera is used)."""
+    return None if model is None else model.camera
 
 
 def _masked_note(capture: Capture) -> str:
@@ -349,9 +352,10 @@ def synth(args: argparse.Namespace) -> int:
     out = _exr_out(args)
     depth_options = _depth_aware_options(args)
     flag_options = _synthesis_options(args)
+    given = _given_model(args)
     capture = _read_capture(
         args.raw,
-        camera=_given_camera(args),
+        camera=_camera_of(given),
         port=port_from_file(args.port) if args.port is not None else None,
         nonfinite=args.nonfinite,
         white=args.white,
@@ -366,14 +370,14 @@ def synth(args: argparse.Namespace) -> int:
         )
         raise ParameterError(f"{args.raw!r}: {where}, and no --port was given; nothing to remove")
     by_cfa = _colour_by_cfa(args, capture)
-    ray_correction = _ray_model(args, capture)
+    model = _capture_model(given, capture, camera)
     if args.port is not None:
-        check_port_ray_model(args.port, ray_correction, camera=args.camera)
+        check_port_ray_model(args.port, model)
     if depth_options is not None:
         _depth_aware_takes(by_cfa)
     inputs = [*_capture_files(args.raw), *_option_files(args)]
     prepare_output_files(synth_outputs(out, args.method), inputs=inputs, overwrite=args.overwrite)  # before the map
-    options = dataclasses.replace(flag_options, ray_correction=ray_correction)
+    options = dataclasses.replace(flag_options, ray_correction=model.correction)
     output = capture.output
     developed = capture.developed
     result: DepthAwareResult | None = None
@@ -424,7 +428,7 @@ def synth(args: argparse.Namespace) -> int:
                 port,
                 rim_margin_px=depth_options.rim_margin_px,
                 compensate_port=depth_options.compensate_port,
-                correction=ray_correction,
+                correction=model.correction,
             )
             rays_seconds = time.perf_counter() - start
         compile_seconds = warp.compile_for(capture.raw)  # numba's first compilation, apart from the apply
@@ -606,20 +610,21 @@ def _figure(
 def naive(args: argparse.Namespace) -> int:
     """``lfrefract naive``: conventional view with no refraction handling."""
     out = _exr_out(args)
-    capture = _read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
+    given = _given_model(args)
+    capture = _read_capture(args.raw, camera=_camera_of(given), nonfinite=args.nonfinite, white=args.white)
     prepare_output_files(
         {out: ExpectedKind(exr_role=f"naive_{args.kind}")},
         inputs=[*_capture_files(args.raw), *_option_files(args)],
         overwrite=args.overwrite,
     )
-    camera = _known(capture.camera, capture.raw_path)
+    model = _capture_model(given, capture)
     image = naive_view(
-        camera,
+        model.camera,
         capture.raw,
         output=capture.output,
         kind=args.kind,
         recorded=capture.recorded,
-        ray_correction=_ray_model(args, capture),
+        ray_correction=model.correction,
     )
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
@@ -630,7 +635,8 @@ def views(args: argparse.Namespace) -> int:
     """``lfrefract views``: a grid of sub-aperture views in the HCI benchmark layout."""
     if not (args.grid >= 3 and args.grid % 2):  # before the capture is read, named as the option
         raise ParameterError(f"--grid must be an odd integer >= 3 (a central view with neighbours), got {args.grid}")
-    capture = _read_capture(args.raw, camera=_given_camera(args), nonfinite=args.nonfinite, white=args.white)
+    given = _given_model(args)
+    capture = _read_capture(args.raw, camera=_camera_of(given), nonfinite=args.nonfinite, white=args.white)
     camera, output = _known(capture.camera, capture.raw_path), capture.output
     require_memory(
         f"views: a {args.grid} x {args.grid} stack of {output.width_px} x {output.height_px} px views "
@@ -645,7 +651,7 @@ def views(args: argparse.Namespace) -> int:
         spacing_px=args.spacing_px,
         output=output,
         recorded=capture.recorded,
-        ray_correction=_ray_model(args, capture),
+        ray_correction=_capture_model(given, capture).correction,
     )
     out = write_view_stack(
         Path(args.out),
@@ -672,7 +678,7 @@ def calibrate_mla_command(args: argparse.Namespace) -> int:
     out = Path(args.out)
     # Read with its unrecorded values masked, to refuse them here: a white image must record every pixel,
     # and calibrate mla has no --nonfinite to offer.
-    capture = read_capture(args.white, camera=_given_camera(args), camera_required=False, nonfinite="mask")
+    capture = read_capture(args.white, camera=_camera_of(_given_model(args)), camera_required=False, nonfinite="mask")
     if capture.unrecorded.values:
         raise ParameterError(
             f"{str(args.white)!r} has {capture.unrecorded.describe()}: a white image must record every pixel "
@@ -706,7 +712,7 @@ def _known(camera: LightFieldCamera | None, where: object) -> LightFieldCamera:
     return camera
 
 
-def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
+def _board_parameters(args: argparse.Namespace, given: CameraModel | None) -> CaptureParameters:
     """The parameters of the first board capture, after every capture's sidecar is checked (before
     any raw image is read) and found to have the same camera (or ``--camera`` is given)."""
     if min(args.squares) < 3:
@@ -723,8 +729,7 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     for size in args.square_size_m if isinstance(args.square_size_m, list) else [args.square_size_m]:
         square_size("--square-size-m", size)
     _distinct_captures(args.boards)
-    given = _given_camera(args)
-    found = [capture_parameters(path, camera=given) for path in args.boards]
+    found = [capture_parameters(path, camera=_camera_of(given)) for path in args.boards]
     for path, other in zip(args.boards, found, strict=True):
         if other.camera != found[0].camera:
             raise ParameterError(f"{path!r} was taken with another camera than {args.boards[0]!r}")
@@ -740,19 +745,22 @@ def _board_parameters(args: argparse.Namespace) -> CaptureParameters:
     return found[0]
 
 
-def _ray_model(args: argparse.Namespace, capture: Capture | CaptureParameters) -> Correction | None:
-    """The ray correction of ``--camera`` (None: the thin lens), once a capture taken through a real
-    main lens that the thin lens would stand for is refused (:func:`check_lens_modelled`)."""
-    correction = ray_correction_from_option(args.camera)
-    check_lens_modelled(capture, correction, camera=args.camera)
-    return correction
+def _capture_model(
+    given: CameraModel | None, capture: Capture | CaptureParameters, camera: LightFieldCamera | None = None
+) -> CameraModel:
+    """The camera model a command uses on ``capture``: the ray model of ``--camera`` (``given``; None:
+    the thin lens) on the capture's camera (or on ``camera``: an MLA calibration's), once a capture
+    taken through a real main lens that the thin lens would stand for is refused
+    (:func:`check_lens_modelled`)."""
+    check_lens_modelled(capture, given)
+    camera = _known(capture.camera if camera is None else camera, capture.raw_path)
+    return CameraModel(camera=camera) if given is None else given.with_camera(camera)
 
 
-def _boards_lens_modelled(args: argparse.Namespace) -> None:
-    """:func:`_ray_model` for every board capture, before any raw image is read."""
-    given = _given_camera(args)
+def _boards_lens_modelled(args: argparse.Namespace, given: CameraModel | None) -> None:
+    """:func:`check_lens_modelled` for every board capture, before any raw image is read."""
     for path in args.boards:
-        _ray_model(args, capture_parameters(path, camera=given))
+        check_lens_modelled(capture_parameters(path, camera=_camera_of(given)), given)
 
 
 def _distinct_captures(paths: list[str]) -> None:
@@ -816,8 +824,9 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".json":
         raise ParameterError(f"--out must name a .json file (the flat port goes beside it as .txt), got {args.out!r}")
     flat_port = out.with_suffix(".txt")
-    first = _board_parameters(args)
-    _boards_lens_modelled(args)
+    in_air = _given_model(args)
+    first = _board_parameters(args, in_air)
+    _boards_lens_modelled(args, in_air)
     outputs = {
         out: ExpectedKind(json_kind=PORT_CALIBRATION_KIND),
         flat_port: ExpectedKind(listed_in=out, listed_kind=PORT_CALIBRATION_KIND),
@@ -827,9 +836,9 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         refined_out = Path(args.refine_camera)
         if refined_out.suffix.lower() != ".json":
             raise ParameterError(f"--refine-camera must name a .json file, got {args.refine_camera!r}")
-        if args.camera is None:
+        if in_air is None:
             raise ParameterError("--refine-camera needs --camera: the camera calibration to refine")
-        prior = correction_estimate_from_option(args.camera)
+        prior = in_air.estimate()
         outputs[refined_out] = ExpectedKind(json_kind=CAMERA_CALIBRATION_KIND)
     prepare_output_files(outputs, inputs=_board_inputs(args), overwrite=args.overwrite)
     camera = _known(first.camera, first.raw_path)
@@ -877,11 +886,11 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     if joint is not None and joint.accepted:
         result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
     else:  # the in-air model (--camera's), also where the refinement was rejected
-        (correction, spread), model_file = ray_model_from_option(args.camera), args.camera
+        correction, model_file = None if in_air is None else in_air.correction, args.camera
         model_views: list[list[BoardView]] = []
-        if correction is not None and spread is not None:  # a calibrated camera: its rays, not the thin lens's
+        if in_air is not None and correction is not None:  # a calibrated camera: its rays, not the thin lens's
             # The camera model's uncertainty: the views as each direction of its spread would correct them.
-            model_views = [[corrected_view(v, moved(correction, f), view) for v in views] for f in spread]
+            model_views = [[corrected_view(v, moved, view) for v in views] for moved in in_air.spread_corrections()]
             views = [corrected_view(v, correction, view) for v in views]
         result = calibrate_port(view, views, model_views=model_views, **glass)
     data = {
@@ -963,14 +972,15 @@ def _refined_camera(args: argparse.Namespace, joint: JointCalibration, port_out:
 def calibrate_approx_command(args: argparse.Namespace) -> int:
     """``lfrefract calibrate approx``: the approximation baseline on the captures' central views."""
     out = Path(args.out)
-    first = _board_parameters(args)
-    _boards_lens_modelled(args)
+    given = _given_model(args)
+    first = _board_parameters(args, given)
+    _boards_lens_modelled(args, given)
     camera = _known(first.camera, first.raw_path)
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
     )
     conventional = ConventionalView(
-        camera=camera, view=virtual_camera_for(camera), ray_correction=ray_correction_from_option(args.camera)
+        camera=camera, view=virtual_camera_for(camera), ray_correction=None if given is None else given.correction
     )
 
     def central_view(path: str) -> np.ndarray:
@@ -1061,7 +1071,7 @@ def calibrate_camera_command(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise ParameterError(f"--out must name a .json file, got {args.out!r}")
-    first = _board_parameters(args)
+    first = _board_parameters(args, _given_model(args))
     camera = _known(first.camera, first.raw_path)
     prepare_output_files(
         {out: ExpectedKind(json_kind=CAMERA_CALIBRATION_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite

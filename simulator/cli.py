@@ -389,7 +389,7 @@ def _dataset(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from lfrefract.formats.capture import camera_from_option
+    from lfrefract.formats.capture import camera_model_from_option
     from simulator.experiments import (
         OPTION_FLAGS,
         ExperimentOptions,
@@ -414,7 +414,7 @@ def _experiment(args: argparse.Namespace) -> int:
     }
     options = ExperimentOptions(
         scale=args.scale,
-        camera=None if args.camera is None else camera_from_option(args.camera),  # names --camera
+        camera=None if args.camera is None else camera_model_from_option(args.camera).camera,  # names --camera
         **fields_by_flag(ExperimentOptions, {OPTION_FLAGS[key]: {key: value} for key, value in given.items()}),
     )
     experiment = load_experiments().get(args.name)

@@ -12,7 +12,7 @@ sidecar, and ignores the others:
 
 A bare raw image (no ``meta.json`` beside it) is a capture too when its camera (and, for a
 refraction-free image, its port) is given: a preset name or a camera file, TOML or JSON
-(:func:`camera_from_option`), and a port file, TOML, JSON or the flat-port text
+(:func:`camera_model_from_option`), and a port file, TOML, JSON or the flat-port text
 (:func:`port_from_file`; both formats: :mod:`lfrefract.formats.paramfile`).
 A given camera or port replaces the sidecar's.
 
@@ -51,7 +51,13 @@ from lfrefract.formats.exr import read_exr, write_exr
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.lytro import colour_from_metadata
 from lfrefract.formats.outputs import atomic_file, staged_directory
-from lfrefract.formats.paramfile import check_kind, read_camera_file, read_parameter_json, read_port_file
+from lfrefract.formats.paramfile import (
+    camera_from_json,
+    check_kind,
+    read_camera_file,
+    read_parameter_json,
+    read_port_file,
+)
 from lfrefract.formats.whites import (
     MAX_WHITE_SHIFT_PX,
     DevelopedCapture,
@@ -67,6 +73,7 @@ from lfrefract.formats.whites import (
     same_file,
 )
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
@@ -89,16 +96,13 @@ __all__ = [
     "CaptureTruth",
     "UnrecordedValues",
     "WhiteChoice",
-    "camera_from_option",
+    "camera_model_from_option",
     "capture_parameters",
     "check_lens_modelled",
     "check_port_ray_model",
-    "correction_estimate_from_option",
     "mask_warp_map",
     "mla_from_file",
     "port_from_file",
-    "ray_correction_from_option",
-    "ray_model_from_option",
     "read_capture",
     "read_ground_truth",
     "read_lytro_capture",
@@ -770,69 +774,83 @@ def _json_key(path: Path, key: str, what: str, data: dict | None = None) -> dict
     return value
 
 
-def camera_from_option(value: str | os.PathLike) -> LightFieldCamera:
-    """The camera a ``--camera`` option names: an existing camera file
-    (:func:`lfrefract.formats.paramfile.read_camera_file`: TOML with a ``[camera]`` table, or JSON
-    whose ``camera`` table is read, such as a render's ``meta.json``, ``lfrefract describe PRESET
-    --json`` output or ``lfrefract calibrate mla`` output), else a preset name.
+def camera_model_from_option(value: str | os.PathLike) -> CameraModel:
+    """The camera model a ``--camera`` option names, its file read once.
+
+    ``value`` is an existing camera file, else a preset name (:data:`lfrefract.optics.presets.PRESETS`,
+    the thin lens). A camera file is TOML with a ``[camera]`` table, or lfrefract JSON whose
+    ``camera`` table is read (:func:`lfrefract.formats.paramfile.read_camera_file`: a render's
+    ``meta.json``, ``lfrefract describe PRESET --json`` output, ``lfrefract calibrate mla`` output),
+    of the thin lens too, or a camera calibration (``lfrefract calibrate camera`` output, kind
+    ``lfrefract.calibrate.camera``, of any suffix but ``.toml``), which adds its ray model: its
+    ``correction``, the radial model's ``correction_covariance`` (None where the file has none:
+    written before it was recorded; only a refinement needs it, :meth:`CameraModel.estimate`) and
+    its ``correction_spread`` rows (none, shape (0, n), where the file has none: a port's covariance
+    then leaves the camera model out). A JSON file of another kind holding a ray model is refused
+    (:func:`lfrefract.formats.paramfile.read_parameter_json`). The real main lens a render's
+    ``meta.json`` records is kept as :attr:`CameraModel.main_lens` (:func:`check_lens_modelled`).
+
+    Returns
+    -------
+    CameraModel
+        With :attr:`~CameraModel.source` ``str(value)``.
 
     Raises
     ------
     FileFormatError
-        If the file is not a camera file or its ``camera`` is missing or invalid.
+        If the file is not a camera file, its ``camera`` is missing or invalid, a camera
+        calibration's ``correction``, ``correction_covariance`` or ``correction_spread`` is missing or
+        invalid, or the file's kind and content disagree; the message names the file and the key.
     ParameterError
         If ``value`` is neither a file nor a preset.
+
+    Examples
+    --------
+    >>> camera_model_from_option("tiny").ray_model
+    'thin-lens'
     """
     path = Path(value)
     if path.is_file():
-        return read_camera_file(path)
+        if path.suffix.lower() == ".toml":  # a TOML file holds a [camera] only
+            return CameraModel(camera=read_camera_file(path), source=str(value))
+        data = read_parameter_json(path)
+        correction, covariance, spread = None, None, None
+        if data.get("kind") == CAMERA_CALIBRATION_KIND:
+            correction, covariance, spread = _calibrated_rays(path, data)
+        return CameraModel(
+            camera=camera_from_json(path, data),
+            correction=correction,
+            covariance=covariance,
+            spread=spread,
+            source=str(value),
+            main_lens=recorded_main_lens(data),
+        )
     if str(value) in PRESETS:
-        return camera_preset(str(value))
+        return CameraModel(camera=camera_preset(str(value)), source=str(value))
     raise ParameterError(
         f"--camera must be a preset ({', '.join(sorted(PRESETS))}) or a JSON or TOML camera file, got {str(value)!r}"
     )
 
 
-def ray_correction_from_option(value: str | os.PathLike | None) -> Correction | None:
-    """The calibrated ray correction a ``--camera`` option carries: that of a camera calibration
-    (``lfrefract calibrate camera`` output, kind ``lfrefract.calibrate.camera``, of any suffix but
-    ``.toml``); None for any other camera (a preset, a camera file, a ``meta.json``), which holds no
-    ray correction (one that does is refused: :func:`lfrefract.formats.paramfile.read_parameter_json`).
-
-    A calibration's ``correction_covariance`` is checked too when it has one (a file written before
-    it was recorded has none; only a refinement needs it, :func:`correction_estimate_from_option`).
-
-    Raises
-    ------
-    FileFormatError
-        If a camera calibration's ``correction`` is missing or invalid, its covariance is invalid,
-        or the file's kind and content disagree; the message names the file and the key.
-    """
-    found = _camera_calibration(value)
-    return None if found is None else _calibration_estimate(*found)[0]
-
-
-def ray_model_from_option(value: str | os.PathLike | None) -> tuple[Correction | None, np.ndarray | None]:
-    """The calibrated ray correction a ``--camera`` option carries (as :func:`ray_correction_from_option`)
-    and its ``correction_spread`` rows (k, n): the model's uncertainty as directions of the correction's
-    parameter vector, (0, n) where the file has none (written before it was recorded: a port's
-    covariance then leaves the camera model out). ``(None, None)`` for a camera that is no camera
-    calibration. The file is read once.
-
-    Raises
-    ------
-    FileFormatError
-        As :func:`ray_correction_from_option`, or if its ``correction_spread`` is not rows of the
-        correction's parameter count of finite numbers.
-    """
-    found = _camera_calibration(value)
-    if found is None:
-        return None, None
-    path, data = found
-    correction, _ = _calibration_estimate(path, data)
+def _calibrated_rays(path: Path, data: dict) -> tuple[Correction, np.ndarray | None, np.ndarray]:
+    """The ``correction`` of a camera calibration's content ``data`` (read from ``path``), the radial
+    model's ``correction_covariance`` (None if the file has none, or for the polynomial model, which
+    carries no radial covariance) and its ``correction_spread`` rows ((0, n) if the file has none);
+    every message names the file and the key."""
+    try:
+        correction = correction_from_dict(
+            _json_key(path, "correction", "--camera", data), where=f"{str(path)!r}: correction"
+        )
+        covariance = None
+        if isinstance(correction, RayCorrection) and "correction_covariance" in data:
+            covariance = CorrectionEstimate.covariance_from_dict(
+                data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
+            )
+    except ParameterError as exc:
+        raise FileFormatError(str(exc)) from None
     n = correction.vector().size
     if "correction_spread" not in data:
-        return correction, np.zeros((0, n))
+        return correction, covariance, np.zeros((0, n))
     where = f"{str(path)!r}: correction_spread"
     table = data["correction_spread"]
     rows = table.get("rows") if isinstance(table, dict) else None
@@ -846,74 +864,17 @@ def ray_model_from_option(value: str | os.PathLike | None) -> tuple[Correction |
         raise FileFormatError(f"{where}.rows must hold numbers only") from None
     if not np.all(np.isfinite(spread)):
         raise FileFormatError(f"{where}.rows must be finite")
-    return correction, spread
+    return correction, covariance, spread
 
 
-def _camera_calibration(value: str | os.PathLike | None) -> tuple[Path, dict] | None:
-    """The path and content of a ``--camera`` camera calibration (read once, its kind checked
-    against its content), or None for any other camera."""
-    if value is None:
-        return None
-    path = Path(value)
-    if not path.is_file() or path.suffix.lower() == ".toml":  # a preset; a TOML file holds a [camera] only
-        return None
-    data = read_parameter_json(path)
-    return (path, data) if data.get("kind") == CAMERA_CALIBRATION_KIND else None
+def _given(model: CameraModel | None) -> str:
+    """How a message names the camera model: ``--camera 'VALUE'``, or the capture's own camera."""
+    if model is None or model.source is None:
+        return "the capture's camera"
+    return f"--camera {model.source!r}"
 
 
-def _calibration_estimate(path: Path, data: dict) -> tuple[Correction, CorrectionEstimate | None]:
-    """The ``correction`` of a camera calibration's content ``data`` (read from ``path``), and its
-    estimate with the ``correction_covariance`` (None if the file has none, or if the model is the
-    polynomial one, which carries no radial covariance)."""
-    try:
-        correction = correction_from_dict(
-            _json_key(path, "correction", "--camera", data), where=f"{str(path)!r}: correction"
-        )
-        if not isinstance(correction, RayCorrection) or "correction_covariance" not in data:
-            return correction, None
-        covariance = CorrectionEstimate.covariance_from_dict(
-            data["correction_covariance"], where=f"{str(path)!r}: correction_covariance"
-        )
-        return correction, CorrectionEstimate(correction=correction, covariance=covariance)
-    except ParameterError as exc:
-        raise FileFormatError(str(exc)) from None
-
-
-def correction_estimate_from_option(value: str | os.PathLike) -> CorrectionEstimate:
-    """The calibrated ray correction of a ``--camera`` camera calibration with its covariance: what
-    ``lfrefract calibrate port --refine-camera`` refines.
-
-    Raises
-    ------
-    ParameterError
-        If ``value`` is not a camera calibration (a preset, another camera file).
-    FileFormatError
-        If it is one but has no valid ``correction_covariance`` (a file written before the
-        calibration recorded it: calibrate the camera again).
-    """
-    found = _camera_calibration(value)
-    if found is None:
-        raise ParameterError(
-            f"--camera {str(value)!r} is not a camera calibration (lfrefract calibrate camera output): "
-            "a refinement needs the calibrated ray model and its covariance"
-        )
-    path, data = found
-    correction, estimate = _calibration_estimate(path, data)
-    if not isinstance(correction, RayCorrection):
-        raise ParameterError(
-            f"--camera {str(value)!r} holds the {correction.name} ray model: a joint refinement with the port takes "
-            "the radial model only (lfrefract calibrate camera --ray-model radial); the polynomial model is used "
-            "as calibrated"
-        )
-    if estimate is None:
-        raise FileFormatError(
-            f"{str(path)!r} has no correction_covariance (written by an earlier lfrefract): run "
-            "lfrefract calibrate camera again to refine it"
-        )
-    return estimate
-
-
-def check_port_ray_model(port_path: str | os.PathLike, correction: Correction | None, *, camera: object) -> None:
+def check_port_ray_model(port_path: str | os.PathLike, model: CameraModel) -> None:
     """Refuse a calibrated port with another ray model than the one it was calibrated on.
 
     A port is calibrated on one ray model of the camera (``lfrefract calibrate port`` records it in
@@ -926,10 +887,9 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: Correction | 
     ----------
     port_path : path-like
         The ``--port`` file.
-    correction : RayCorrection, PolynomialCorrection or None
-        The ray correction of ``--camera`` (None: the thin-lens model).
-    camera : object
-        What ``--camera`` was, for the message.
+    model : CameraModel
+        The camera model the port is to be used with (``--camera``'s; its :attr:`~CameraModel.source`
+        names it in the message).
 
     Raises
     ------
@@ -944,17 +904,18 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: Correction | 
     data = read_parameter_json(path)  # a ray_model only in a port calibration
     if "ray_model" not in data:
         return
-    model = data["ray_model"]
-    if not isinstance(model, dict) or "correction" not in model:
-        raise FileFormatError(f"{str(path)!r}: ray_model must be a table with a correction (or null), got {model!r}")
+    table = data["ray_model"]
+    if not isinstance(table, dict) or "correction" not in table:
+        raise FileFormatError(f"{str(path)!r}: ray_model must be a table with a correction (or null), got {table!r}")
     try:
         recorded = (
             None
-            if model["correction"] is None
-            else correction_from_dict(model["correction"], where=f"{str(path)!r}: ray_model.correction")
+            if table["correction"] is None
+            else correction_from_dict(table["correction"], where=f"{str(path)!r}: ray_model.correction")
         )
     except ParameterError as exc:
         raise FileFormatError(str(exc)) from None
+    correction = model.correction
     same = (recorded is None and correction is None) or (
         recorded is not None
         and correction is not None
@@ -963,11 +924,11 @@ def check_port_ray_model(port_path: str | os.PathLike, correction: Correction | 
         and np.allclose(recorded.vector(), correction.vector(), rtol=0.0, atol=1e-12)
     )
     if not same:
-        calibrated_on = model.get("camera", "a camera file")
+        calibrated_on = table.get("camera", "a camera file")
         raise ParameterError(
             f"--port {str(path)!r} was calibrated on the ray model of {calibrated_on!r} "
-            f"({'the thin lens' if recorded is None else 'a calibrated correction'}), not on that of --camera "
-            f"{str(camera)!r} ({'the thin lens' if correction is None else 'another correction'}): give the camera "
+            f"({'the thin lens' if recorded is None else 'a calibrated correction'}), not on that of {_given(model)} "
+            f"({'the thin lens' if correction is None else 'another correction'}): give the camera "
             "file the port was calibrated with (after --refine-camera: the refined one)"
         )
 
@@ -993,9 +954,7 @@ def recorded_main_lens(data: Mapping | None) -> str | None:
     return next((name for name in found if isinstance(name, str) and name), "an unnamed prescription")
 
 
-def check_lens_modelled(
-    capture: Capture | CaptureParameters, correction: Correction | None, *, camera: str | os.PathLike | None = None
-) -> None:
+def check_lens_modelled(capture: Capture | CaptureParameters, model: CameraModel | None) -> None:
     """Refuse a capture taken through a real main lens when the camera model is the bare thin lens.
 
     The core's camera model is a thin lens, plus the ray correction of a camera calibration
@@ -1010,32 +969,34 @@ def check_lens_modelled(
     ----------
     capture : Capture or CaptureParameters
         Its sidecar (if any) is read for the lens.
-    correction : RayCorrection or None
-        The ray correction of ``--camera`` (None: the thin lens).
-    camera : path-like or None
-        The ``--camera`` option: a camera file that records a real lens (a render's ``meta.json``)
-        is checked too.
+    model : CameraModel or None
+        The camera model of ``--camera`` (None: none given, the capture's own camera, the thin
+        lens): the real main lens its file records (:attr:`CameraModel.main_lens`, a render's
+        ``meta.json``) is checked too.
 
     Raises
     ------
     ParameterError
-        If the capture's sidecar or the camera file records a real main lens and ``correction`` is None.
-    FileFormatError
-        If the camera file's kind and content disagree.
+        If the capture's sidecar or the camera file records a real main lens and the model is the thin lens.
     """
-    if correction is not None:
+    if model is not None and model.correction is not None:
         return
-    sources: list[tuple[Path, Mapping | None, str]] = []
+    sources: list[tuple[str, str | None, str]] = []
     if capture.sidecar_path is not None:
-        sources.append((capture.sidecar_path, capture.sidecar, f"the capture {str(capture.raw_path)!r} was taken"))
-    if camera is not None and Path(camera).is_file() and Path(camera).suffix.lower() != ".toml":
-        sources.append((Path(camera), read_parameter_json(Path(camera)), "the camera of --camera was taken"))
-    for path, data, what in sources:
-        lens = recorded_main_lens(data)
+        sources.append(
+            (
+                str(capture.sidecar_path),
+                recorded_main_lens(capture.sidecar),
+                f"the capture {str(capture.raw_path)!r} was taken",
+            )
+        )
+    if model is not None and model.source is not None:
+        sources.append((model.source, model.main_lens, "the camera of --camera was taken"))
+    for path, lens, what in sources:
         if lens is not None:
-            given = "the thin lens of its camera" if camera is None else f"--camera {str(camera)!r}, a thin lens"
+            given = "the thin lens of its camera" if model is None else f"{_given(model)}, a thin lens"
             raise ParameterError(
-                f"{str(path)!r} says {what} through the real main lens {lens!r}, but the camera model is "
+                f"{path!r} says {what} through the real main lens {lens!r}, but the camera model is "
                 f"{given} with no calibrated ray model: its rays are not that lens's, and the result would be "
                 "wrong without saying so. Calibrate the camera from in-air boards (lfrefract calibrate camera "
                 "BOARD ... --out camera.json) and pass --camera camera.json"

@@ -67,6 +67,7 @@ __all__ = [
     "MLA_CALIBRATION_KIND",
     "PORT_FILE_KIND",
     "PORT_SUFFIXES",
+    "camera_from_json",
     "check_kind",
     "read_camera_file",
     "read_lens_file",
@@ -116,6 +117,20 @@ def read_camera_file(path: str | os.PathLike) -> LightFieldCamera:
     path = Path(path)
     table = _toml_table(path, "camera") if _is_toml(path) else _json_table(path, "camera")
     return _parsed(path, "camera", table, LightFieldCamera.from_dict)
+
+
+def camera_from_json(path: str | os.PathLike, data: dict) -> LightFieldCamera:
+    """The camera of a JSON camera file's content ``data``, read from ``path`` by
+    :func:`read_parameter_json` (so that a caller reading other tables of it reads the file once);
+    checked as :func:`read_camera_file` checks it, every message naming ``path`` and the key.
+
+    Raises
+    ------
+    FileFormatError
+        As :func:`read_camera_file`.
+    """
+    path = Path(path)
+    return _parsed(path, "camera", _json_table(path, "camera", data), LightFieldCamera.from_dict)
 
 
 def read_parameter_json(path: str | os.PathLike) -> dict:
@@ -455,9 +470,10 @@ def _toml_table(path: Path, key: str) -> dict:
     return data[key]
 
 
-def _json_table(path: Path, key: str) -> dict:
-    """The ``key`` table of the lfrefract JSON file ``path`` (:func:`read_parameter_json`)."""
-    data = read_parameter_json(path)
+def _json_table(path: Path, key: str, data: dict | None = None) -> dict:
+    """The ``key`` table of the lfrefract JSON file ``path`` (:func:`read_parameter_json`; ``data``: its
+    content, if it was read already)."""
+    data = read_parameter_json(path) if data is None else data
     if key == "camera" and "lens" in data:
         raise FileFormatError(
             f"{str(path)!r} holds a 'lens' table (a real main lens, {shown(data['lens'])}), which lfrefract's camera "

@@ -83,12 +83,13 @@ from tqdm import tqdm
 from lfrefract import cli as core_cli
 from lfrefract.errors import ParameterError
 from lfrefract.figures import new_figure, save_figure
-from lfrefract.formats.capture import RAW_NAME, camera_from_option, port_from_file, ray_correction_from_option
+from lfrefract.formats.capture import RAW_NAME, camera_model_from_option, port_from_file
 from lfrefract.formats.exr import read_exr
 from lfrefract.formats.jsonio import read_json, write_text_atomically
 from lfrefract.formats.outputs import scratch_directory
 from lfrefract.metrics import ray_errors
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
@@ -621,12 +622,12 @@ def _numbered(folder: Path) -> list[Path]:
     return sorted(folder.glob("board-*.lfr"), key=lambda p: int(p.stem.split("-")[-1]))
 
 
-def ray_model_name(camera_file: Path) -> str:
-    """The ray model of a camera calibration file as reports name it: ``"radial"``, or the generic
+def ray_model_name(model: CameraModel) -> str:
+    """The ray model of a camera calibration's model as reports name it: ``"radial"``, or the generic
     model's member its calibration chose (:attr:`PolynomialCorrection.name`: ``"symmetric-D"`` or
     ``"polynomial-D-Da"``, total degree ``D`` and degree ``Da`` in the aperture point, the file's
     ``correction.degree`` and ``correction.aperture_degree``)."""
-    correction = ray_correction_from_option(camera_file)
+    correction = model.correction
     return correction.name if isinstance(correction, PolynomialCorrection) else "radial"
 
 
@@ -724,14 +725,13 @@ def _core_stage(
                 _synth_all(core, captures, args, products / "synth" / method / camera, products / "maps")
                 chain.ports[camera] = port_from_file(port)
                 chain.port_files[camera] = port
+                given = camera_model_from_option(model)
                 if method == "data-only":
-                    chain.ray_models[camera] = ray_model_name(model) + _refinement_note(model if refine else None)
+                    chain.ray_models[camera] = ray_model_name(given) + _refinement_note(model if refine else None)
+                    chain.rays[camera] = given.captured_rays(run["uv"])
                 else:
                     chain.ray_models[camera] = "thin lens"
-                lf = camera_from_option(model)
-                rays = lf.captured_rays(run["uv"])
-                correction = ray_correction_from_option(model) if method == "data-only" else None
-                chain.rays[camera] = rays if correction is None else correction.corrected(rays)
+                    chain.rays[camera] = given.camera.captured_rays(run["uv"])
             except Exception as exc:  # a failing chain is a table row, not a failed run
                 chain.fail(camera, exc)
     return models

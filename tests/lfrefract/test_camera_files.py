@@ -13,16 +13,15 @@ import pytest
 from lfrefract import FlatPort, ParameterError, camera_preset
 from lfrefract.errors import FileFormatError
 from lfrefract.formats.capture import (
-    camera_from_option,
+    camera_model_from_option,
     check_port_ray_model,
-    correction_estimate_from_option,
     mla_from_file,
     port_from_file,
-    ray_correction_from_option,
     read_sidecar,
 )
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.paramfile import read_camera_file
+from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.ray_correction import PARAMETERS, CorrectionEstimate, RayCorrection
 
 TINY = camera_preset("tiny")
@@ -48,9 +47,10 @@ def calibration(path: Path, **changes) -> Path:
 def test_a_camera_calibration_gives_its_camera_and_correction_under_any_suffix(tmp_path):
     for name in ("camera.json", "camera.cal", "camera"):  # a camera file of any suffix but .toml is JSON
         path = calibration(tmp_path / name)
-        assert camera_from_option(path) == TINY
-        assert ray_correction_from_option(path) == CORRECTION
-        assert correction_estimate_from_option(path).correction == CORRECTION
+        model = camera_model_from_option(path)
+        assert model.camera == TINY
+        assert model.correction == CORRECTION
+        assert model.estimate().correction == CORRECTION
 
 
 @pytest.mark.parametrize("kind", ["lfrefract.camera", "lfsim.render", "lfrefract.calibrate.mla", "my.camera", None])
@@ -58,7 +58,7 @@ def test_a_correction_in_a_file_of_another_kind_is_refused(tmp_path, kind):
     # The kind edited: every --camera reader read the thin lens, the output bit-identical to it.
     path = calibration(tmp_path / "camera.json", kind=kind)  # None: no kind
     said = re.escape(f"{str(path)!r}: key 'kind' is {kind!r}")
-    for read in (camera_from_option, ray_correction_from_option, read_camera_file):
+    for read in (camera_model_from_option, read_camera_file):
         with pytest.raises(FileFormatError, match=said) as info:
             read(path)
         assert "'correction'" in str(info.value)
@@ -68,16 +68,15 @@ def test_a_correction_in_a_file_of_another_kind_is_refused(tmp_path, kind):
 def test_a_covariance_in_a_file_of_another_kind_is_refused(tmp_path):
     path = calibration(tmp_path / "camera.json", kind="lfrefract.camera", correction=None)
     with pytest.raises(FileFormatError, match=re.escape("key 'kind' is 'lfrefract.camera'")) as info:
-        camera_from_option(path)
+        camera_model_from_option(path)
     assert "'correction_covariance'" in str(info.value)
 
 
 def test_a_camera_calibration_without_its_correction_is_refused(tmp_path):
     path = calibration(tmp_path / "camera.json", correction=None)
-    for read in (camera_from_option, ray_correction_from_option):
-        with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} is a camera calibration")) as info:
-            read(path)
-        assert "no 'correction'" in str(info.value)
+    with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r} is a camera calibration")) as info:
+        camera_model_from_option(path)
+    assert "no 'correction'" in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -96,7 +95,7 @@ def test_a_table_the_kind_does_not_hold_or_lacks_is_refused(tmp_path, data, says
     path = tmp_path / "camera.json"
     write_json(path, {"camera": TINY.to_dict(), **data})
     with pytest.raises(FileFormatError, match=re.escape(says)):
-        camera_from_option(path)
+        camera_model_from_option(path)
 
 
 def test_a_captures_sidecar_holding_a_correction_is_refused(tmp_path):
@@ -134,10 +133,9 @@ def test_every_problem_of_the_correction_names_the_file_and_the_key(tmp_path, co
         data = read_json(path)
         del data["schema_version"]
         write_json(path, {**data, "correction": None})
-    for read in (ray_correction_from_option, correction_estimate_from_option):
-        with pytest.raises(FileFormatError, match=re.escape(says)) as info:
-            read(path)
-        assert str(path) in str(info.value)
+    with pytest.raises(FileFormatError, match=re.escape(says)) as info:
+        camera_model_from_option(path)
+    assert str(path) in str(info.value)
 
 
 def _covariance(matrix) -> dict:
@@ -166,19 +164,21 @@ def test_every_problem_of_the_covariance_names_the_file_and_the_key(tmp_path, co
     data = read_json(path)
     del data["schema_version"]
     write_json(path, {**data, "correction_covariance": covariance})
-    for read in (ray_correction_from_option, correction_estimate_from_option):
-        with pytest.raises(FileFormatError, match=re.escape(says)) as info:
-            read(path)
-        assert str(path) in str(info.value)
+    with pytest.raises(FileFormatError, match=re.escape(says)) as info:
+        camera_model_from_option(path)
+    assert str(path) in str(info.value)
 
 
 def test_a_calibration_without_a_covariance_gives_its_correction_but_no_refinement(tmp_path):
     # Files written before the covariance was recorded: their correction is whole; only a
     # refinement needs the covariance, and it says what to do.
     path = calibration(tmp_path / "camera.json", correction_covariance=None)
-    assert ray_correction_from_option(path) == CORRECTION
-    with pytest.raises(FileFormatError, match="has no correction_covariance"):
-        correction_estimate_from_option(path)
+    model = camera_model_from_option(path)
+    assert model.correction == CORRECTION
+    assert model.covariance is None
+    said = re.escape(f"the camera model of {str(path)!r} has no correction_covariance")
+    with pytest.raises(ParameterError, match=said):
+        model.estimate()
 
 
 # =============================================================================== port files and their ray model
@@ -195,8 +195,8 @@ def test_a_port_calibrated_on_another_ray_model_is_refused_under_any_suffix(tmp_
     path = _port_calibration(tmp_path / name, correction=None)
     assert port_from_file(path) == PORT
     with pytest.raises(ParameterError, match=re.escape("was calibrated on the ray model of 'camera.json'")):
-        check_port_ray_model(path, CORRECTION, camera="camera.json")
-    check_port_ray_model(path, None, camera="tiny")
+        check_port_ray_model(path, CameraModel(camera=TINY, correction=CORRECTION, source="camera.json"))
+    check_port_ray_model(path, CameraModel(camera=TINY, source="tiny"))
 
 
 @pytest.mark.parametrize("kind", ["lfrefract.port", "lfsim.render", None])
@@ -209,10 +209,10 @@ def test_a_ray_model_in_a_port_file_of_another_kind_is_refused(tmp_path, kind):
     with pytest.raises(FileFormatError, match=said):
         port_from_file(path)
     with pytest.raises(FileFormatError, match=said):
-        check_port_ray_model(path, None, camera="tiny")
+        check_port_ray_model(path, CameraModel(camera=TINY, source="tiny"))
 
 
 def test_a_port_calibrations_bad_ray_model_names_the_file_and_the_key(tmp_path):
     path = _port_calibration(tmp_path / "port.json", correction={**CORRECTION.to_dict(), "k2": 20.0})
     with pytest.raises(FileFormatError, match=re.escape(f"{str(path)!r}: ray_model.correction.k2 must lie in")):
-        check_port_ray_model(path, CORRECTION, camera="camera.json")
+        check_port_ray_model(path, CameraModel(camera=TINY, correction=CORRECTION, source="camera.json"))

@@ -22,7 +22,7 @@ from lfrefract.formats.capture import (
     Capture,
     CaptureTruth,
     UnrecordedValues,
-    camera_from_option,
+    camera_model_from_option,
     capture_parameters,
     mask_warp_map,
     port_from_file,
@@ -247,18 +247,18 @@ def test_a_warp_map_with_everything_masked_fills_nothing(warp):
 
 # =============================================================================== option files
 def test_camera_options_are_presets_or_camera_files(tmp_path):
-    assert camera_from_option("tiny") == TINY
+    assert camera_model_from_option("tiny").camera == TINY
     wide = dataclasses.replace(TINY, name="wide", f_number=2.5)
     write_json(tmp_path / "cam.json", {"camera": wide.to_dict(), "other": 1})
-    assert camera_from_option(tmp_path / "cam.json") == wide
+    assert camera_model_from_option(tmp_path / "cam.json").camera == wide
     write_json(tmp_path / "no.json", {"port": PORT.to_dict()})
     with pytest.raises(FileFormatError, match=re.escape("no.json' has no key 'camera': it is not a camera file")):
-        camera_from_option(tmp_path / "no.json")
+        camera_model_from_option(tmp_path / "no.json")
     (tmp_path / "utf16.json").write_bytes(json.dumps({"schema_version": 1}).encode("utf-16"))
     with pytest.raises(FileFormatError, match=re.escape("utf16.json' is not UTF-8 text")):
-        camera_from_option(tmp_path / "utf16.json")
+        camera_model_from_option(tmp_path / "utf16.json")
     with pytest.raises(ParameterError, match=r"--camera must be a preset \(f01, illum, tiny, tiny-2x\) or a JSON"):
-        camera_from_option("tiny3")
+        camera_model_from_option("tiny3")
 
 
 def test_port_files_need_a_port_table(tmp_path):

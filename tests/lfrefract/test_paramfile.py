@@ -16,7 +16,7 @@ import pytest
 from lfrefract import FlatPort, ParameterError, camera_preset
 from lfrefract.calibration.mla import LENS_STATUS, MlaCalibration
 from lfrefract.errors import FileFormatError
-from lfrefract.formats.capture import camera_from_option, port_from_file
+from lfrefract.formats.capture import camera_model_from_option, port_from_file
 from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.formats.paramfile import (
     CAMERA_FILE_KIND,
@@ -53,7 +53,7 @@ def test_every_preset_camera_reads_back_equal(tmp_path, name, suffix):
     back = read_camera_file(path)
     assert back == camera
     assert back.to_dict() == camera.to_dict()
-    assert camera_from_option(path) == camera  # so every --camera takes it
+    assert camera_model_from_option(path).camera == camera  # so every --camera takes it
 
 
 def test_a_camera_with_every_field_changed_reads_back_equal(tmp_path):
@@ -181,7 +181,7 @@ def test_bad_camera_files_are_refused_naming_file_and_key(tmp_path, text, messag
         read_camera_file(path)
     assert repr(str(path)) in str(caught.value)
     with pytest.raises(FileFormatError, match=re.escape(message)):
-        camera_from_option(path)
+        camera_model_from_option(path)
 
 
 PORT = "[port]\ndistance_m = 0.02\nthickness_m = 0.005\ntilt_x_deg = 10.0\n"
@@ -345,4 +345,4 @@ def test_an_illum_mla_calibration_is_read_as_a_camera_file(tmp_path):
     write_json(path, {"kind": "lfrefract.calibrate.mla", "mla": mla.to_dict(), "camera": camera.to_dict()})
     assert path.stat().st_size > 16 * 2**20
     assert read_camera_file(path) == camera
-    assert camera_from_option(path) == camera
+    assert camera_model_from_option(path).camera == camera

@@ -18,7 +18,7 @@ from lfrefract.calibration import calibrate_camera
 from lfrefract.calibration.camera import _board_points, observed_rays
 from lfrefract.calibration.ray_fit import choose_capacity, fit_polynomial
 from lfrefract.errors import FileFormatError, ParameterError
-from lfrefract.formats.capture import correction_estimate_from_option, ray_correction_from_option
+from lfrefract.formats.capture import camera_model_from_option
 from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import (
@@ -220,16 +220,16 @@ def test_camera_file_with_the_polynomial_model(tmp_path):
             }
         )
     )
-    read = ray_correction_from_option(path)
+    read = camera_model_from_option(path).correction
     assert isinstance(read, PolynomialCorrection)
     assert np.array_equal(read.coefficients, model.coefficients)
     with pytest.raises(ParameterError, match="radial model only"):
-        correction_estimate_from_option(path)
+        camera_model_from_option(path).estimate()
     broken = model.to_dict()
     broken["coefficients"] = broken["coefficients"][:-1]
     path.write_text(json.dumps({"schema_version": 1, "kind": CAMERA_CALIBRATION_KIND, "correction": broken}))
     with pytest.raises(FileFormatError, match="coefficients"):
-        ray_correction_from_option(path)
+        camera_model_from_option(path)
 
 
 def test_synthesis_takes_the_polynomial_model():
