@@ -424,11 +424,10 @@ def synth(args: argparse.Namespace) -> int:
         if depth_options is not None:
             start = time.perf_counter()
             rays = trace_scene_rays(
-                camera,
+                model,
                 port,
                 rim_margin_px=depth_options.rim_margin_px,
                 compensate_port=depth_options.compensate_port,
-                correction=model.correction,
             )
             rays_seconds = time.perf_counter() - start
         compile_seconds = warp.compile_for(capture.raw)  # numba's first compilation, apart from the apply
@@ -617,14 +616,12 @@ def naive(args: argparse.Namespace) -> int:
         inputs=[*_capture_files(args.raw), *_option_files(args)],
         overwrite=args.overwrite,
     )
-    model = _capture_model(given, capture)
     image = naive_view(
-        model.camera,
+        _capture_model(given, capture),
         capture.raw,
         output=capture.output,
         kind=args.kind,
         recorded=capture.recorded,
-        ray_correction=model.correction,
     )
     write_exr(out, image, role=f"naive_{args.kind}")
     print(f"wrote {args.out}{_masked_note(capture)}")
@@ -645,13 +642,12 @@ def views(args: argparse.Namespace) -> int:
         reduce="a smaller --grid",
     )
     stack = subaperture_stack(
-        camera,
+        _capture_model(given, capture),
         capture.raw,
         grid=args.grid,
         spacing_px=args.spacing_px,
         output=output,
         recorded=capture.recorded,
-        ray_correction=_capture_model(given, capture).correction,
     )
     out = write_view_stack(
         Path(args.out),
@@ -979,9 +975,7 @@ def calibrate_approx_command(args: argparse.Namespace) -> int:
     prepare_output_files(
         {out: ExpectedKind(json_kind=APPROX_KIND)}, inputs=_board_inputs(args), overwrite=args.overwrite
     )
-    conventional = ConventionalView(
-        camera=camera, view=virtual_camera_for(camera), ray_correction=None if given is None else given.correction
-    )
+    conventional = ConventionalView(camera=_capture_model(given, first), view=virtual_camera_for(camera))
 
     def central_view(path: str) -> np.ndarray:
         raw = _board_raw(path, camera, args.white, args.colour, command="approx", nonfinite=args.nonfinite)

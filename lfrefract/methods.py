@@ -41,9 +41,9 @@ from scipy import sparse
 from lfrefract.calibration.approx import ApproxCalibration, calibrate_approx
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel, as_camera_model
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import Correction
 from lfrefract.synthesis.depth_aware import DepthAwareOptions, DepthAwareSynthesis
 from lfrefract.synthesis.views import (
     apply_resampling,
@@ -138,28 +138,26 @@ class ConventionalView:
 
     Attributes
     ----------
-    camera : LightFieldCamera
+    camera : LightFieldCamera or CameraModel
+        The camera and its ray model: a calibrated camera's radial model (``lfrefract calibrate
+        camera``) puts each lens where its corrected chief ray points, so the main lens's distortion
+        is not in the image; a bare camera: the thin lens's rays.
     view : PinholeCamera
         Output geometry.
-    ray_correction : RayCorrection or PolynomialCorrection, optional
-        A calibrated camera's rays (``lfrefract calibrate camera``): each lens sits where its
-        corrected chief ray points, so the main lens's distortion is not in the image. Default: the
-        thin lens's rays.
     """
 
-    camera: LightFieldCamera
+    camera: LightFieldCamera | CameraModel
     view: PinholeCamera
-    ray_correction: Correction | None = None
+    _model: CameraModel = field(init=False, repr=False)
     _idx: np.ndarray = field(init=False, repr=False)
     _matrix: sparse.csr_matrix = field(init=False, repr=False)
     _inside: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.camera, LightFieldCamera):
-            raise ParameterError(f"camera must be a LightFieldCamera, got {self.camera!r}")
+        object.__setattr__(self, "_model", as_camera_model(self.camera))
         if not isinstance(self.view, PinholeCamera):
             raise ParameterError(f"view must be a PinholeCamera, got {self.view!r}")
-        idx, matrix, inside = resampling_matrix(self.camera, self.view, ray_correction=self.ray_correction)
+        idx, matrix, inside = resampling_matrix(self._model, self.view)
         object.__setattr__(self, "_idx", idx)
         object.__setattr__(self, "_matrix", matrix)
         object.__setattr__(self, "_inside", inside)
@@ -168,9 +166,10 @@ class ConventionalView:
         """The conventional image of ``raw`` (see :func:`conventional_image`); ``recorded`` ((H, W)
         bool, e.g. :func:`~lfrefract.synthesis.views.finite_pixels`): only those raw pixels are used,
         as in :func:`~lfrefract.synthesis.views.subaperture_view`."""
-        image = raw_channels(self.camera, raw)
-        recorded = recorded_mask(self.camera, recorded)
-        samples = micro_image_samples(self.camera, image, self._idx, recorded=recorded)
+        camera = self._model.camera
+        image = raw_channels(camera, raw)
+        recorded = recorded_mask(camera, recorded)
+        samples = micro_image_samples(camera, image, self._idx, recorded=recorded)
         grey = np.ndim(raw) == 2
         return apply_resampling(self._matrix, self._inside, samples, self.view, grey=grey, masked=recorded is not None)
 

@@ -63,6 +63,7 @@ from scipy import ndimage
 
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel, as_camera_model
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import Correction, correction_from_dict
@@ -311,23 +312,22 @@ def warp_correction(warp: WarpMap) -> Correction | None:
 
 
 def trace_scene_rays(
-    camera: LightFieldCamera,
+    camera: LightFieldCamera | CameraModel,
     port: FlatPort | None,
     *,
     rim_margin_px: float = 0.71,
     compensate_port: bool = True,
-    correction: Correction | None = None,
 ) -> SceneRays:
     """Trace every usable captured ray of ``camera`` into the water behind ``port``.
 
     Parameters
     ----------
-    camera : LightFieldCamera
-        A thin-lens light-field camera (its captured-ray model: pixel -> microlens centre -> main lens).
-    correction : RayCorrection or PolynomialCorrection, optional
-        The camera's calibrated ray model (:func:`lfrefract.calibration.calibrate_camera`): each
-        pixel's ray is its thin-lens ray corrected (which pixels are usable is still decided on the
-        thin-lens aperture point, as the warp map does). Default: the thin-lens rays.
+    camera : LightFieldCamera or CameraModel
+        A thin-lens light-field camera (its captured-ray model: pixel -> microlens centre -> main
+        lens), or a camera model with its calibrated ray model
+        (:func:`lfrefract.calibration.calibrate_camera`): each pixel's ray is then its thin-lens ray
+        corrected (which pixels are usable is still decided on the thin-lens aperture point, as the
+        warp map does).
     port : FlatPort or None
         The port; None continues the rays straight (the estimator without refraction handling).
     rim_margin_px : float
@@ -341,8 +341,8 @@ def trace_scene_rays(
     SceneRays
         Rays lost to the port (total internal reflection, grazing) are left out.
     """
-    if not isinstance(camera, LightFieldCamera):
-        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    model = as_camera_model(camera)
+    camera, correction = model.camera, model.correction
     if port is not None and not isinstance(port, FlatPort):
         raise ParameterError(f"port must be a FlatPort or None, got {port!r}")
     radius = camera.usable_aperture_radius_m(rim_margin_px)
@@ -688,11 +688,10 @@ class DepthAwareSynthesis:
                 if json.dumps(warp.meta.get(what), sort_keys=True) != json.dumps(given, sort_keys=True):
                     raise ParameterError(f"the warp map was built for another {what} than the one given")
         rays = trace_scene_rays(
-            camera,
+            CameraModel(camera=camera, correction=warp_correction(warp)),
             port,
             rim_margin_px=options.rim_margin_px,
             compensate_port=options.compensate_port,
-            correction=warp_correction(warp),
         )
         return cls(warp=warp, rays=rays, options=options)
 

@@ -20,11 +20,12 @@ form a regular grid on the main-lens plane, ``baseline = s * pixel_pitch * f' / 
 every view has the same K and orientation, so it is the input that light-field depth-estimation
 methods expect (``lfrefract.formats.viewstack.write_view_stack`` writes it in the HCI benchmark layout).
 
-A calibrated camera (``ray_correction``, a :class:`lfrefract.optics.ray_correction.RayCorrection`
-from ``lfrefract calibrate camera``) moves every ray: the thin-lens slope ``t`` becomes
-``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` and the aperture point ``a`` becomes ``m a``. Every function
-here takes it: a lens then lands at ``K (t', 1)`` (the main lens's distortion removed) and a
-sub-aperture view's centre of projection is ``m h``, so the views are again pinholes of one K and
+A calibrated camera (a :class:`lfrefract.optics.camera_model.CameraModel` whose ``correction`` is
+a :class:`lfrefract.optics.ray_correction.RayCorrection`, from ``lfrefract calibrate camera``) moves
+every ray: the thin-lens slope ``t`` becomes ``t' = s t (1 + k1 |t|^2 + k2 |t|^4)`` and the aperture
+point ``a`` becomes ``m a``. Every function here takes such a model in place of a bare camera: a
+lens then lands at ``K (t', 1)`` (the main lens's distortion removed) and a sub-aperture view's
+centre of projection is ``m h``, so the views are again pinholes of one K and
 the stack's baseline is ``m`` times the thin lens's. The pupil's drift ``d`` is left out: the rays of
 slope ``t'`` cross the axis at ``z = d |t'|^2`` rather than 0, which moves a point at depth ``Z`` by
 about ``f_px d |t'|^3 / Z`` pixels in the views (0.01 px for the tiny camera's corner at 0.3 m with
@@ -57,6 +58,7 @@ from scipy.spatial import Delaunay
 from lfrefract._memory import require_memory
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel, as_camera_model
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.ray_correction import Correction, PolynomialCorrection, RayCorrection
 from lfrefract.synthesis.empty import masked_reason, output_geometry, require_a_value
@@ -186,19 +188,20 @@ def _per_lens_values(
 
 
 def naive_view(
-    camera: LightFieldCamera,
+    camera: LightFieldCamera | CameraModel,
     raw: np.ndarray,
     *,
     output: PinholeCamera | None = None,
     kind: str = "central",
     recorded: np.ndarray | None = None,
-    ray_correction: Correction | None = None,
 ) -> np.ndarray:
     """Resample a conventional view of ``raw`` onto a pinhole image, ignoring any port.
 
     Parameters
     ----------
-    camera : LightFieldCamera
+    camera : LightFieldCamera or CameraModel
+        The camera and its ray model: a calibrated radial model's rays (see the module docstring),
+        else (a bare camera) the thin lens's.
     raw : ndarray, shape (H, W) or (H, W, C)
         Raw lenslet image of ``camera``'s sensor size.
     output : PinholeCamera, optional
@@ -208,8 +211,6 @@ def naive_view(
     recorded : ndarray of bool, shape (H, W), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
         Default: all.
-    ray_correction : RayCorrection, optional
-        The camera's calibrated rays (see the module docstring); default: the thin lens's.
 
     Returns
     -------
@@ -219,11 +220,11 @@ def naive_view(
     Raises
     ------
     ParameterError
-        For a raw image of another size, an unknown ``kind``, or an output whose estimated memory
-        (:func:`naive_view_bytes`) exceeds the memory available.
+        For a raw image of another size, an unknown ``kind``, the polynomial ray model, or an output
+        whose estimated memory (:func:`naive_view_bytes`) exceeds the memory available.
     """
     one_of("kind", kind, VIEW_KINDS)
-    ray_correction = checked_correction(ray_correction)
+    camera, ray_correction = _unpacked(camera)
     output = output if output is not None else virtual_camera_for(camera)
     if not isinstance(output, PinholeCamera):
         raise ParameterError(f"output must be a PinholeCamera, got {output!r}")
@@ -366,9 +367,7 @@ def _resample(
     if len(idx) == len(camera.lens_indices_on_sensor()):  # every lens (a subset keeps the order)
         matrix, inside = _sensor_resampling(camera, output, tuple(slope_shift), ray_correction)
     else:
-        _, matrix, inside = resampling_matrix(
-            camera, output, slope_shift=slope_shift, lenses=idx, ray_correction=ray_correction
-        )
+        _, matrix, inside = _resampling_matrix(camera, ray_correction, output, slope_shift=slope_shift, lenses=idx)
     return apply_resampling(matrix, inside, values, output, grey=grey, masked=masked)
 
 
@@ -381,7 +380,7 @@ def _sensor_resampling(
 ) -> tuple[sparse.csr_matrix, np.ndarray]:
     """:func:`resampling_matrix` over every lens on the sensor, built once for all the captures of a
     camera (the central view of each board capture: 3-4 s an Illum capture when built for each)."""
-    _, matrix, inside = resampling_matrix(camera, output, slope_shift=slope_shift, ray_correction=ray_correction)
+    _, matrix, inside = _resampling_matrix(camera, ray_correction, output, slope_shift=slope_shift)
     inside.flags.writeable = False
     return matrix, inside
 
@@ -452,17 +451,17 @@ def _apply_resampling_masked(
 
 
 def resampling_matrix(
-    camera: LightFieldCamera,
+    camera: LightFieldCamera | CameraModel,
     output: PinholeCamera,
     *,
     slope_shift: tuple[float, float] = (0.0, 0.0),
     lenses: np.ndarray | None = None,
-    ray_correction: Correction | None = None,
 ) -> tuple[np.ndarray, sparse.csr_matrix, np.ndarray]:
     """Linear interpolation from per-lens samples to the pixels of a pinhole image.
 
     Lens ``c`` sits at ``K (t, 1)``, ``t = c / f' + slope_shift`` its thin-lens slope, or
-    ``K (t', 1)`` with ``t' = ray_correction.slopes(t)`` for a calibrated camera; a pixel inside the lenses' Delaunay
+    ``K (t', 1)`` with ``t' = correction.slopes(t)`` for a calibrated camera (a :class:`CameraModel`
+    with a radial ``correction``); a pixel inside the lenses' Delaunay
     triangulation is the barycentric mix of its triangle's three lenses (what
     ``scipy.interpolate.LinearNDInterpolator`` does, with the weights computed once, in numpy:
     scipy's per-triangle transforms call LAPACK per triangle, which took 0.7-15 s with threaded
@@ -479,15 +478,27 @@ def resampling_matrix(
     Raises
     ------
     ParameterError
-        If its estimated memory (:func:`resampling_bytes`) exceeds the memory available.
+        If its estimated memory (:func:`resampling_bytes`) exceeds the memory available, or the ray
+        model is the polynomial one.
     """
+    return _resampling_matrix(*_unpacked(camera), output, slope_shift=slope_shift, lenses=lenses)
+
+
+def _resampling_matrix(
+    camera: LightFieldCamera,
+    correction: RayCorrection | None,
+    output: PinholeCamera,
+    *,
+    slope_shift: tuple[float, float] = (0.0, 0.0),
+    lenses: np.ndarray | None = None,
+) -> tuple[np.ndarray, sparse.csr_matrix, np.ndarray]:
+    """:func:`resampling_matrix` of a camera and its radial correction (None: the thin lens)."""
     lenses = camera.lens_indices_on_sensor() if lenses is None else lenses
     require_memory(
         f"resampling {len(lenses)} lenses onto a {output.width_px} x {output.height_px} px image",
         resampling_bytes(lenses=len(lenses), pixels=output.width_px * output.height_px),
     )
     slopes = camera.mla.centres_m(lenses) / camera.lens_to_mla_m + np.asarray(slope_shift)
-    correction = checked_correction(ray_correction)
     if correction is not None:
         slopes = correction.slopes(slopes)
     positions = output.focal_px * slopes + np.array([output.cx_px, output.cy_px])
@@ -595,18 +606,20 @@ def _row_extent(corners: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndar
     return lo, hi
 
 
-def subaperture_centre_m(
-    camera: LightFieldCamera, offset_px: tuple[float, float], *, ray_correction: Correction | None = None
-) -> np.ndarray:
+def subaperture_centre_m(camera: LightFieldCamera | CameraModel, offset_px: tuple[float, float]) -> np.ndarray:
     """Centre of projection (3,), camera frame, metres, of the sub-aperture view at ``offset_px``.
 
     ``offset_px = (du, dv)``: the sensor offset from every micro-image centre, pixels. The point
     is on the main-lens plane: ``(du, dv, 0) * pixel_pitch * f' / f_mla``, times the pupil scale
-    ``m`` of a calibrated camera's ``ray_correction``.
+    ``m`` of a calibrated camera's radial correction (``camera`` a :class:`CameraModel`).
     """
+    return _centre_m(*_unpacked(camera), offset_px)
+
+
+def _centre_m(camera: LightFieldCamera, correction: RayCorrection | None, offset_px: tuple[float, float]) -> np.ndarray:
+    """:func:`subaperture_centre_m` of a camera and its radial correction (None: the thin lens)."""
     du, dv = finite_vector("offset_px", offset_px, 2)
     scale = camera.sensor.pixel_pitch_m * camera.lens_to_mla_m / camera.mla.focal_length_m
-    correction = checked_correction(ray_correction)
     if correction is not None:
         scale *= correction.pupil_scale
     return np.array([du * scale, dv * scale, 0.0])
@@ -624,14 +637,20 @@ def checked_correction(ray_correction: object) -> RayCorrection | None:
     return ray_correction
 
 
+def _unpacked(camera: LightFieldCamera | CameraModel) -> tuple[LightFieldCamera, RayCorrection | None]:
+    """The camera and the radial correction (None: the thin lens) of a camera model (a bare camera:
+    its thin lens), for the views: :func:`checked_correction` refuses the polynomial model."""
+    model = as_camera_model(camera)
+    return model.camera, checked_correction(model.correction)
+
+
 def subaperture_view(
-    camera: LightFieldCamera,
+    camera: LightFieldCamera | CameraModel,
     raw: np.ndarray,
     offset_px: tuple[float, float],
     *,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
-    ray_correction: Correction | None = None,
 ) -> np.ndarray:
     """The sub-aperture view at ``offset_px`` from the micro-image centres, as a pinhole image.
 
@@ -641,7 +660,8 @@ def subaperture_view(
 
     Parameters
     ----------
-    camera : LightFieldCamera
+    camera : LightFieldCamera or CameraModel
+        The camera and its ray model (see :func:`naive_view`).
     raw : ndarray, shape (H, W) or (H, W, C)
     offset_px : (float, float)
         ``(du, dv)``, pixels; at most the micro-image radius less one pixel
@@ -650,8 +670,6 @@ def subaperture_view(
         Output geometry; default :func:`virtual_camera_for` ``(camera)``.
     recorded : ndarray of bool, shape (H, W), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
-    ray_correction : RayCorrection, optional
-        The camera's calibrated rays (see the module docstring); default: the thin lens's.
 
     Returns
     -------
@@ -659,7 +677,7 @@ def subaperture_view(
         NaN outside the lenses' hull, and where no recorded pixel contributes.
     """
     du, dv = finite_vector("offset_px", offset_px, 2)
-    ray_correction = checked_correction(ray_correction)
+    camera, ray_correction = _unpacked(camera)
     limit = subaperture_limit_px(camera)
     if np.hypot(du, dv) > limit:
         raise ParameterError(
@@ -813,7 +831,7 @@ class ViewStack:
                     f"offsets_px reach {corner:.4g} px from the micro-image centres at the corners, beyond "
                     f"camera {self.camera.name!r}'s limit of {subaperture_limit_px(self.camera):.4g} px"
                 )
-            step_m = subaperture_centre_m(self.camera, (1.0, 0.0), ray_correction=self.ray_correction)[0]
+            step_m = _centre_m(self.camera, checked_correction(self.ray_correction), (1.0, 0.0))[0]
             expected = np.concatenate([offsets * step_m, np.zeros((grid, grid, 1))], axis=2)
             if not np.allclose(centres, expected, rtol=1e-9, atol=0.0):
                 raise ParameterError(
@@ -881,14 +899,13 @@ class ViewStack:
 
 
 def subaperture_stack(
-    camera: LightFieldCamera,
+    camera: LightFieldCamera | CameraModel,
     raw: np.ndarray,
     *,
     grid: int = 9,
     spacing_px: float | None = None,
     output: PinholeCamera | None = None,
     recorded: np.ndarray | None = None,
-    ray_correction: Correction | None = None,
 ) -> ViewStack:
     """A regular ``grid x grid`` set of sub-aperture views of ``raw`` (a light-field view stack).
 
@@ -903,7 +920,10 @@ def subaperture_stack(
 
     Parameters
     ----------
-    camera : LightFieldCamera
+    camera : LightFieldCamera or CameraModel
+        The camera and its ray model: a calibrated radial model's rays (see the module docstring),
+        every view resampled on them and the baseline the pupil scale times the thin lens's; else
+        (a bare camera) the thin lens's.
     raw : ndarray, shape (H_raw, W_raw) or (H_raw, W_raw, C)
         Raw lenslet image of ``camera``'s sensor size.
     grid : int
@@ -918,9 +938,6 @@ def subaperture_stack(
     recorded : ndarray of bool, shape (H_raw, W_raw), optional
         Raw pixels that hold a recorded value; the others are not used (see the module docstring).
         Default: all.
-    ray_correction : RayCorrection, optional
-        The camera's calibrated rays (see the module docstring): every view is resampled on them and
-        the baseline is the pupil scale times the thin lens's. Default: the thin lens's.
 
     Returns
     -------
@@ -938,10 +955,8 @@ def subaperture_stack(
         estimated memory (:func:`view_stack_bytes`) exceeds the memory available (checked before
         any view is allocated).
     """
-    if not isinstance(camera, LightFieldCamera):
-        raise ParameterError(f"camera must be a LightFieldCamera, got {camera!r}")
+    camera, ray_correction = _unpacked(camera)
     grid = _grid_size("grid", grid)
-    ray_correction = checked_correction(ray_correction)
     if output is None:
         output = virtual_camera_for(camera)
     elif not isinstance(output, PinholeCamera):
@@ -997,13 +1012,11 @@ def subaperture_stack(
             shift = subaperture_slope_shift(camera, du, dv)
             if cached is None or shift != cached_shift:
                 cached = None  # release the previous matrix before building the next
-                cached = resampling_matrix(
-                    camera, output, slope_shift=shift, lenses=idx, ray_correction=ray_correction
-                )[1:]
+                cached = _resampling_matrix(camera, ray_correction, output, slope_shift=shift, lenses=idx)[1:]
                 cached_shift = shift
             values = _bilinear(planes, centres_px + np.asarray((du, dv)), weight)
             views[r, c] = apply_resampling(*cached, values, output, grey=grey, masked=weight is not None)
-            centres[r, c] = subaperture_centre_m(camera, (du, dv), ray_correction=ray_correction)
+            centres[r, c] = _centre_m(camera, ray_correction, (du, dv))
     return ViewStack(
         views=views, offsets_px=offsets, centres_m=centres, output=output, camera=camera, ray_correction=ray_correction
     )

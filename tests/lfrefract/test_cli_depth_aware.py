@@ -278,13 +278,14 @@ def test_depth_aware_takes_a_camera_calibrations_ray_model(tmp_path):
 def test_depth_aware_rays_are_the_calibrated_models():
     """trace_scene_rays with a ray model: each pixel's ray is its thin-lens ray corrected, the same
     pixels kept (their thin-lens aperture point decides); warp_correction reads a map's model back."""
+    from lfrefract.optics.camera_model import CameraModel
     from lfrefract.optics.ray_correction import RayCorrection
     from lfrefract.synthesis.depth_aware import trace_scene_rays, warp_correction
     from lfrefract.synthesis.warp_map import SynthesisOptions, build_warp_map
 
     correction = RayCorrection(pupil_scale=1.1, k1=0.2)
     thin = trace_scene_rays(TINY, None)
-    model = trace_scene_rays(TINY, None, correction=correction)
+    model = trace_scene_rays(CameraModel(camera=TINY, correction=correction), None)
     assert np.array_equal(thin.raw_index, model.raw_index)
     expected = correction.corrected(TINY.captured_rays()).origins_cam[thin.raw_index]
     np.testing.assert_allclose(model.origins_cam, expected.astype(np.float32), rtol=0, atol=1e-9)

@@ -25,6 +25,7 @@ from lfrefract.formats.jsonio import SCHEMA_VERSION, write_json
 from lfrefract.formats.viewstack import read_view_stack, view_file_names, write_view_stack
 from lfrefract.methods import ConventionalView
 from lfrefract.metrics import shift_px
+from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.ray_correction import RayCorrection
 from lfrefract.synthesis.views import (
     ViewStack,
@@ -351,6 +352,7 @@ def test_bad_exports_and_files_are_refused(tmp_path, rgb_stack):
 #: A strong correction of the tiny camera (a 15 % larger pupil, 4 % longer focal length, barrel
 #: distortion moving the image corners by about 2.5 view pixels); no drift, so the views are pinholes.
 CORRECTION = RayCorrection(pupil_scale=1.15, slope_scale=1.04, k1=-0.4)
+CALIBRATED = CameraModel(camera=TINY, correction=CORRECTION)
 
 
 def pinhole_image(camera: LightFieldCamera, depth_m: float, seed: int = 0) -> np.ndarray:
@@ -372,13 +374,13 @@ def test_a_calibrated_cameras_central_view_is_the_pinhole_image_of_its_rays():
         return float(np.sqrt(np.mean((image - truth)[covered] ** 2)))
 
     floor = rms(naive_view(TINY, plane_raw(TINY, depth)))  # the thin lens's own view of its own rays
-    calibrated = rms(naive_view(TINY, raw, ray_correction=CORRECTION))
+    calibrated = rms(naive_view(CALIBRATED, raw))
     uncorrected = rms(naive_view(TINY, raw))
     assert calibrated < VIEW_CALIBRATED_FLOOR_RATIO * floor, (calibrated, floor)  # measured: 0.0064 / 0.0066
     assert calibrated < uncorrected / 2, (calibrated, uncorrected)  # measured: 0.0064 against 0.0187
     # The resampling is the conventional image's too (the approximation baseline's input).
-    conventional = ConventionalView(camera=TINY, view=virtual_camera_for(TINY), ray_correction=CORRECTION)
-    np.testing.assert_allclose(conventional.apply(raw), naive_view(TINY, raw, ray_correction=CORRECTION), atol=1e-6)
+    conventional = ConventionalView(camera=CALIBRATED, view=virtual_camera_for(TINY))
+    np.testing.assert_allclose(conventional.apply(raw), naive_view(CALIBRATED, raw), atol=1e-6)
 
 
 # The pupil and focal scales, then the distortion: with all of them OpenCV's ECC stops with "NaN
@@ -391,7 +393,7 @@ def test_a_calibrated_cameras_views_are_a_pupil_scale_wider_grid(correction):
     depth = 0.2
     camera = camera_preset("tiny-2x")
     stack = subaperture_stack(
-        camera, plane_raw(camera, depth, correction=correction), grid=9, ray_correction=correction
+        CameraModel(camera=camera, correction=correction), plane_raw(camera, depth, correction=correction), grid=9
     )
     thin = subaperture_centre_m(camera, (1.0, 0.0))[0] * stack.spacing_px
     assert stack.baseline_m == pytest.approx(correction.pupil_scale * thin, rel=FLOAT64_RELATIVE)
@@ -401,7 +403,7 @@ def test_a_calibrated_cameras_views_are_a_pupil_scale_wider_grid(correction):
 
 def test_a_stack_of_a_calibrated_camera_round_trips_and_is_validated(tmp_path):
     raw = plane_raw(TINY, 0.1, correction=CORRECTION)
-    stack = subaperture_stack(TINY, raw, grid=3, ray_correction=CORRECTION)
+    stack = subaperture_stack(CALIBRATED, raw, grid=3)
     write_view_stack(tmp_path / "views", stack, image_format="exr")
     back = read_view_stack(tmp_path / "views")
     assert back.ray_correction == CORRECTION
@@ -409,8 +411,8 @@ def test_a_stack_of_a_calibrated_camera_round_trips_and_is_validated(tmp_path):
     fields = {f.name: getattr(stack, f.name) for f in dataclasses.fields(stack)}
     with pytest.raises(ParameterError, match="centres_m are not subaperture_centre_m"):
         ViewStack(**(fields | {"ray_correction": None}))
-    with pytest.raises(ParameterError, match="ray_correction must be a RayCorrection"):
-        subaperture_stack(TINY, raw, grid=3, ray_correction={"pupil_scale": 1.1})
+    with pytest.raises(ParameterError, match="correction must be a RayCorrection"):
+        subaperture_stack(CameraModel(camera=TINY, correction={"pupil_scale": 1.1}), raw, grid=3)
 
 
 def test_the_cli_takes_a_camera_calibration_for_views_and_naive(tmp_path, capsys):
@@ -426,10 +428,10 @@ def test_the_cli_takes_a_camera_calibration_for_views_and_naive(tmp_path, capsys
     assert main(["views", source, "--out", str(tmp_path / "views"), "--grid", "3", "--camera", str(calibration)]) == 0
     written = read_view_stack(tmp_path / "views")
     assert written.ray_correction == CORRECTION
-    np.testing.assert_array_equal(written.views, subaperture_stack(TINY, raw, grid=3, ray_correction=CORRECTION).views)
+    np.testing.assert_array_equal(written.views, subaperture_stack(CALIBRATED, raw, grid=3).views)
     out = tmp_path / "naive.exr"
     assert main(["naive", source, "--out", str(out), "--camera", str(calibration)]) == 0
-    np.testing.assert_array_equal(read_exr(out), naive_view(TINY, raw, ray_correction=CORRECTION))
+    np.testing.assert_array_equal(read_exr(out), naive_view(CALIBRATED, raw))
     capsys.readouterr()
 
 
@@ -466,7 +468,7 @@ def test_an_off_focus_stack_keeps_one_interpolation_matrix_alive(monkeypatch):
 
     import lfrefract.synthesis.views
 
-    real = lfrefract.synthesis.views.resampling_matrix
+    real = lfrefract.synthesis.views._resampling_matrix
     built: list[weakref.ref] = []
     alive_at_build: list[int] = []
 
@@ -476,17 +478,17 @@ def test_an_off_focus_stack_keeps_one_interpolation_matrix_alive(monkeypatch):
         built.append(weakref.ref(result[1]))
         return result
 
-    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", counting)
+    monkeypatch.setattr(lfrefract.synthesis.views, "_resampling_matrix", counting)
     raw = plane_raw(TINY_OFF_FOCUS, 0.1)
     stack = subaperture_stack(TINY_OFF_FOCUS, raw, grid=3)
     assert len(alive_at_build) == 9  # one shift per view
     assert max(alive_at_build) == 0, alive_at_build
-    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", real)
+    monkeypatch.setattr(lfrefract.synthesis.views, "_resampling_matrix", real)
     np.testing.assert_array_equal(
         stack.views[0, 2], subaperture_view(TINY_OFF_FOCUS, raw, tuple(stack.offsets_px[0, 2]))
     )
     alive_at_build.clear()
-    monkeypatch.setattr(lfrefract.synthesis.views, "resampling_matrix", counting)
+    monkeypatch.setattr(lfrefract.synthesis.views, "_resampling_matrix", counting)
     subaperture_stack(TINY, plane_raw(TINY, 0.1), grid=3)
     assert alive_at_build == [0]  # f' = f: one matrix for every view
 

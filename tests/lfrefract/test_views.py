@@ -207,6 +207,7 @@ def test_a_calibrated_cameras_distorted_lens_field_is_resampled_within_its_memor
     box of candidates asked for 6.8 GiB. The resampling stays within resampling_bytes, and is right."""
     import tracemalloc
 
+    from lfrefract.optics.camera_model import CameraModel
     from lfrefract.optics.ray_correction import RayCorrection
     from lfrefract.synthesis.views import resampling_bytes, resampling_matrix
 
@@ -214,9 +215,10 @@ def test_a_calibrated_cameras_distorted_lens_field_is_resampled_within_its_memor
     output = virtual_camera_for(camera)
     correction = RayCorrection(k1=0.05)
     positions = _lens_positions(camera, output, correction)
+    model = CameraModel(camera=camera, correction=correction)  # built before the memory is traced
     tracemalloc.start()
     try:
-        _, matrix, inside = resampling_matrix(camera, output, ray_correction=correction)
+        _, matrix, inside = resampling_matrix(model, output)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
