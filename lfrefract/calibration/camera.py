@@ -59,6 +59,7 @@ from lfrefract.calibration.uncertainty import larger_covariance, spread_factors
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import CAMERA_CALIBRATION_KIND
 from lfrefract.optics.camera import CapturedRays, LightFieldCamera
+from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.ray_correction import (
     HELD_SLOPE_SCALE_STD,
@@ -170,6 +171,15 @@ class CameraCalibration:
                 "with the port takes the radial model only)"
             )
         return CorrectionEstimate(correction=self.correction, covariance=self.correction_covariance)
+
+    @property
+    def model(self) -> CameraModel:
+        """The calibrated camera model: :attr:`camera`, :attr:`correction`, the radial model's
+        :attr:`correction_covariance` (None for the polynomial model, whose covariance is over its
+        free coefficients) and :attr:`spread`; what ``camera_model_from_option`` reads back from the
+        file :meth:`to_dict` writes."""
+        covariance = self.correction_covariance if isinstance(self.correction, RayCorrection) else None
+        return CameraModel(camera=self.camera, correction=self.correction, covariance=covariance, spread=self.spread)
 
     def spread_to_dict(self) -> dict:
         """:attr:`spread` as plain data: its rows and what they mean."""

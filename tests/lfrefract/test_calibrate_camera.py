@@ -18,6 +18,8 @@ from lfrefract.calibration import calibrate_camera
 from lfrefract.calibration.camera import HELD_SLOPE_SCALE_STD
 from lfrefract.calibration.port import BoardView
 from lfrefract.errors import CalibrationError
+from lfrefract.formats.capture import camera_model_from_option
+from lfrefract.formats.jsonio import write_json
 from tests.tolerances import CAMERA_CAL_BOARD_DEPTH_RELATIVE, CAMERA_CAL_FREE_SLOPE_SCALE
 
 CAMERA = camera_preset("illum")
@@ -92,13 +94,19 @@ def test_small_boards_hold_the_slope_scale_and_keep_their_distances():
     assert written["correction_std"]["slope_scale"] == pytest.approx(HELD_SLOPE_SCALE_STD)
 
 
-def test_large_boards_determine_the_slope_scale():
+def test_large_boards_determine_the_slope_scale(tmp_path):
     """Boards six times larger (30 deg across) determine the slope scale: fitted, not held."""
     views, depths = _board_views(square_at_015_m=6 * 2.1e-3)
     calibration = calibrate_camera(CAMERA, views, view=VIEW)
     assert calibration.held == ()
     assert abs(calibration.correction.slope_scale - SLOPE) < CAMERA_CAL_FREE_SLOPE_SCALE
     assert calibration.to_dict()["held"] == []
+    # Its file gives back its camera model, bit for bit (JSON keeps every float64).
+    write_json(tmp_path / "camera.json", calibration.to_dict())
+    read, model = camera_model_from_option(tmp_path / "camera.json"), calibration.model
+    assert (read.camera, read.correction) == (model.camera, model.correction)
+    assert np.array_equal(read.covariance, model.covariance)
+    assert np.array_equal(read.spread, model.spread)
     ratios = _depth_ratios(calibration, views, depths)
     assert abs(np.mean(ratios) - 1.0) < CAMERA_CAL_BOARD_DEPTH_RELATIVE, ratios
 
