@@ -37,7 +37,7 @@ from lfrefract.optics.ray_correction import (
 from lfrefract.optics.real_lens import RealLensCamera
 from simulator.config import main_lens
 
-__all__ = ["APERTURE_FRACTION", "PATTERN", "board_views", "port_on_model", "truth_model"]
+__all__ = ["APERTURE_FRACTION", "PATTERN", "board_views", "port_on_model", "slopes_seeing", "truth_model"]
 
 #: Where the four outer aperture points lie, as a fraction of the aperture radius: inside the pupil
 #: of the designs that vignette their axial beam at the camera's f-number (working at about twice it).
@@ -47,11 +47,16 @@ PATTERN = (7, 5)
 
 
 def truth_model(
-    lens_name: str, *, camera: str = "tiny-2x", pixel_step: int = 2, capacity: tuple[int, int] = (7, 3)
+    lens_name: str,
+    *,
+    camera: str = "tiny-2x",
+    pixel_step: int = 2,
+    capacity: tuple[int, int] = (7, 3),
+    calibration_frame: bool = True,
 ) -> tuple[LightFieldCamera, PolynomialCorrection]:
     """The thin-lens camera with the lens's micro-image lattice (what an MLA calibration from a white
     image measures), and the lens's true rays of every ``pixel_step``-th raw pixel fitted by a
-    polynomial model of ``capacity``, its frame directions removed (the calibration's frame).
+    polynomial model of ``capacity``.
 
     Parameters
     ----------
@@ -59,6 +64,10 @@ def truth_model(
         A lens preset or a lens file (:func:`simulator.config.main_lens`), scaled and stopped to the camera.
     camera : str
         The camera preset.
+    calibration_frame : bool
+        True: the model's frame directions removed, so that its rays are in the frame a calibration
+        reports (origin at the paraxial entrance pupil); False: in the simulator's camera frame, the
+        frame of a render's truth (its port, its boards).
     """
     nominal = camera_preset(camera)
     real = RealLensCamera(camera=nominal, lens=main_lens(lens_name, nominal))
@@ -84,14 +93,14 @@ def truth_model(
     norms = np.array([template.aperture_norm_m] * 2 + [template.slope_norm] * 2)
     target = np.column_stack([origins - a, slopes - t]) / norms
     coefficients = np.linalg.lstsq(phi, target, rcond=None)[0]  # normalised (M, 4)
+    if not calibration_frame:
+        return camera, dataclasses.replace(template, coefficients=coefficients * norms)
     fixed = frame_directions(template.exponents)
     flat = coefficients.ravel() - fixed.T @ (fixed @ coefficients.ravel())
     return camera, dataclasses.replace(template, coefficients=flat.reshape(-1, 4) * norms)
 
 
-def _slopes_seeing(
-    truth: PolynomialCorrection, a: np.ndarray, corners: np.ndarray, port: FlatPort | None
-) -> np.ndarray:
+def slopes_seeing(truth: PolynomialCorrection, a: np.ndarray, corners: np.ndarray, port: FlatPort | None) -> np.ndarray:
     """Thin-lens slopes (N, 2) from aperture points ``a`` whose true rays (through ``port``) pass ``corners``."""
     t = (corners[:, :2] - a) / corners[:, 2:3]
 
@@ -157,7 +166,7 @@ def board_views(
         corners = np.column_stack([board, np.zeros(len(board))]) @ rotation.T + centre
         a = np.repeat(aperture, len(corners), axis=0)
         points = np.tile(corners, (len(aperture), 1))
-        t = _slopes_seeing(truth, a, points, port)
+        t = slopes_seeing(truth, a, points, port)
         pixels = np.column_stack([t, np.ones(len(t))]) @ view.K.T
         inside = np.all(np.isfinite(pixels), axis=1) & np.all(
             (pixels[:, :2] > 0) & (pixels[:, :2] < [view.width_px - 1, view.height_px - 1]), axis=1
