@@ -231,7 +231,7 @@ def setup_for_pipeline(scale: str) -> PipelineSetup:
     rig = setup_for(scale)
     if scale == "tiny":
         return PipelineSetup(
-            rig=rig, sensor=SENSORS[scale], white_frames=16, white_spp=32, board_spp=128, board_frames=8
+            rig=rig, sensor=SENSORS[scale], white_frames=16, white_spp=32, board_spp=64, board_frames=8
         )
     return PipelineSetup(rig=rig, sensor=SENSORS[scale], white_frames=8, white_spp=16, board_spp=32, board_frames=8)
 
