@@ -304,7 +304,10 @@ def _dask_client(workers: int, scheduler: str | None) -> Iterator:
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            # A port of the system's choosing: with None the scheduler's web server still takes 8787, and a
+            # second cluster on the machine (another run, another test worker) then warns and fails under
+            # warnings-as-errors.
+            dashboard_address=":0",
             silence_logs=logging.CRITICAL,  # task errors reach the manifest and the report; no worker log noise
         )
     try:

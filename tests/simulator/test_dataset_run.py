@@ -51,7 +51,7 @@ def scheduler():
     """Address of a running Dask cluster (2 worker processes) for runs given ``scheduler=``."""
     from dask.distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         yield cluster.scheduler_address
 
 
@@ -442,3 +442,19 @@ def test_water_sweep_reaches_the_render(tmp_path, scheduler):
     assert clear.port.n_water == turbid.port.n_water == pytest.approx(n_water, abs=1e-12)
     assert turbid.meta["render"]["medium"] is not None
     assert turbid.raw.mean() / clear.raw.mean() < DATASET_TURBID_OVER_CLEAR_MAX
+
+
+def test_a_local_cluster_starts_while_another_holds_the_dask_port():
+    """Two clusters on one machine (another run, another test worker): the second once took the
+    scheduler's web port 8787 too, warned that it was in use, and failed under warnings-as-errors
+    (12 errors of a CI run whose two test workers each started one)."""
+    import contextlib
+    import socket
+
+    from simulator.dataset.run import _dask_client
+
+    with socket.socket() as held:
+        with contextlib.suppress(OSError):  # held by another process already: the same case
+            held.bind(("", 8787))
+        with _dask_client(1, None) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
