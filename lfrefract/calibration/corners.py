@@ -7,33 +7,26 @@ a sample of some sub-aperture view: its captured ray (:meth:`LightFieldCamera.ca
 leaves the main lens at the aperture point ``a`` (camera frame, metres, on the lens plane z = 0)
 along direction ``d``, which is pixel ``x = K d`` of the pinhole view centred at ``a`` (the
 convention of :mod:`lfrefract.synthesis.views` and :class:`~lfrefract.calibration.port.BoardView`). A board
-corner appears in the view from ``a`` at ``x(a)``; over the small aperture that track is
+corner appears in the view from ``a`` at ``x(a)``; over the small aperture that track is affine,
 
-    ``x(a) = p + J a (1 + kappa |a|^2)``,
+    ``x(a) = p + J a``,
 
-with ``J`` the parallax: ``-f / Z`` for a central camera and a point at depth ``Z``, anisotropic
-behind a tilted port. Through a thin lens it is affine (``kappa = 0``; at 0.9 of the aperture radius
-0.01 px from the exact refracted track behind an untilted 12 mm port, 0.03 px behind one tilted 27
-deg; boards at 0.15-0.35 m). ``a`` is the thin-lens aperture point of a pixel; a real main lens maps
-it to the point its ray really leaves from with pupil aberration, ``a (1 + kappa |a|^2 + ...)`` to
-third order, and an affine track then bends: on double-Gauss renders (tiny-2x camera) a track fitted
-affine over the aperture put the corners seen from 0.6 of its radius 1.4 % of their parallax
-(0.02 px) too far out, a bias the port took as 0.55 deg of its normal even on the lens's true rays;
-with ``kappa`` 0.5 % (0.008 px) and 0.23 deg (``benchmarks/measure_corner_bias.py``).
+(at 0.9 of the aperture radius 0.01 px from the exact refracted track behind an untilted 12 mm
+port, 0.03 px behind one tilted 27 deg; boards at 0.15-0.35 m) with ``J`` the parallax: ``-f / Z``
+for a central camera and a point at depth ``Z``, anisotropic behind a tilted port.
 
-The raw pixels whose ``w = x - p - J a (1 + kappa |a|^2)`` lies within a window around the corner
-are fitted with a blurred X-junction,
+The raw pixels whose ``w = x - p - J a`` lies within a window around the corner are fitted with a
+blurred X-junction,
 
     ``I = c0 + g . w + c1 * erf(n1 . w / s) * erf(n2 . w / s)``,
 
 ``n1, n2`` the normals of the board's two edges through the corner (angles ``theta1, theta2``),
-``c0 + g . w`` the local mean with its shading gradient, ``c1`` the contrast and ``s`` the blur: 14
-parameters per corner (with ``p``, ``J`` and ``kappa``), all corners at once, by a batched
-Levenberg-Marquardt in numpy. A chessboard is point-symmetric about each inner corner and so is
-every pixel's footprint (its area, its microlens), so the blur's exact profile does not move the
-fitted centre. Starting
+``c0 + g . w`` the local mean with its shading gradient, ``c1`` the contrast and ``s`` the blur: 13
+parameters per corner, all corners at once, by a batched Levenberg-Marquardt in numpy. A
+chessboard is point-symmetric about each inner corner and so is every pixel's footprint (its
+area, its microlens), so the blur's exact profile does not move the fitted centre. Starting
 point: the corner found in the central view, edge normals from its neighbours in the detected
-grid, ``kappa = 0`` and ``J = -m I`` with ``m`` the board's image scale (pixels per metre of board): a central
+grid, and ``J = -m I`` with ``m`` the board's image scale (pixels per metre of board): a central
 camera sees a point at depth ``Z`` at scale ``f / Z`` and parallax ``-f / Z``, and a flat port
 changes both alike.
 """
@@ -56,9 +49,9 @@ from lfrefract.validate import as_points, finite_vector, positive_float
 
 __all__ = ["RIM_MARGIN_PX", "CornerTracks", "light_field_corners"]
 
-_N_PARAMS = 14  # p (2), J (4), theta1, theta2, c0, gx, gy, c1, s, kappa
+_N_PARAMS = 13  # p (2), J (4), theta1, theta2, c0, gx, gy, c1, s
 _MM = 1e3  # aperture points are handled in millimetres, J in px/mm, for a well-scaled problem
-_CHUNK = 64  # corners fitted together (bounds the (chunk, samples, 14) Jacobian)
+_CHUNK = 64  # corners fitted together (bounds the (chunk, samples, 13) Jacobian)
 #: Default margin from the micro-image rim (pixels): half a pixel diagonal, the geometric limit
 #: of partial vignetting (as :class:`lfrefract.synthesis.warp_map.SynthesisOptions`).
 RIM_MARGIN_PX = 0.71
@@ -69,8 +62,7 @@ class CornerTracks:
     """Where chessboard corners appear in every sub-aperture view of one light-field capture.
 
     Corner ``i`` is seen from aperture point ``a`` (camera frame, metres, main-lens plane) at pixel
-    ``centre_px[i] + parallax_px_per_m[i] @ a * (1 + bend_per_m2[i] * |a|^2)`` of the pinhole view
-    ``K`` it was fitted in (the module docstring's track).
+    ``centre_px[i] + parallax_px_per_m[i] @ a`` of the pinhole view ``K`` it was fitted in.
 
     Attributes
     ----------
@@ -78,8 +70,6 @@ class CornerTracks:
         The corner in the central view (``a = 0``), pixels.
     parallax_px_per_m : ndarray, shape (N, 2, 2)
         ``J``: pixels per metre of aperture offset.
-    bend_per_m2 : ndarray, shape (N,)
-        ``kappa``: how the track bends, per square metre of aperture offset (0 through a thin lens).
     centre_std_px : ndarray, shape (N,)
         Formal standard deviation of ``centre_px`` (larger axis), from the fit's residuals.
     samples : ndarray of int, shape (N,)
@@ -91,7 +81,6 @@ class CornerTracks:
 
     centre_px: np.ndarray
     parallax_px_per_m: np.ndarray
-    bend_per_m2: np.ndarray
     centre_std_px: np.ndarray
     samples: np.ndarray
     ok: np.ndarray
@@ -99,8 +88,7 @@ class CornerTracks:
     def at(self, aperture_point_m: tuple[float, float]) -> np.ndarray:
         """Corner pixels (N, 2) in the view centred at ``aperture_point_m`` (x, y), metres."""
         a = np.asarray(finite_vector("aperture_point_m", aperture_point_m, 2))
-        bent = a[None, :] * (1.0 + self.bend_per_m2[:, None] * float(a @ a))
-        return self.centre_px + np.einsum("nij,nj->ni", self.parallax_px_per_m, bent)
+        return self.centre_px + self.parallax_px_per_m @ a
 
 
 def light_field_corners(
@@ -218,7 +206,6 @@ def light_field_corners(
     return CornerTracks(
         centre_px=result[:, 0:2],
         parallax_px_per_m=result[:, 2:6].reshape(-1, 2, 2) * _MM,
-        bend_per_m2=result[:, 13] * _MM**2,
         centre_std_px=std,
         samples=counts,
         ok=ok,
@@ -266,20 +253,14 @@ def _light_field_samples(camera: LightFieldCamera, view: PinholeCamera, rim_marg
 
 
 def _local(params: np.ndarray, x: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Local coordinates ``w = x - p - J a (1 + kappa |a|^2)`` (C, M, 2) of samples ``x`` (C, M, 2)
-    seen from ``a``."""
+    """Local coordinates ``w = x - p - J a`` (C, M, 2) of samples ``x`` (C, M, 2) seen from ``a``."""
     jac_a = params[:, 2:6].reshape(-1, 1, 2, 2)
-    return x - params[:, None, 0:2] - np.sum(jac_a * _bent(params, a)[..., None, :], axis=3)
-
-
-def _bent(params: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """The aperture point along the track, ``a (1 + kappa |a|^2)`` (C, M, 2), millimetres."""
-    return a * (1.0 + params[:, None, 13:14] * np.sum(a**2, axis=2, keepdims=True))
+    return x - params[:, None, 0:2] - np.sum(jac_a * a[..., None, :], axis=3)
 
 
 def _model(params: np.ndarray, x: np.ndarray, a: np.ndarray, *, jacobian: bool = True):
     """X-junction values (C, M) at samples ``x`` seen from ``a``, and with ``jacobian`` their
-    Jacobian (C, M, 14)."""
+    Jacobian (C, M, 13)."""
     w = _local(params, x, a)
     theta1, theta2 = params[:, 6:7], params[:, 7:8]
     c0, g, c1, s = params[:, 8:9], params[:, None, 9:11], params[:, 11:12], params[:, 12:13]
@@ -295,11 +276,7 @@ def _model(params: np.ndarray, x: np.ndarray, a: np.ndarray, *, jacobian: bool =
     d_w = g + c1[..., None] * ((du * ev)[..., None] * n1 + (eu * dv)[..., None] * n2) / s[..., None]
     jac = np.empty((*value.shape, _N_PARAMS))
     jac[..., 0:2] = -d_w
-    bent = _bent(params, a)
-    jac[..., 2:6] = -(d_w[..., :, None] * bent[..., None, :]).reshape(*value.shape, 4)
-    jac_a = params[:, 2:6].reshape(-1, 1, 2, 2)
-    cubic = np.sum(jac_a * (a * np.sum(a**2, axis=2, keepdims=True))[..., None, :], axis=3)  # J a |a|^2
-    jac[..., 13] = -np.sum(d_w * cubic, axis=2)
+    jac[..., 2:6] = -(d_w[..., :, None] * a[..., None, :]).reshape(*value.shape, 4)
     jac[..., 6] = c1 * du * ev * (w[..., 1] * n1[..., 0] - w[..., 0] * n1[..., 1]) / s
     jac[..., 7] = c1 * eu * dv * (w[..., 1] * n2[..., 0] - w[..., 0] * n2[..., 1]) / s
     jac[..., 8] = 1.0
@@ -332,7 +309,7 @@ def _fit_chunk(
     """Batched Levenberg-Marquardt for C corners over padded samples (C, M).
 
     Each pass keeps the samples within ``radius`` of the current track and runs ``iterations``
-    damped Gauss-Newton steps on them. Returns the parameters (C, 14), the centre's standard
+    damped Gauss-Newton steps on them. Returns the parameters (C, 13), the centre's standard
     deviation (C,), and the sample counts (C,).
     """
     # Normalise each corner's values so that one damping schedule suits all.

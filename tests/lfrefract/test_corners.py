@@ -35,23 +35,13 @@ def _corners_world(pose: Pose, square_m: float) -> np.ndarray:
     return pose.to_world(np.c_[local, np.zeros(len(local))])
 
 
-def _bent(a: np.ndarray, bend_per_m2: float) -> np.ndarray:
-    """Aperture points ``a`` (N, 2 or 3), metres, moved as a lens with pupil aberration moves them:
-    ``a (1 + bend |a|^2)`` on the lens plane."""
-    a = np.array(a, dtype=float)
-    a[..., :2] *= 1.0 + bend_per_m2 * np.sum(a[..., :2] ** 2, axis=-1, keepdims=True)
-    return a
-
-
-def _raw(port: FlatPort, pose: Pose, square_m: float, *, bounded: bool = False, bend_per_m2: float = 0.0) -> np.ndarray:
+def _raw(port: FlatPort, pose: Pose, square_m: float, *, bounded: bool = False) -> np.ndarray:
     """Each pixel's chief ray through ``port`` onto the board plane, where the texture
     ``0.5 + 0.4 tanh(3 cos(pi x / s)) tanh(3 cos(pi y / s))`` has its X-junctions at the inner corners
     (point-symmetric about each, like a blurred chessboard); ``bounded``: white (0.9) beyond the
-    board's squares (one more than :data:`PATTERN` each way), so that OpenCV finds the board;
-    ``bend_per_m2``: each ray leaves the lens plane from its aperture point bent by :func:`_bent`
-    (its direction kept), as through a lens with pupil aberration."""
+    board's squares (one more than :data:`PATTERN` each way), so that OpenCV finds the board."""
     rays = CAMERA.captured_rays()
-    trace = port.trace_from_air(_bent(rays.origins_cam, bend_per_m2), rays.directions_cam)
+    trace = port.trace_from_air(rays.origins_cam, rays.directions_cam)
     rotation, centre = np.asarray(pose.rotation), np.asarray(pose.position_m)
     normal = rotation[:, 2]
     along = ((centre - trace.exit_points_cam) @ normal) / (trace.directions_cam @ normal)
@@ -89,29 +79,6 @@ def test_corner_tracks_follow_the_exact_refracted_projection(port, depth_m, rota
         error = np.sqrt(np.mean(np.sum((tracks.at(a) - seen) ** 2, axis=1)))
         assert error < 2 * LF_CORNER_ANALYTIC_PX, (a, error)
     assert np.all(tracks.centre_std_px < LF_CORNER_ANALYTIC_PX)
-
-
-def test_corner_tracks_bend_with_a_lens_whose_pupil_is_aberrated():
-    """Through a real main lens a pixel's ray leaves from another point than its thin-lens aperture
-    point, to third order ``a (1 + kappa |a|^2)``, and a corner's track over ``a`` bends. Fitted as a
-    straight track, the corners seen from 0.6-0.9 of the aperture radius were 0.018-0.050 px off here,
-    0.008-0.010 px bent (double-Gauss renders: 1.4 % of the parallax, and a port 0.55 deg off on the
-    lens's true rays)."""
-    rim = CAMERA.usable_aperture_radius_m(0.71)
-    bend = 0.15 / rim**2  # the rays at the usable rim leave 15 % farther out
-    pose, square = _board(PORT, 0.12, (15.0, -10.0, 5.0), px_per_square=12.0)  # 1.0-1.5 px of parallax
-    world = _corners_world(pose, square)
-    expected = project_through_port(VIEW, PORT, world)
-    start = expected + np.random.default_rng(1).normal(scale=0.3, size=expected.shape)
-    raw = _raw(PORT, pose, square, bend_per_m2=bend)
-    tracks = light_field_corners(CAMERA, raw, start, pattern=PATTERN, square_size_m=square, view=VIEW)
-    assert tracks.ok.all()
-    assert np.sqrt(np.mean(np.sum((tracks.centre_px - expected) ** 2, axis=1))) < LF_CORNER_ANALYTIC_PX
-    for a in ((0.9 * rim, 0.0), (0.0, -0.6 * rim), (-0.6 * rim, 0.6 * rim)):
-        seen = project_through_port(VIEW, PORT, world, centre_m=_bent([*a, 0.0], bend))
-        error = np.sqrt(np.mean(np.sum((tracks.at(a) - seen) ** 2, axis=1)))
-        assert error < LF_CORNER_ANALYTIC_PX, (a, error)
-    assert np.median(tracks.bend_per_m2) == pytest.approx(bend, rel=0.1)  # 1-2 % off measured
 
 
 def test_corners_are_fitted_alike_in_chunks_and_unrecorded_pixels_are_no_samples(monkeypatch):
