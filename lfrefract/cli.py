@@ -85,6 +85,7 @@ from lfrefract import (
 )
 from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory, warp_map_bytes
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
+from lfrefract.calibration.advice import PortAdvice, advise_port_views
 from lfrefract.calibration.approx import KIND as APPROX_KIND
 from lfrefract.calibration.approx import MIN_PX_PER_SQUARE, square_size
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, RAY_MODELS, calibrate_camera, corrected_view
@@ -95,6 +96,8 @@ from lfrefract.calibration.port import (
     MIN_BOARD_CORNERS,
     PORT_CALIBRATION_KIND,
     BoardView,
+    PortCalibration,
+    PortUndeterminedError,
     board_view_from_light_field,
 )
 from lfrefract.calibration.port import MIN_VIEWS as PORT_MIN_VIEWS
@@ -856,6 +859,20 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--thickness-m / --n-glass / --n-water: {exc}") from None
     positive_float("--max-normal-std-deg", args.max_normal_std_deg)
     positive_float("--max-distance-std-m", args.max_distance_std_m)
+    target_normal = positive_float("--target-normal-std-deg", args.target_normal_std_deg)
+    target_distance = positive_float("--target-distance-std-m", args.target_distance_std_m)
+
+    def advice_on(calibration: PortCalibration) -> PortAdvice:
+        """What ``calibration`` leaves poorly determined and which views would fix it (the views'
+        board geometry from the aperture points: the candidates' information needs no more)."""
+        return advise_port_views(
+            view,
+            calibration,
+            boards.views,
+            target_normal_std_deg=target_normal,
+            target_distance_std_m=target_distance,
+        )
+
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     step = args.subaperture_offset_px
     if step != 0 and args.corners != "views":
@@ -877,18 +894,22 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
     }
     joint = None
     correction: Correction | None
-    if prior is not None:  # the port and the camera's ray model together, kept if held-back boards say so
-        joint = calibrate_port_and_camera(view, views, prior=prior, **glass)
-    if joint is not None and joint.accepted:
-        result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
-    else:  # the in-air model (--camera's), also where the refinement was rejected
-        correction, model_file = None if in_air is None else in_air.correction, args.camera
-        model_views: list[list[BoardView]] = []
-        if in_air is not None and correction is not None:  # a calibrated camera: its rays, not the thin lens's
-            # The camera model's uncertainty: the views as each direction of its spread would correct them.
-            model_views = [[corrected_view(v, moved, view) for v in views] for moved in in_air.spread_corrections()]
-            views = [corrected_view(v, correction, view) for v in views]
-        result = calibrate_port(view, views, model_views=model_views, **glass)
+    try:
+        if prior is not None:  # the port and the camera's ray model together, kept if held-back boards say so
+            joint = calibrate_port_and_camera(view, views, prior=prior, **glass)
+        if joint is not None and joint.accepted:
+            result, correction, model_file = joint.port, joint.correction.correction, args.refine_camera
+        else:  # the in-air model (--camera's), also where the refinement was rejected
+            correction, model_file = None if in_air is None else in_air.correction, args.camera
+            model_views: list[list[BoardView]] = []
+            if in_air is not None and correction is not None:  # a calibrated camera: its rays, not the thin lens's
+                # The camera model's uncertainty: the views as each direction of its spread would correct them.
+                model_views = [[corrected_view(v, moved, view) for v in views] for moved in in_air.spread_corrections()]
+                views = [corrected_view(v, correction, view) for v in views]
+            result = calibrate_port(view, views, model_views=model_views, **glass)
+    except PortUndeterminedError as exc:  # say which views would determine it
+        raise CalibrationError("\n".join([str(exc), *advice_on(exc.calibration).lines()])) from None
+    advice = advice_on(result)
     data = {
         "kind": PORT_CALIBRATION_KIND,
         **boards.to_dict(),
@@ -896,6 +917,7 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         "ray_model": {"camera": model_file, "correction": None if correction is None else correction.to_dict()},
         **result.to_dict(),
     }
+    data["advice"] = advice.to_dict()
     if joint is not None:
         data["joint_refinement"] = joint.to_dict()
         write_json(Path(args.refine_camera), _refined_camera(args, joint, out, boards))
@@ -923,6 +945,8 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         f"residual {result.rms_px:.3f} px RMS over {len(views)} captures{boards.left_out_note()}{refined}; "
         f"wrote {out} and {out.with_suffix('.txt')}"
     )
+    for line in advice.lines():
+        print(line)
     return 0
 
 
@@ -1392,6 +1416,18 @@ def _calibrate_port_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=_default_of(calibrate_port, "max_distance_std_m"),
         help="refuse a port whose distance's standard deviation exceeds this, metres",
+    )
+    parser.add_argument(
+        "--target-normal-std-deg",
+        type=float,
+        default=_default_of(advise_port_views, "target_normal_std_deg"),
+        help="how well the normal should be known, degrees: beyond it the command says which board views to add",
+    )
+    parser.add_argument(
+        "--target-distance-std-m",
+        type=float,
+        default=_default_of(advise_port_views, "target_distance_std_m"),
+        help="how well the distance should be known, metres: beyond it the command says which board views to add",
     )
     corners = _default_of(board_view_from_light_field, "method")
     parser.add_argument(

@@ -64,9 +64,11 @@ __all__ = [
     "BoardView",
     "CalibrationError",
     "PortCalibration",
+    "PortUndeterminedError",
     "board_view_from_light_field",
     "calibrate_port",
     "estimate_normal",
+    "normal_std_deg",
     "project_through_port",
 ]
 
@@ -203,6 +205,16 @@ class PortCalibration:
                 else {}
             ),
         }
+
+
+class PortUndeterminedError(CalibrationError):
+    """The views do not determine the port to the limits asked: the fit is attached as
+    ``calibration`` (a :class:`PortCalibration`), so that a caller can say what views would
+    determine it (:func:`lfrefract.calibration.advice.advise_port_views`)."""
+
+    def __init__(self, message: str, *, calibration: PortCalibration) -> None:
+        super().__init__(message)
+        self.calibration = calibration
 
 
 #: How near an end of ``distance_range_m`` a fitted port distance counts as at that end (metres): far
@@ -675,7 +687,7 @@ def calibrate_port(
         :func:`lfrefract.calibration.distinct.require_distinct_corners`), views that show no
         refraction (straight lines of sight fit them as well as the best port, within
         :data:`NO_REFRACTION_CHI2`: boards captured in air), or the normal or distance not determined
-        to the stated limits.
+        to the stated limits (:class:`PortUndeterminedError`, with the fit).
     """
     if not isinstance(camera, PinholeCamera):
         raise ParameterError(f"camera must be a PinholeCamera, got {camera!r}")
@@ -827,6 +839,21 @@ def _require_refraction(
         )
 
 
+def normal_std_deg(port: FlatPort, covariance: np.ndarray) -> float:
+    """Standard deviation of ``port``'s normal direction (degrees, the larger axis) for a covariance
+    (3, 3) of ``(tilt_x_rad, tilt_y_rad, distance_m)``: through d n / d (tilt_x, tilt_y)."""
+    tx, ty = port.tilt_x_rad, port.tilt_y_rad
+    dn = np.array(
+        [
+            [-math.sin(ty) * math.sin(tx), math.cos(ty) * math.cos(tx)],
+            [-math.cos(tx), 0.0],
+            [-math.cos(ty) * math.sin(tx), -math.sin(ty) * math.cos(tx)],
+        ]
+    )
+    normal_cov = dn @ covariance[:2, :2] @ dn.T
+    return math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(normal_cov)[-1]), 0.0)))
+
+
 def port_result(
     port: FlatPort,
     poses6: np.ndarray,
@@ -859,38 +886,32 @@ def port_result(
     Raises
     ------
     CalibrationError
-        If the covariance is not finite or a standard deviation exceeds its limit.
+        If the covariance is not finite.
+    PortUndeterminedError
+        If a standard deviation exceeds its limit (the fit it refuses attached).
     """
     if not np.all(np.isfinite(covariance)):
         raise CalibrationError("the views do not determine the port: its covariance is not finite")
-    # Direction of the normal: its covariance through d n / d (tilt_x, tilt_y).
-    tx, ty = port.tilt_x_rad, port.tilt_y_rad
-    dn = np.array(
-        [
-            [-math.sin(ty) * math.sin(tx), math.cos(ty) * math.cos(tx)],
-            [-math.cos(tx), 0.0],
-            [-math.cos(ty) * math.sin(tx), -math.sin(ty) * math.cos(tx)],
-        ]
-    )
-    normal_cov = dn @ covariance[:2, :2] @ dn.T
-    normal_std_deg = math.degrees(math.sqrt(max(float(np.linalg.eigvalsh(normal_cov)[-1]), 0.0)))
+    normal_deg = normal_std_deg(port, covariance)
     distance_std_m = math.sqrt(max(float(covariance[2, 2]), 0.0))
-    if not (normal_std_deg <= max_normal_std_deg and distance_std_m <= max_distance_std_m):
-        raise CalibrationError(
-            f"the views do not determine the port: normal std {normal_std_deg:.3g} deg "
-            f"(limit {max_normal_std_deg:g}), distance std {distance_std_m * 1e3:.3g} mm "
-            f"(limit {max_distance_std_m * 1e3:g}); use more views, tilted towards and away from the camera"
-        )
     bounds = np.cumsum([0, *[2 * s for s in sizes]])
     view_rms = np.array([math.sqrt(np.mean(residuals_px[a:b] ** 2)) for a, b in itertools.pairwise(bounds)])
     board_poses = tuple(Pose(rotation=Rotation.from_rotvec(p[:3]).as_matrix(), position_m=p[3:]) for p in poses6)
-    return PortCalibration(
+    result = PortCalibration(
         port=port,
         board_poses=board_poses,
         rms_px=float(math.sqrt(np.mean(residuals_px**2))),
         view_rms_px=view_rms,
         covariance=covariance,
-        normal_std_deg=normal_std_deg,
+        normal_std_deg=normal_deg,
         distance_std_m=distance_std_m,
         covariance_parts={} if parts is None else dict(parts),
     )
+    if not (normal_deg <= max_normal_std_deg and distance_std_m <= max_distance_std_m):
+        raise PortUndeterminedError(
+            f"the views do not determine the port: normal std {normal_deg:.3g} deg "
+            f"(limit {max_normal_std_deg:g}), distance std {distance_std_m * 1e3:.3g} mm "
+            f"(limit {max_distance_std_m * 1e3:g}); use more views, tilted towards and away from the camera",
+            calibration=result,
+        )
+    return result

@@ -77,7 +77,16 @@ def test_calibrate_approx_and_port_from_board_captures(port_captures, tmp_path, 
     # (0.13 deg, 0.06 mm off measured); both files are written.
     out = tmp_path / "port.json"
     assert core_cli.main(["calibrate", "port", *captures, *board_args, "--out", str(out)]) == 0
-    assert "port normal" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "port normal" in printed
+    # Six boards at one depth: the command says what they leave poorly determined and which views to add.
+    advice = read_json(out)["advice"]
+    stds = {
+        "normal": (advice["normal_std_deg"], advice["target_normal_std_deg"]),
+        "distance": (advice["distance_std_m"], advice["target_distance_std_m"]),
+    }
+    assert advice["poorly_determined"] == [name for name, (std, target) in stds.items() if std > target]
+    assert all(f"add {k}: a board" in printed for k in range(1, len(advice["views"]) + 1))
     estimated = FlatPort.from_dict(read_json(out)["port"])
     truth = empty_scene(tilt).port
     assert math.degrees(math.acos(min(1.0, float(estimated.normal @ truth.normal)))) < 0.5

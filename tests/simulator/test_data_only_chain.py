@@ -81,7 +81,9 @@ def test_from_lytro_files_alone_the_calibrated_chain_beats_the_thin_lens_chain(t
             # the port's stated uncertainty (clustered by capture) is beyond the default limits: refused.
             # Raised limits show how far off it is.
             assert core_cli.main(argv) == 2
-            assert "the views do not determine the port" in capsys.readouterr().err
+            refused = capsys.readouterr().err
+            assert "the views do not determine the port" in refused
+            assert "poorly determined" in refused  # with the views that would determine it
             argv = [*argv, "--max-normal-std-deg", "5", "--max-distance-std-m", "0.05"]
         assert core_cli.main(argv) == 0
         cosine = np.clip(port_from_file(port).normal @ truth_port.normal, -1.0, 1.0)
