@@ -36,7 +36,6 @@ from lfrefract.calibration.port import (
     port_from_parameters,
     project_through_port,
 )
-from lfrefract.calibration.uncertainty import larger_covariance
 from lfrefract.errors import ParameterError
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.port import FlatPort
@@ -265,8 +264,8 @@ def _inflation(calibration: PortCalibration) -> float:
     parts = calibration.covariance_parts
     if "pixel_noise" not in parts or "noise" not in parts:
         return 1.0
-    ratio = larger_covariance(parts["pixel_noise"], parts["noise"])
-    values = np.linalg.eigvals(np.linalg.solve(parts["pixel_noise"], ratio)).real
+    # "noise" is already the larger of the two in every direction (calibrate_port): the ratio is >= 1.
+    values = np.linalg.eigvals(np.linalg.solve(parts["pixel_noise"], parts["noise"])).real
     return float(max(1.0, values.max(initial=1.0)))
 
 
