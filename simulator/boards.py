@@ -32,6 +32,7 @@ from types import ModuleType
 
 import numpy as np
 
+from lfrefract.calibration.advice import AdvisedView
 from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.calibration.port import (
     PortCalibration,
@@ -39,6 +40,7 @@ from lfrefract.calibration.port import (
     calibrate_port,
     project_through_port,
 )
+from lfrefract.errors import ParameterError
 from lfrefract.methods import CalibrationViews
 from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -70,6 +72,7 @@ __all__ = [
     "STRAIGHT",
     "TILTED",
     "PortFromRenders",
+    "advised_board_table",
     "aligned_errors_px",
     "board_points_world",
     "board_px_per_square",
@@ -227,6 +230,35 @@ def board_table(position_m, rotation_xyz_deg, square_size_m: float) -> dict:
         "squares": list(SQUARES),
         "square_size_m": float(square_size_m),
     }
+
+
+def advised_board_table(view: AdvisedView, square_size_m: float) -> dict:
+    """A :data:`SQUARES` chessboard table at a view a port calibration's advice names
+    (:func:`lfrefract.calibration.advice.advise_port_views`), in the frame of the advice's camera.
+
+    The advice turns a board facing the camera by extrinsic rotations about x then y
+    (:attr:`~lfrefract.calibration.advice.AdvisedView.turn_deg`) and puts the centre of its
+    inner-corner grid at :attr:`~lfrefract.calibration.advice.AdvisedView.centre_m`; a
+    :class:`simulator.config.Placement` turns extrinsically about x, y, z and places the board's
+    centre, which its even margin makes the centre of its inner corners. So the table's rotation is
+    ``(turn_x, turn_y, 0)`` and its position the advised centre.
+
+    Parameters
+    ----------
+    view : AdvisedView
+        One of :attr:`lfrefract.calibration.advice.PortAdvice.views`.
+    square_size_m : float
+        Edge of a square, metres: the advice's board is like the calibration's board seen nearest its
+        depth, so give that board's.
+
+    Returns
+    -------
+    dict
+        The ``[[object]]`` table (:func:`board_table`), in the camera frame (OpenCV axes, metres).
+    """
+    if not isinstance(view, AdvisedView):
+        raise ParameterError(f"view must be an AdvisedView, got {view!r}")
+    return board_table(view.centre_m, (*view.turn_deg, 0.0), square_size_m)
 
 
 def _scene(tilt_deg: tuple[float, float], objects: list[dict], lights: Sequence[dict], spp: int, seed: int):

@@ -150,6 +150,7 @@ __all__ = [
     "SENSORS",
     "TEST_BOARD_DEPTHS_M",
     "PipelineSetup",
+    "port_board_scene",
     "ray_model_name",
     "run_pipeline",
     "scene_signature",
@@ -313,6 +314,56 @@ def _port_board_scene(camera_scene: SceneConfig, table: dict, spp: int, seed: in
     )
 
 
+def port_board_scene(
+    options: ExperimentOptions,
+    camera_name: str,
+    table: dict,
+    *,
+    seed: int,
+    spp: int | None = None,
+    frames: int | None = None,
+) -> SceneConfig:
+    """A port calibration board before one rig camera, as the pipeline renders its port boards for
+    ``options`` (the real main lens, the sensor model, the wall as the camera's port): e.g. more boards
+    like those of a kept run.
+
+    Parameters
+    ----------
+    options : ExperimentOptions
+        The run's options (scale, ``lens``, the wall's options), as its ``meta.json`` records them.
+    camera_name : str
+        The rig camera (``"left"``, ``"right"``).
+    table : dict
+        The board, a :func:`simulator.boards.board_table` (``position_m``, ``rotation_xyz_deg``,
+        ``squares``, ``square_size_m``) in that camera's frame: OpenCV axes, metres. The scene is in
+        the camera's own frame (identity pose; the rig's lights moved into it), so a pose in the camera
+        frame (a calibration's, :func:`lfrefract.calibration.advice.advise_port_views`'s) is its placement.
+    seed : int
+        The render's seed (its sensor noise's too).
+    spp, frames : int, optional
+        Samples per pixel and exposures averaged; default the scale's ``board_spp`` and ``board_frames``
+        (:func:`setup_for_pipeline`). A run made with others records them (``parameters`` of its meta.json).
+
+    Returns
+    -------
+    SceneConfig
+    """
+    setup = setup_for_pipeline(options.scale)
+    cameras = {c.name: c for c in _real_rig(setup, options).cameras}
+    if camera_name not in cameras:
+        raise ParameterError(f"camera_name must be one of the rig's cameras {sorted(cameras)}, got {camera_name!r}")
+    spp = setup.board_spp if spp is None else spp
+    frames = setup.board_frames if frames is None else frames
+    return _port_board_scene(cameras[camera_name].scene, table, spp, seed, frames)
+
+
+def _real_rig(setup: PipelineSetup, options: ExperimentOptions) -> RigConfig:
+    """The rig of the real captures: ``options``'s main lens (default :data:`DEFAULT_LENS`) and wall,
+    each camera with the scale's sensor model."""
+    lens = options.lens if options.lens is not None else DEFAULT_LENS
+    return _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
+
+
 def _focus_distance_m(camera: LightFieldCamera) -> float:
     """The distance the camera focuses on (thin-lens model, from the main lens), metres; inf at infinity."""
     excess = 1.0 / camera.focal_length_m - 1.0 / camera.lens_to_mla_m
@@ -461,7 +512,7 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
     lens = options.lens if options.lens is not None else DEFAULT_LENS
     experiment_rig(setup.rig, options)  # the user's options alone first: an impossible rig names only their flags
     thin = experiment_rig(setup.rig, dataclasses.replace(options, lens=THIN_LENS))
-    real = _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
+    real = _real_rig(setup, options)
     jobs, squares = _rig_jobs(thin, setup.rig, scale)
     renders = work / "renders"
     oracle, captures = {}, {}
