@@ -128,7 +128,7 @@ from lfrefract.formats.viewstack import VIEW_STACK_FORMATS, write_view_stack
 from lfrefract.formats.whites import is_lytro_file
 from lfrefract.methods import ConventionalView
 from lfrefract.optics.camera import GRID_TYPES
-from lfrefract.optics.camera_model import CameraModel
+from lfrefract.optics.camera_model import BOARD_COLOURS, CameraModel
 from lfrefract.optics.ray_correction import PARAMETERS, Correction, RayCorrection
 from lfrefract.synthesis.depth_aware import (
     FILLED_EXACT_GIVEN_DEPTH,
@@ -159,14 +159,14 @@ from lfrefract.validate import fields_by_flag, positive_float
 #: colour's own Bayer sites. Demosaicing first is the default: on the tiny camera's capture it
 #: scored 23.2 dB against 22.1-22.6 dB (docs/cli.md, "Lytro files"): each colour's nearest rays
 #: among its own sites lie farther apart than among all pixels, and the colours no longer share them.
-COLOUR_MODES = ("demosaic", "cfa")
+COLOUR_MODES = BOARD_COLOURS  # one registry: how a Lytro capture's colours are read
 DEFAULT_COLOUR_MODE = "demosaic"
-#: How each board command reads a Lytro capture by default (measured on the pipeline experiment's
-#: double-Gauss captures, docs/calibration.md): ``calibrate port`` on the devignetted mosaic as one
-#: grey light field (port normal 0.17 deg from the truth against 0.59 on the demosaiced image), and
-#: ``calibrate camera`` and ``calibrate approx`` on the demosaiced image (the camera's rays 0.048 mm
-#: from the truth at the port against 0.096 on the grey mosaic).
-DEFAULT_BOARD_COLOUR = {"port": "cfa", "camera": "demosaic", "approx": "demosaic"}
+#: How each board command reads a Lytro capture by default (docs/calibration.md, "Board captures from
+#: a Lytro file"): ``calibrate camera`` and ``calibrate port`` on the devignetted mosaic as one grey
+#: light field, both alike, so that the ray model is fitted to the light-field corners as the port
+#: calibration sees them (double-Gauss renders: port normal 0.02 deg from the truth, against 0.75 with
+#: the in-air boards demosaiced); ``calibrate approx`` (OpenCV on the central view) on the demosaiced image.
+DEFAULT_BOARD_COLOUR = {"port": "cfa", "camera": "cfa", "approx": "demosaic"}
 
 #: The methods of ``synth --method``: ``proposed``, the warp map alone (exact inside its coverage,
 #: the nearby rays' approximation outside it); ``depth-aware``, the warp map's exact coverage with,
@@ -800,6 +800,20 @@ def _board_raw(
     a Lytro capture its grey mosaic (``colour`` ``"cfa"``) or its demosaiced image (``"demosaic"``,
     :meth:`DevelopedCapture.measured`), NaN where its white gives no light; None: ``command``'s
     default (:data:`DEFAULT_BOARD_COLOUR`)."""
+    return _board_image(path, camera, white, colour, command=command, nonfinite=nonfinite)[0]
+
+
+def _board_image(
+    path: str,
+    camera: LightFieldCamera,
+    white: str | None,
+    colour: str | None,
+    *,
+    command: str,
+    nonfinite: str,
+) -> tuple[np.ndarray, str | None]:
+    """:func:`_board_raw`'s image and how it was read (``"cfa"`` or ``"demosaic"``; None: a linear raw
+    image, read as it is)."""
     capture = _read_capture(path, camera=camera, white=white, nonfinite=nonfinite)
     if capture.developed is None:
         if colour is not None:
@@ -809,11 +823,12 @@ def _board_raw(
             )
         if capture.recorded is not None:  # --nonfinite mask: unrecorded pixels as NaN, left out of the views
             mask = capture.recorded if capture.raw.ndim == 2 else capture.recorded[..., None]
-            return np.where(mask, capture.raw, np.nan)
-        return capture.raw
-    if (colour or DEFAULT_BOARD_COLOUR[command]) == "cfa":
-        return capture.developed.grey()
-    return capture.developed.measured()  # what the white does not light is no black sample of the board
+            return np.where(mask, capture.raw, np.nan), None
+        return capture.raw, None
+    reading = colour or DEFAULT_BOARD_COLOUR[command]
+    if reading == "cfa":
+        return capture.developed.grey(), reading
+    return capture.developed.measured(), reading  # what the white does not light is no black sample of the board
 
 
 def calibrate_port_command(args: argparse.Namespace) -> int:
@@ -864,13 +879,15 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
 
     def advice_on(calibration: PortCalibration) -> PortAdvice:
         """What ``calibration`` leaves poorly determined and which views would fix it (the views'
-        board geometry from the aperture points: the candidates' information needs no more)."""
+        board geometry from the aperture points: the candidates' information needs no more; the in-air
+        model for what added views make of its part, where the calibration propagated it)."""
         return advise_port_views(
             view,
             calibration,
             boards.views,
             target_normal_std_deg=target_normal,
             target_distance_std_m=target_distance,
+            camera_model=in_air,
         )
 
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
@@ -879,7 +896,15 @@ def calibrate_port_command(args: argparse.Namespace) -> int:
         raise ParameterError(f"--subaperture-offset-px={step!r} needs --corners views")
     offsets = ((0.0, 0.0),) if step == 0 else ((0.0, 0.0), (step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))
     boards = _board_views(
-        args, camera, view, pattern, command="port", minimum=PORT_MIN_VIEWS, method=args.corners, offsets_px=offsets
+        args,
+        camera,
+        view,
+        pattern,
+        command="port",
+        minimum=PORT_MIN_VIEWS,
+        method=args.corners,
+        offsets_px=offsets,
+        in_air=in_air,
     )
     views = boards.views
     glass = {
@@ -1035,12 +1060,35 @@ class _BoardViews:
     views: list[BoardView]
     sources: list[str]  # the capture of each view
     left_out: list[dict[str, str]]  # {"source": capture, "reason": why}
+    colour: str | None  # how the Lytro captures were read ("cfa", "demosaic"); None: linear raw images
 
     def to_dict(self) -> dict:
-        return {"sources": self.sources, "left_out": self.left_out}
+        return {"sources": self.sources, "left_out": self.left_out, "board_colour": self.colour}
 
     def left_out_note(self) -> str:
         return f" ({len(self.left_out)} left out, named above)" if self.left_out else ""
+
+
+def _check_board_colour(in_air: CameraModel | None, reading: str, *, option: str | None) -> None:
+    """Refuse Lytro board captures read as ``reading`` where the calibrated ray model ``in_air`` was
+    fitted to boards read otherwise; warn where its file does not say how they were read."""
+    if in_air is None or in_air.correction is None:
+        return
+    if in_air.board_colour is None:
+        print(
+            f"warning: {in_air.source} does not say how its board captures were read (board_colour; written "
+            f"before it was recorded, when calibrate camera read them demosaiced by default); these are read as "
+            f"{reading!r}: read both alike (--colour), or calibrate the camera again",
+            file=sys.stderr,
+        )
+    elif in_air.board_colour != reading:
+        how = f"--colour {option}" if option is not None else f"read as {reading!r} by default"
+        raise ParameterError(
+            f"--camera {in_air.source}: its ray model was fitted to board captures read as "
+            f"{in_air.board_colour!r} (its board_colour), these are {how}: the light-field corners differ "
+            f"between the two readings, and the port would absorb it; use --colour {in_air.board_colour}, or "
+            f"calibrate the camera with --colour {reading}"
+        )
 
 
 def _board_views(
@@ -1053,16 +1101,29 @@ def _board_views(
     minimum: int,
     method: str = "light-field",
     offsets_px: tuple[tuple[float, float], ...] = ((0.0, 0.0),),
+    in_air: CameraModel | None = None,
 ) -> _BoardViews:
     """The corners of every board capture of ``args.boards`` (:func:`board_view_from_light_field`),
     each with its square size. A capture where the board is not located is left out and named on
-    stderr (and in the output's ``left_out``); fewer than ``minimum`` located is an error."""
+    stderr (and in the output's ``left_out``); fewer than ``minimum`` located is an error. Lytro
+    captures read otherwise than ``in_air``'s calibration boards were (its ``board_colour``) are
+    refused at the first: a ray model fitted to corners read one way does not fit those read the other."""
     views, sources, left_out = [], [], []
+    readings: set[str | None] = set()
     reason = NOT_LOCATED.format(cols=pattern[0], rows=pattern[1])
     for path, size in zip(args.boards, _square_sizes(args), strict=True):
+        image, reading = _board_image(path, camera, args.white, args.colour, command=command, nonfinite=args.nonfinite)
+        if not readings and reading is not None:
+            _check_board_colour(in_air, reading, option=args.colour)
+        readings.add(reading)
+        if len(readings) > 1:
+            raise ParameterError(
+                f"the board captures mix Lytro files and linear raw images ({path!r} is "
+                f"{'a linear raw image' if reading is None else 'a Lytro file'}): give one kind"
+            )
         board_view = board_view_from_light_field(
             camera,
-            _board_raw(path, camera, args.white, args.colour, command=command, nonfinite=args.nonfinite),
+            image,
             pattern=pattern,
             square_size_m=size,
             view=view,
@@ -1081,7 +1142,7 @@ def _board_views(
         raise CalibrationError(
             f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed{named}"
         )
-    return _BoardViews(views=views, sources=sources, left_out=left_out)
+    return _BoardViews(views=views, sources=sources, left_out=left_out, colour=next(iter(readings), None))
 
 
 def calibrate_camera_command(args: argparse.Namespace) -> int:

@@ -73,7 +73,7 @@ from lfrefract.formats.whites import (
     same_file,
 )
 from lfrefract.optics.camera import LightFieldCamera
-from lfrefract.optics.camera_model import CameraModel
+from lfrefract.optics.camera_model import BOARD_COLOURS, CameraModel
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
@@ -814,9 +814,13 @@ def camera_model_from_option(value: str | os.PathLike) -> CameraModel:
         if path.suffix.lower() == ".toml":  # a TOML file holds a [camera] only
             return CameraModel(camera=read_camera_file(path), source=str(value))
         data = read_parameter_json(path)
-        correction, covariance, spread = None, None, None
+        correction, covariance, spread, colour = None, None, None, None
         if data.get("kind") == CAMERA_CALIBRATION_KIND:
             correction, covariance, spread = _calibrated_rays(path, data)
+            colour = data.get("board_colour")
+            if colour not in (None, *BOARD_COLOURS):
+                where = f"{str(path)!r}: board_colour"
+                raise FileFormatError(f"{where} must be one of {BOARD_COLOURS}, got {shown(colour)}")
         return CameraModel(
             camera=camera_from_json(path, data),
             correction=correction,
@@ -824,6 +828,7 @@ def camera_model_from_option(value: str | os.PathLike) -> CameraModel:
             spread=spread,
             source=str(value),
             main_lens=recorded_main_lens(data),
+            board_colour=colour,
         )
     if str(value) in PRESETS:
         return CameraModel(camera=camera_preset(str(value)), source=str(value))

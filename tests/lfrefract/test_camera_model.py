@@ -10,6 +10,7 @@ import pytest
 
 from lfrefract import ParameterError, camera_preset
 from lfrefract.calibration.uncertainty import spread_factors
+from lfrefract.errors import FileFormatError
 from lfrefract.formats import paramfile
 from lfrefract.formats.capture import camera_model_from_option
 from lfrefract.formats.jsonio import read_json, write_json
@@ -183,3 +184,17 @@ def test_a_model_is_read_only_and_changes_by_copy():
     assert as_camera_model(TINY).ray_model == "thin-lens"
     with pytest.raises(ParameterError, match="camera must be a LightFieldCamera or a CameraModel, got str"):
         as_camera_model("tiny")
+
+
+def test_a_calibrations_board_reading_is_read_and_checked(tmp_path):
+    """How a calibration's Lytro boards were read travels with its model (``calibrate port`` compares
+    it with its own boards'); a value other than the two readings is refused naming the file and key."""
+    model = camera_model_from_option(_calibration(tmp_path / "cfa.json", board_colour="cfa"))
+    assert model.board_colour == "cfa"
+    assert camera_model_from_option(_calibration(tmp_path / "old.json")).board_colour is None
+    bad = _calibration(tmp_path / "bad.json", board_colour="grey")
+    message = f"{str(bad)!r}: board_colour must be one of ('cfa', 'demosaic')"
+    with pytest.raises(FileFormatError, match=re.escape(message)):
+        camera_model_from_option(bad)
+    with pytest.raises(ParameterError, match="board_colour must be one of"):
+        CameraModel(camera=TINY, board_colour="grey")

@@ -224,6 +224,15 @@ def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
             board = core_cli._board_raw(str(path), camera, str(tmp_path), colour, command=command)
             assert np.isnan(board[~lit]).all()
             assert np.isfinite(board[lit]).all()
+    # The camera's in-air boards are read as the port's underwater ones are, the grey mosaic: the
+    # ray model learns the light-field corners as the port calibration will see them (read
+    # demosaiced, the in-air corners' parallax differs and the port absorbs it: a double-Gauss
+    # render's port 0.75 deg off against 0.02 deg, docs/calibration.md).
+    grey = developed.grey()
+    for command in ("camera", "port"):
+        board = core_cli._board_raw(str(path), camera, str(tmp_path), None, command=command)
+        np.testing.assert_array_equal(board, grey)
+    assert core_cli._board_raw(str(path), camera, str(tmp_path), None, command="approx").ndim == 3
     with pytest.raises(ParameterError, match="is a linear raw image already"):
         read_capture(tmp_path / "raw.exr", white=white_path)
 
@@ -447,3 +456,51 @@ def test_an_exr_given_as_the_white_is_told_what_a_white_is(tmp_path):
     (tmp_path / "white" / "meta.json").write_text("{}")
     with pytest.raises(FileFormatError, match=r"raw.exr' is no Lytro file: a white image is a .raw with its .json"):
         read_capture(capture, white=tmp_path / "white" / "raw.exr")
+
+
+@pytest.mark.parametrize(("recorded", "colour", "refused"), [("demosaic", None, True), ("demosaic", "demosaic", False)])
+def test_calibrate_port_refuses_boards_read_otherwise_than_its_camera_calibration_read_its_own(
+    tmp_path, capsys, recorded, colour, refused
+):
+    """A ray model fitted to in-air corners read from the demosaiced image does not fit underwater
+    corners read from the grey mosaic (on double-Gauss renders the port absorbed the difference:
+    0.75 deg off against 0.02 deg read alike): ``calibrate port`` refuses the mix at its first board,
+    before any corner is fitted, naming the camera file's ``board_colour`` and the option to use."""
+    from lfrefract.formats.jsonio import write_json
+    from lfrefract.optics.ray_correction import RayCorrection
+
+    capture = lytro_capture(tmp_path, 0.5)
+    (tmp_path / "other").mkdir()
+    other = lytro_capture(tmp_path / "other", 0.3)
+    whites = tmp_path / "whites"
+    whites.mkdir()
+    write_white(whites, "white", white_mosaic(), zoom=6000, focus=0)
+    camera_file = tmp_path / "camera.json"
+    data = {
+        "kind": "lfrefract.calibrate.camera",
+        "camera": small_camera().to_dict(),
+        "correction": RayCorrection(k1=0.01).to_dict(),
+        "board_colour": recorded,
+    }
+    write_json(camera_file, data)
+    out = tmp_path / "port.json"
+    argv = ["calibrate", "port", str(capture), str(other), "--camera", str(camera_file), "--white", str(whites)]
+    argv += ["--squares", "7", "5", "--square-size-m", "0.01", "--thickness-m", "0.004", "--n-glass", "1.5"]
+    argv += ["--n-water", "1.333", "--out", str(out), *(["--colour", colour] if colour else [])]
+    assert core_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    if refused:
+        assert f"--camera {camera_file}: its ray model was fitted to board captures read as 'demosaic'" in err
+        assert "these are read as 'cfa' by default" in err
+        assert "use --colour demosaic" in err
+    else:  # read alike: the boards are read (and, a uniform grey, not located)
+        assert "its ray model was fitted" not in err
+        assert "the board was located in 0 of 2 captures" in err
+    assert not out.exists()
+    # A camera file that does not say how its boards were read is taken, with a warning.
+    del data["board_colour"]
+    write_json(camera_file, data)
+    assert core_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"warning: {camera_file} does not say how its board captures were read" in err
+    assert "the board was located in 0 of 2 captures" in err
