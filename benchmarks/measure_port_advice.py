@@ -242,6 +242,7 @@ def main() -> int:
             target_normal_std_deg=args.target_normal_std_deg,
             target_distance_std_m=args.target_distance_std_m,
             count=args.count,
+            camera_model=model,
         )
         print(f"\nK = {first} (boards 0-{first - 1}, {len(boards)} located); the advice:")
         print("\n".join(advice.lines()) or "  nothing poorly determined")

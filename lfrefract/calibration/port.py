@@ -45,7 +45,7 @@ from lfrefract.calibration.approx import detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
-from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance, propagated_covariance
+from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import PORT_CALIBRATION_KIND
 from lfrefract.optics.camera import LightFieldCamera
@@ -177,6 +177,12 @@ class PortCalibration:
         of a capture share), ``"noise"`` (the larger of the two in every direction, which the total
         takes) and ``"camera_model"`` (the camera's ray model's uncertainty, propagated; zero when none
         was given). Empty where the covariance is the Jacobian's alone.
+    camera_model_shifts : ndarray, shape (k, 3)
+        The port's first-order change ``-(J^T J)^-1 J^T dr`` in ``(tilt_x_rad, tilt_y_rad, distance_m)``
+        with the views moved along each of the ``k`` directions of the camera model's spread
+        (``model_views`` of :func:`calibrate_port`; ``dr`` the residuals' change): their outer products
+        sum to ``covariance_parts["camera_model"]``. Shape (0, 3) without a camera model. What more
+        boards make of that part (:func:`lfrefract.calibration.advice.advise_port_views`) starts here.
     """
 
     port: FlatPort
@@ -187,6 +193,7 @@ class PortCalibration:
     normal_std_deg: float
     distance_std_m: float
     covariance_parts: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    camera_model_shifts: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
 
     def to_dict(self) -> dict:
         """Plain data for a JSON file."""
@@ -770,7 +777,7 @@ def calibrate_port(
         bread = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         raise CalibrationError("the views do not determine the port: the normal equations are singular") from None
-    parts = _covariance_parts(problem, fit.x, jac, residuals, bread, sigma2, model_views, template)
+    parts, shifts = _covariance_parts(problem, fit.x, jac, residuals, bread, sigma2, model_views, template)
     # The bounded solver stays a little inside a bound it presses against (1e-8 m was seen): a
     # distance within DISTANCE_AT_BOUND_M of either end is the end of the range, not an answer.
     at_bound = fit.active_mask[2] != 0 or min(abs(fit.x[2] - lo), abs(hi - fit.x[2])) <= DISTANCE_AT_BOUND_M
@@ -788,6 +795,7 @@ def calibrate_port(
         max_normal_std_deg=max_normal_std_deg,
         max_distance_std_m=max_distance_std_m,
         parts=parts,
+        model_shifts=shifts,
     )
 
 
@@ -800,20 +808,23 @@ def _covariance_parts(
     sigma2: float,
     model_views: Sequence[Sequence[BoardView]],
     template: FlatPort,
-) -> dict[str, np.ndarray]:
-    """The port's covariance parts (:attr:`PortCalibration.covariance_parts`), port block (3, 3)."""
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The port's covariance parts (:attr:`PortCalibration.covariance_parts`), port block (3, 3), and the
+    port's shift per direction of the camera model's spread (:attr:`PortCalibration.camera_model_shifts`)."""
     bounds = np.cumsum([0, *(2 * s for s in problem.sizes)])
     scores = [jac[a:b].T @ residuals[a:b] for a, b in itertools.pairwise(bounds)]
     pixel = (bread * sigma2)[:3, :3]
     by_capture = clustered_covariance(bread, scores)[:3, :3]
     changes = [_Problem(problem.camera, list(moved), template).residuals(x) - residuals for moved in model_views]
-    model = propagated_covariance(bread @ jac.T, changes)[:3, :3] if changes else np.zeros((3, 3))
-    return {
+    # The port block of propagated_covariance's steps: each direction's first-order change of the fit.
+    shifts = np.array([-(bread @ (jac.T @ change))[:3] for change in changes]).reshape(-1, 3)
+    parts = {
         "pixel_noise": pixel,
         "by_capture": by_capture,
         "noise": larger_covariance(pixel, by_capture),
-        "camera_model": model,
+        "camera_model": shifts.T @ shifts,
     }
+    return parts, shifts
 
 
 def _require_refraction(
@@ -864,6 +875,7 @@ def port_result(
     max_normal_std_deg: float,
     max_distance_std_m: float,
     parts: dict[str, np.ndarray] | None = None,
+    model_shifts: np.ndarray | None = None,
 ) -> PortCalibration:
     """A fitted port as a :class:`PortCalibration`, after its uncertainty is checked.
 
@@ -882,6 +894,8 @@ def port_result(
         As :func:`calibrate_port`.
     parts : dict of str to ndarray, optional
         :attr:`PortCalibration.covariance_parts`.
+    model_shifts : ndarray, shape (k, 3), optional
+        :attr:`PortCalibration.camera_model_shifts` (default: none, shape (0, 3)).
 
     Raises
     ------
@@ -906,6 +920,7 @@ def port_result(
         normal_std_deg=normal_deg,
         distance_std_m=distance_std_m,
         covariance_parts={} if parts is None else dict(parts),
+        camera_model_shifts=np.zeros((0, 3)) if model_shifts is None else np.reshape(model_shifts, (-1, 3)),
     )
     if not (normal_deg <= max_normal_std_deg and distance_std_m <= max_distance_std_m):
         raise PortUndeterminedError(
