@@ -69,8 +69,8 @@ def test_from_lytro_files_alone_the_calibrated_chain_beats_the_thin_lens_chain(t
     camera_json = tmp_path / "camera.json"
     argv = ["calibrate", "camera", *air, "--camera", str(mla), *board_args, "--square-size-m", *air_sizes]
     assert core_cli.main([*argv, "--out", str(camera_json)]) == 0
-    # Read as the port's boards will be (the grey mosaic), and the file says so (calibrate port checks it).
-    assert read_json(camera_json)["board_colour"] == "cfa"
+    # The radial model reads the demosaiced image by default, and the file says how it read them.
+    assert read_json(camera_json)["board_colour"] == "demosaic"
     truth_port = boards.empty_scene(TILT).port
     glass = ["--thickness-m", str(truth_port.thickness_m), "--n-glass", "1.5", "--n-water", "1.333"]
     corners, normal_errors = {}, {}
