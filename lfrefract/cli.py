@@ -1117,7 +1117,7 @@ def _board_views(
     warned about at the first (the polynomial model: fitted to corners read one way, it does not fit
     those read the other)."""
     views, sources, left_out = [], [], []
-    readings: set[str | None] = set()
+    readings: list[str | None] = []  # a Lytro file's reading; None for a linear raw image (--white takes no mix)
     reason = NOT_LOCATED.format(cols=pattern[0], rows=pattern[1])
     for path, size in zip(args.boards, _square_sizes(args), strict=True):
         image, reading = _board_image(
@@ -1125,12 +1125,7 @@ def _board_views(
         )
         if not readings and reading is not None:
             _check_board_colour(in_air, reading, option=args.colour)
-        readings.add(reading)
-        if len(readings) > 1:
-            raise ParameterError(
-                f"the board captures mix Lytro files and linear raw images ({path!r} is "
-                f"{'a linear raw image' if reading is None else 'a Lytro file'}): give one kind"
-            )
+        readings.append(reading)
         board_view = board_view_from_light_field(
             camera,
             image,
@@ -1152,7 +1147,7 @@ def _board_views(
         raise CalibrationError(
             f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed{named}"
         )
-    return _BoardViews(views=views, sources=sources, left_out=left_out, colour=next(iter(readings), None))
+    return _BoardViews(views=views, sources=sources, left_out=left_out, colour=readings[0])
 
 
 def calibrate_camera_command(args: argparse.Namespace) -> int:
