@@ -65,9 +65,10 @@ def truth_model(
     camera : str
         The camera preset.
     calibration_frame : bool
-        True: the model's frame directions removed, so that its rays are in the frame a calibration
-        reports (origin at the paraxial entrance pupil); False: in the simulator's camera frame, the
-        frame of a render's truth (its port, its boards).
+        True: the rays in the frame a calibration reports (moved to the paraxial entrance pupil,
+        :attr:`~lfrefract.optics.real_lens.RealLensCamera.calibration_origin_cam`, and the fit's
+        remaining frame directions, a few micrometres of the fit's own, removed); False: in the
+        simulator's camera frame, the frame of a render's truth (its port, its boards).
     """
     nominal = camera_preset(camera)
     real = RealLensCamera(camera=nominal, lens=main_lens(lens_name, nominal))
@@ -80,7 +81,10 @@ def truth_model(
     a = thin.origins_cam[ok, :2]
     t = thin.directions_cam[ok, :2] / thin.directions_cam[ok, 2:3]
     slopes = true.directions_cam[ok, :2] / true.directions_cam[ok, 2:3]
-    origins = true.origins_cam[ok, :2] - true.origins_cam[ok, 2:3] * slopes
+    # the true rays where they cross z = 0 of the frame: the simulator's, or the one a calibration
+    # reports (the same rays, moved to the paraxial entrance pupil)
+    start = true.origins_cam[ok] - (real.calibration_origin_cam if calibration_frame else 0.0)
+    origins = start[:, :2] - start[:, 2:3] * slopes
     half_diagonal = 0.5 * math.hypot(camera.sensor.width_px, camera.sensor.height_px) * camera.sensor.pixel_pitch_m
     template = PolynomialCorrection(
         degree=capacity[0],

@@ -140,6 +140,26 @@ class RealLensCamera:
         return self.first_order.exit_pupil_z_m - self.camera.mla_z_m
 
     @property
+    def calibration_origin_cam(self) -> np.ndarray:
+        """Where a calibration from boards in air puts this camera's origin (3,), camera frame, metres:
+        on the axis at the lens's paraxial entrance pupil (:attr:`FirstOrder.entrance_pupil_z_m`).
+
+        Views of boards in air fix a camera's frame up to a shift along its axis (moving the origin
+        along the chief rays changes no image). The ray models fix it by putting the paraxial chief
+        rays through the origin (:func:`lfrefract.optics.ray_correction.frame_directions`), so a
+        calibrated model's rays are this lens's rays moved here: its truth (ports, boards, rays) is
+        compared with a calibration in this frame.
+
+        Examples
+        --------
+        >>> from lfrefract import camera_preset
+        >>> real = RealLensCamera.from_preset(camera_preset("tiny-2x"), "double-gauss")
+        >>> round(float(real.calibration_origin_cam[2]) * 1e3, 3)  # mm: 0.514 mm behind the origin
+        -0.514
+        """
+        return np.array([0.0, 0.0, self.first_order.entrance_pupil_z_m])
+
+    @property
     def image_side_f_number(self) -> float:
         """``D`` over the exit pupil's diameter: the cone of light arriving at the MLA."""
         return self.exit_pupil_distance_m / self.first_order.exit_pupil_diameter_m

@@ -54,6 +54,14 @@ triangulated, as in ``planes``. Columns (units in the names):
   port calibrations left out, their board not located (``lfrefract calibrate``'s ``left_out``).
 - ``ray_model``: each camera's ray model as its port and synthesis used it (:func:`ray_model_name`).
 
+The ``data-only`` chain is measured in the frame its calibration can know: boards in air fix a
+camera's frame but for its position along the axis, which both ray models put at the main lens's
+paraxial entrance pupil (:attr:`~lfrefract.optics.real_lens.RealLensCamera.calibration_origin_cam`:
+0.5 mm behind the simulator's camera origin for the double Gauss at ``tiny-2x``, 11 mm in front of
+it for the retrofocus design), so its ports, rays, corners and planes are compared with the truth
+moved there. The ``oracle`` (a thin lens at the
+origin) and ``thin-lens-assumed`` (the nominal thin lens, at the origin) keep the simulator's frame.
+
 ``ports.csv`` has a row per calibrated port (method and camera): its normal's and distance's errors
 against the true port beside the standard deviations its port file states, and the error's length in
 that file's covariance (``port_error_sigmas``).
@@ -815,29 +823,49 @@ def _true_rays(rig: RigConfig, uv: np.ndarray) -> dict[str, CapturedRays]:
     return out
 
 
-def _port_errors(ports: dict[str, FlatPort], truth: RigConfig) -> tuple[float, float]:
-    """(normal angle, deg; distance, mm) of the calibrated ports against the true ones, the larger
-    of the cameras'."""
+def _calibration_origin(scene: SceneConfig) -> np.ndarray:
+    """Where a calibration from boards in air puts the camera of ``scene`` (3,), its camera frame:
+    :attr:`RealLensCamera.calibration_origin_cam`, the origin itself for a thin lens."""
+    if scene.lens is None:
+        return np.zeros(3)
+    return RealLensCamera(camera=scene.camera, lens=scene.lens).calibration_origin_cam
+
+
+def _moved_port(port: FlatPort, origin: np.ndarray) -> FlatPort:
+    """``port`` in the frame whose origin is at ``origin`` (3,) of its own (axes unchanged)."""
+    return dataclasses.replace(port, distance_m=port.distance_m - float(port.normal @ origin))
+
+
+def _origins(rig: RigConfig, *, moved: bool) -> dict[str, np.ndarray]:
+    """Each camera's frame origin for the measures: :func:`_calibration_origin` where ``moved``,
+    else the simulator's origin."""
+    return {c.name: _calibration_origin(c.scene) if moved else np.zeros(3) for c in rig.cameras}
+
+
+def _port_errors(ports: dict[str, FlatPort], truth: RigConfig, origins: dict[str, np.ndarray]) -> tuple[float, float]:
+    """(normal angle, deg; distance, mm) of the calibrated ports against the true ones (each camera's
+    moved to ``origins``), the larger of the cameras'."""
     angles, distances = [], []
     for camera in truth.cameras:
-        true, port = camera.scene.port, ports[camera.name]
+        true, port = _moved_port(camera.scene.port, origins[camera.name]), ports[camera.name]
         angles.append(math.degrees(math.acos(float(np.clip(np.dot(true.normal, port.normal), -1.0, 1.0)))))
         distances.append(abs(port.distance_m - true.distance_m) * 1e3)
     return max(angles), max(distances)
 
 
-def _port_rows(models: dict[str, _Models], truth: RigConfig) -> list[dict]:
-    """Each calibrated port (the methods that calibrate one) against its camera's true one, with the
-    uncertainty its calibration states: one row per method and camera (the columns of ``ports.csv``)."""
+def _port_rows(models: dict[str, _Models], truth: RigConfig, origins: dict[str, dict[str, np.ndarray]]) -> list[dict]:
+    """Each calibrated port (the methods that calibrate one) against its camera's true one (moved to
+    the method's ``origins``), with the uncertainty its calibration states: one row per method and
+    camera (the columns of ``ports.csv``)."""
     rows = []
     for method in METHODS:
         chain = models[method]
         for camera in truth.cameras:
             if camera.name not in chain.port_files:
                 continue
-            true, port = camera.scene.port, chain.ports[camera.name]
-            if true is None:  # a rig camera's scene has the wall as its port
+            if camera.scene.port is None:  # a rig camera's scene has the wall as its port
                 raise ParameterError(f"rig camera {camera.name!r} has no port to measure its calibration against")
+            true, port = _moved_port(camera.scene.port, origins[method][camera.name]), chain.ports[camera.name]
             data = read_json(chain.port_files[camera.name])
             # (tilt_x_rad, tilt_y_rad, distance_m): the order of the port file's covariance
             delta = np.array([port.tilt_x_rad, port.tilt_y_rad, port.distance_m])
@@ -864,15 +892,19 @@ def _port_rows(models: dict[str, _Models], truth: RigConfig) -> list[dict]:
     return rows
 
 
-def _ray_measures(rays: dict[str, CapturedRays], true: dict[str, CapturedRays], truth: RigConfig) -> dict:
-    """The ray models against the true rays at each true port's air-side face, RMS over the cameras."""
+def _ray_measures(
+    rays: dict[str, CapturedRays], true: dict[str, CapturedRays], truth: RigConfig, origins: dict[str, np.ndarray]
+) -> dict:
+    """The ray models against the true rays (each camera's moved to ``origins``) at each true port's
+    air-side face, RMS over the cameras."""
     positions, angles = [], []
     for camera in truth.cameras:
-        model, ref, port = rays[camera.name], true[camera.name], camera.scene.port
+        origin = origins[camera.name]
+        model, ref, port = rays[camera.name], true[camera.name], _moved_port(camera.scene.port, origin)
         errors = ray_errors(
             model.origins_cam,
             model.directions_cam,
-            ref.origins_cam,
+            ref.origins_cam - origin,
             ref.directions_cam,
             plane_normal=port.normal,
             plane_distance_m=port.distance_m,
@@ -884,8 +916,15 @@ def _ray_measures(rays: dict[str, CapturedRays], true: dict[str, CapturedRays], 
     return {"ray_rms_mm": rms(positions) * 1e3, "ray_angle_mrad": rms(angles) * 1e3}
 
 
-def _corner_measures(images: CentralImages, shots: dict[str, Capture], tests: dict[str, Chessboard], rig) -> dict:
-    """The test boards' corners in the method's images against their true projections by its ``K``."""
+def _corner_measures(
+    images: CentralImages,
+    shots: dict[str, Capture],
+    tests: dict[str, Chessboard],
+    rig: RigConfig,
+    origins: dict[str, np.ndarray],
+) -> dict:
+    """The test boards' corners in the method's images against their true projections by its ``K``
+    from each camera's ``origins``."""
     squared, found, total = [], 0, 0
     for name, board in tests.items():
         world = board_scenes.chessboard_corners_world(board)
@@ -895,7 +934,7 @@ def _corner_measures(images: CentralImages, shots: dict[str, Capture], tests: di
             if corners is None:
                 continue
             found += 1
-            expected = images.outputs[camera.name].project(camera.scene.pose.to_camera(world))
+            expected = images.outputs[camera.name].project(camera.scene.pose.to_camera(world) - origins[camera.name])
             squared.append(np.sum(board_scenes.aligned_errors_px(corners, expected) ** 2, axis=1))
     rms = float(np.sqrt(np.mean(np.concatenate(squared)))) if squared else math.nan
     return {"corner_rms_px": rms, "test_boards_found": f"{found}/{total}"}
@@ -945,6 +984,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     tests = _test_boards(thin, setup.rig, scale)
     plane_depths = PLANE_DEPTHS_M[scale]
     truth = {depth: plane_in_left(thin, textured_plane(thin, depth)) for depth in plane_depths}
+    origins = {method: _origins(real, moved=method == "data-only") for method in METHODS}
     names = [c.name for c in thin.cameras]
     rows, by_depth, disparities = [], [], {}
     for method in METHODS:
@@ -957,15 +997,16 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
             images = _images(products / "synth" / method, names, jobs[0][0])
             boards = [(shots[name], size) for name, size in squares.items()]
             prepared = calibrate_method_rig(method, images, boards, cameras=(names[0], names[1]))
-            row |= _corner_measures(images, shots, tests, thin)
-            row["port_normal_err_deg"], row["port_distance_err_mm"] = _port_errors(chain.ports, thin)
-            row |= _ray_measures(chain.rays, true_rays[method], thin)
+            row |= _corner_measures(images, shots, tests, thin, origins[method])
+            row["port_normal_err_deg"], row["port_distance_err_mm"] = _port_errors(chain.ports, thin, origins[method])
+            row |= _ray_measures(chain.rays, true_rays[method], thin, origins[method])
         if prepared.ok:
+            left = origins[method][names[0]]
             for depth in plane_depths:
                 shot = shots[f"plane-{depth:g}"]
-                by_depth += plane_rows(
-                    prepared, shot, depth, truth[depth], thin, warps, disparities, out_dir, clouds=None
-                )
+                normal, offset = truth[depth]
+                moved = (normal, offset - float(normal @ left))
+                by_depth += plane_rows(prepared, shot, depth, moved, thin, warps, disparities, out_dir, clouds=None)
             zncc = [r for r in by_depth if r["method"] == method and r["matcher"] == MATCHERS[0]]
             row["plane_rmse_mm"] = float(np.mean([r["plane_rmse_mm"] for r in zncc]))
             row["truth_error_mm"] = float(np.mean([r["truth_error_mm"] for r in zncc]))
@@ -981,7 +1022,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         rows.append(row)
     seconds["measure_s"] = time.perf_counter() - start
     rows = list(complete_rows(rows))
-    ports = _port_rows(models, thin)
+    ports = _port_rows(models, thin, origins)
     write_table(complete_rows(by_depth), out_dir, stem="planes")
     if ports:
         write_table(complete_rows(ports), out_dir, stem="ports")

@@ -14,12 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfrefract import virtual_camera_for
+from lfrefract import camera_preset, virtual_camera_for
 from lfrefract.calibration import calibrate_camera
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.ray_correction import POLYNOMIAL_CAPACITIES
+from lfrefract.optics.real_lens import RealLensCamera
+from simulator.config import main_lens
 from simulator.lens_family import board_views, port_on_model, truth_model
-from tests.tolerances import LENS_FAMILY_NORMAL_DEG, LENS_FAMILY_RAY_M
+from tests.tolerances import LENS_FAMILY_FRAME_M, LENS_FAMILY_FRAME_SLOPE, LENS_FAMILY_NORMAL_DEG, LENS_FAMILY_RAY_M
 
 LENS = str(Path(__file__).resolve().parents[2] / "scenes" / "lenses" / "heliar.toml")
 SYMMETRIC = tuple(c for c in POLYNOMIAL_CAPACITIES if c.symmetric)
@@ -59,3 +61,25 @@ def test_the_port_is_found_and_its_stated_uncertainty_covers_its_error(chain):
     assert abs(port.port.distance_m - PORT.distance_m) <= 3.0 * port.distance_std_m
     assert normal_error < LENS_FAMILY_NORMAL_DEG
     assert np.any(port.covariance_parts["camera_model"])  # the camera model's share was propagated
+
+
+def test_the_calibration_frame_is_the_true_rays_moved_to_the_entrance_pupil():
+    """A calibration reports a lens's rays moved along the axis to where its paraxial chief rays cross
+    it; the truth in that frame must be the same rays moved rigidly, not a fit with a coefficient
+    dropped (which on the retrofocus design at tiny-2x, its entrance pupil 11 mm in front of the
+    simulator's origin, left the rays 6.9 um from the true ones moved there; 0.16 um moved)."""
+    lens = str(Path(LENS).with_name("retrofocus.toml"))
+    _, simulated = truth_model(lens, camera="tiny-2x", pixel_step=8, capacity=(5, 3), calibration_frame=False)
+    _, calibrated = truth_model(lens, camera="tiny-2x", pixel_step=8, capacity=(5, 3))
+    nominal = camera_preset("tiny-2x")
+    pupil_z = RealLensCamera(camera=nominal, lens=main_lens(lens, nominal)).calibration_origin_cam[2]
+    assert pupil_z > 5e-3  # in front of the simulator's origin: a move that matters
+    rng = np.random.default_rng(2)
+    radius = 0.3 * nominal.aperture_radius_m
+    a, t = rng.uniform(-radius, radius, (4000, 2)), rng.uniform(-0.2, 0.2, (4000, 2))
+    o0, s0 = simulated.origins_and_slopes(a, t)
+    o1, s1 = calibrated.origins_and_slopes(a, t)
+    # where the boards were seen from; at the port face, 30 mm in front of the pupil: the simulator's ray reaches it at z = pupil_z + 30 mm
+    at_face = (o1 + PORT.distance_m * s1) - (o0 + (pupil_z + PORT.distance_m) * s0)
+    assert math.sqrt(np.mean(np.sum(at_face**2, axis=1))) < LENS_FAMILY_FRAME_M
+    np.testing.assert_allclose(s1, s0, atol=LENS_FAMILY_FRAME_SLOPE)  # a move leaves the slopes

@@ -6,6 +6,7 @@ Nothing here renders: the options are checked before any work, and a kept render
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -13,13 +14,17 @@ import pytest
 
 from lfrefract.errors import ParameterError
 from lfrefract.optics.pinhole import virtual_camera_for
+from lfrefract.optics.real_lens import RealLensCamera
 from simulator import boards as board_scenes
 from simulator import cli as sim_cli
 from simulator.experiments import OPTION_FLAGS, ExperimentOptions, load_experiments
 from simulator.experiments.kept import differs, keep
 from simulator.experiments.pipeline import (
     _air_board_scene,
+    _origins,
     _port_board_scene,
+    _port_errors,
+    _real_rig,
     _with_sensor,
     scene_signature,
     setup_for_pipeline,
@@ -119,6 +124,34 @@ def test_a_tilt_left_out_keeps_the_rigs_own_and_the_indices_reach_every_port():
         assert y1 - y0 == pytest.approx(-5.0, abs=FLOAT64_ANGLE_DEG)
         assert (after.scene.port.n_glass, after.scene.port.n_water) == (1.52, 1.34)
     assert (rig.wall.distance_m, rig.wall.thickness_m) == (own.wall.distance_m, own.wall.thickness_m)
+
+
+def test_the_data_only_chain_is_measured_where_a_calibration_puts_the_camera():
+    """A calibration from boards in air reports a real lens's camera with its origin at the paraxial
+    entrance pupil (0.5 mm behind the simulator's origin for the double Gauss): a port calibrated
+    without error reads 0 there, and about 0.48 mm long (0.514 mm times the normal's z) in the
+    simulator's frame, which the thin-lens chains keep."""
+    real = _real_rig(SETUP, ExperimentOptions(lens="double-gauss", port_tilt_x_deg=20.0, port_tilt_y_deg=10.0))
+    moved, kept = _origins(real, moved=True), _origins(real, moved=False)
+    for camera in real.cameras:
+        pupil = RealLensCamera(camera=camera.scene.camera, lens=camera.scene.lens).first_order.entrance_pupil_z_m
+        np.testing.assert_allclose(moved[camera.name], [0.0, 0.0, pupil], atol=FLOAT64_UNIT)
+        assert pupil == pytest.approx(-0.514e-3, abs=1e-6)
+        assert not np.any(kept[camera.name])
+    # each camera's true port as a flawless calibration reports it: from its entrance pupil
+    reported = {
+        c.name: dataclasses.replace(
+            c.scene.port, distance_m=c.scene.port.distance_m - c.scene.port.normal @ moved[c.name]
+        )
+        for c in real.cameras
+    }
+    angle_deg, distance_mm = _port_errors(reported, real, moved)
+    assert angle_deg < 1e-5  # arccos of a unit dot product: about 1e-6 deg of rounding
+    assert distance_mm == pytest.approx(0.0, abs=1e-9)
+    _, distance_mm = _port_errors(reported, real, kept)
+    expected = max(-c.scene.port.normal[2] * moved[c.name][2] for c in real.cameras) * 1e3
+    assert distance_mm == pytest.approx(expected, rel=1e-9)
+    assert 0.45 < distance_mm < 0.52
 
 
 @pytest.mark.parametrize("option", [*WALL_OPTIONS, "port_distance_m", "thickness_m"])
