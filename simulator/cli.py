@@ -275,7 +275,10 @@ def _parser() -> argparse.ArgumentParser:
     exp.add_argument(
         "--lens",
         metavar="LENS",
-        help=f"main lens every rig camera renders through (the core still assumes a thin lens): {LENS_HELP}",
+        help=(
+            "main lens every rig camera renders through (planes, objects: the core assumes a thin lens; "
+            f"pipeline: the data-only chain calibrates its ray model): {LENS_HELP}"
+        ),
     )
     exp.add_argument(
         "--renders",

@@ -32,6 +32,12 @@ one per ``method``:
 - ``thin-lens-assumed``: the old core on the real-lens files: the MLA from the white, the port
   calibrated on the thin-lens model (no camera calibration).
 
+Each chain's captures are synthesized by each of ``ExperimentOptions.methods`` (``--methods``), the
+methods of ``lfrefract synth --method``: ``proposed`` (the warp map; the default) and
+``depth-aware`` (outside the exact coverage, each pixel rendered at the depth its light field
+shows, tracing the chain's own ray model). A method other than ``proposed`` labels its rows
+``<chain> <method>`` (e.g. ``data-only depth-aware``); the ``synthesis`` column names it.
+
 For each, the rig is stereo-calibrated on its synthesized images of the twelve boards (OpenCV,
 intrinsics fixed to its ``K``), rectified, matched (ZNCC, the paper's cost, and SGBM) and
 triangulated, as in ``planes``. Columns (units in the names):
@@ -160,10 +166,12 @@ __all__ = [
     "PipelineSetup",
     "port_board_scene",
     "ray_model_name",
+    "row_label",
     "run_pipeline",
     "scene_signature",
     "setup_for_pipeline",
     "summary_figure",
+    "synthesis_methods",
 ]
 
 #: The rows of the table, in order.
@@ -445,8 +453,9 @@ def run_pipeline(
     ``n_water`` (the rig's wall: :func:`~simulator.experiments.rigstereo.wall_with_options`) and
     ``ray_model`` (the data-only chain's, default :data:`DEFAULT_RAY_MODEL`; the ``ray_model``
     column and ``ports.csv``, each calibrated port against the truth with its stated standard
-    deviations, say what was used and found). ``renders_dir``: keep the renders there
-    and reuse those that match on a later run (default: a temporary directory, deleted).
+    deviations, say what was used and found) and ``methods`` (:func:`synthesis_methods`).
+    ``renders_dir``: keep the renders there and reuse those that match on a later run (default: a
+    temporary directory, deleted).
     """
     options = options if options is not None else ExperimentOptions()
     # The core's input folder and its products live in a fresh temporary folder of every run: nothing
@@ -618,12 +627,25 @@ def _once(folder: Path, signature, render) -> None:
     kept_render(folder, signature, render)
 
 
-def _synth_all(core: _Core, captures: dict[str, Path], model_args: Sequence[str], out: Path, maps: Path) -> None:
-    """``lfrefract synth`` of each capture (name -> raw file) into ``out/<name>.exr``, k = the paper's 32."""
-    out.mkdir(parents=True, exist_ok=True)
-    for name, raw in captures.items():
-        target = out / f"{name}.exr"
-        core("synth", raw, *model_args, "--k", PAPER_K, "--map-cache", maps, "--quiet", "--out", target)
+def _synth_all(
+    core: _Core,
+    captures: dict[str, Path],
+    model_args: Sequence[str],
+    products: Path,
+    chain: str,
+    camera: str,
+    syntheses: Sequence[str],
+) -> None:
+    """``lfrefract synth --method M`` of each capture (name -> raw file) for each of ``syntheses``
+    into ``products/synth/<M>/<chain>/<camera>/<name>.exr``, k = the paper's 32 (the warp maps
+    cached in ``products/maps``)."""
+    for synthesis in syntheses:
+        out = products / "synth" / synthesis / chain / camera
+        out.mkdir(parents=True, exist_ok=True)
+        for name, raw in captures.items():
+            target = out / f"{name}.exr"
+            method = ["--method", synthesis, "--quiet", "--map-cache", products / "maps"]
+            core("synth", raw, *model_args, "--k", PAPER_K, *method, "--out", target)
 
 
 def _images(synth_dir: Path, cameras: Sequence[str], reference: str) -> CentralImages:
@@ -690,6 +712,27 @@ def ray_model_name(model: CameraModel) -> str:
     return correction.name if isinstance(correction, PolynomialCorrection) else "radial"
 
 
+def synthesis_methods(options: ExperimentOptions) -> tuple[str, ...]:
+    """The synthesis methods every chain's captures go through (``lfrefract synth --method``):
+    ``options.methods``, each one of :data:`lfrefract.cli.SYNTH_METHODS`, default the first
+    (``proposed``); :class:`ParameterError` naming ``--methods`` for another name."""
+    if options.methods is None:
+        return core_cli.SYNTH_METHODS[:1]
+    for name in options.methods:
+        if name not in core_cli.SYNTH_METHODS:
+            raise ParameterError(
+                f"--methods: the pipeline synthesizes with lfrefract synth's methods {list(core_cli.SYNTH_METHODS)}, "
+                f"got {name!r}"
+            )
+    return tuple(options.methods)
+
+
+def row_label(chain: str, synthesis: str) -> str:
+    """A table row's ``method``: the chain (:data:`METHODS`), followed by the synthesis method
+    where that is not the default ``proposed`` (e.g. ``"data-only depth-aware"``)."""
+    return chain if synthesis == core_cli.SYNTH_METHODS[0] else f"{chain} {synthesis}"
+
+
 def _refinement_note(refined: Path | None) -> str:
     """How a ray model relates to its port, for the ``ray_model`` column: ``""`` (no refinement asked),
     ``" refined with the port"``, or ``" in-air (its refinement rejected)"`` where ``calibrate port
@@ -702,7 +745,14 @@ def _refinement_note(refined: Path | None) -> str:
 
 
 def _core_stage(
-    core: _Core, delivered: Path, products: Path, cal_out: Path, runs: dict, *, ray_model: str
+    core: _Core,
+    delivered: Path,
+    products: Path,
+    cal_out: Path,
+    runs: dict,
+    *,
+    ray_model: str,
+    syntheses: Sequence[str],
 ) -> dict[str, _Models]:
     """The data-only and thin-lens-assumed chains, per camera, on the delivered files only; the
     data-only chain's camera with ``ray_model`` (``calibrate camera --ray-model``), refined with its
@@ -781,7 +831,7 @@ def _core_stage(
                 model = out / REFINED_CAMERA_NAME if refine else model
                 captures = {p.stem: p for p in sorted(rig.glob("*.lfr"))}
                 args = ["--white", whites, "--camera", model, "--port", port]
-                _synth_all(core, captures, args, products / "synth" / method / camera, products / "maps")
+                _synth_all(core, captures, args, products, method, camera, syntheses)
                 chain.ports[camera] = port_from_file(port)
                 chain.port_files[camera] = port
                 given = camera_model_from_option(model)
@@ -796,13 +846,20 @@ def _core_stage(
     return models
 
 
-def _oracle_stage(core: _Core, oracle: dict[str, Capture], thin: RigConfig, products: Path, uv: np.ndarray) -> _Models:
+def _oracle_stage(
+    core: _Core,
+    oracle: dict[str, Capture],
+    thin: RigConfig,
+    products: Path,
+    uv: np.ndarray,
+    syntheses: Sequence[str],
+) -> _Models:
     """Today's pipeline: ``synth`` of the thin-lens renders' noiseless raw images with their meta.json."""
     models = _Models()
     try:
         for camera in thin.cameras:
             captures = {name: capture.folder / camera.name / RAW_NAME for name, capture in oracle.items()}
-            _synth_all(core, captures, [], products / "synth" / "oracle" / camera.name, products / "maps")
+            _synth_all(core, captures, [], products, "oracle", camera.name, syntheses)
             models.ports[camera.name] = camera.scene.port
             models.rays[camera.name] = camera.scene.camera.captured_rays(uv)
             models.ray_models[camera.name] = "true thin lens"
@@ -943,6 +1000,7 @@ def _corner_measures(
 def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *, progress: bool) -> ExperimentResult:
     """Render (into ``work``), run the core on the delivered files, measure; see :func:`run_pipeline`."""
     scale = options.scale
+    syntheses = synthesis_methods(options)
     seconds = {}
     start = time.perf_counter()
     delivered, products = scratch / "delivered", scratch / "core"
@@ -970,11 +1028,12 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     log: list[str] = []
     core = _Core({delivered: "delivered", products: "core", work: "", out_dir: "out"}, log)
     start = time.perf_counter()
-    models = {"oracle": _oracle_stage(core, oracle, thin, products, uv)}
+    models = {"oracle": _oracle_stage(core, oracle, thin, products, uv, syntheses)}
     seconds["oracle_core_s"] = time.perf_counter() - start
     start = time.perf_counter()
     ray_model = options.ray_model if options.ray_model is not None else DEFAULT_RAY_MODEL
-    models |= _core_stage(core, delivered, products, out_dir / "calibration", runs, ray_model=ray_model)
+    cal_out = out_dir / "calibration"
+    models |= _core_stage(core, delivered, products, cal_out, runs, ray_model=ray_model, syntheses=syntheses)
     seconds["data_core_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -987,16 +1046,19 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     origins = {method: _origins(real, moved=method == "data-only") for method in METHODS}
     names = [c.name for c in thin.cameras]
     rows, by_depth, disparities = [], [], {}
-    for method in METHODS:
+    labels = []
+    for synthesis, method in ((synthesis, method) for synthesis in syntheses for method in METHODS):
+        label = row_label(method, synthesis)
+        labels.append(label)
         chain, shots = models[method], oracle if method == "oracle" else captures
-        row: dict = {"method": method} | dict.fromkeys(MEASURES, math.nan)
+        row: dict = {"method": label, "synthesis": synthesis} | dict.fromkeys(MEASURES, math.nan)
         row |= {"test_boards_found": "", "boards_left_out": " ".join(chain.left_out)}
         row["ray_model"] = ", ".join(f"{camera} {name}" for camera, name in chain.ray_models.items())
-        prepared = PreparedMethod(name=method, error=chain.error)
+        prepared = PreparedMethod(name=label, error=chain.error)
         if chain.error is None:
-            images = _images(products / "synth" / method, names, jobs[0][0])
+            images = _images(products / "synth" / synthesis / method, names, jobs[0][0])
             boards = [(shots[name], size) for name, size in squares.items()]
-            prepared = calibrate_method_rig(method, images, boards, cameras=(names[0], names[1]))
+            prepared = calibrate_method_rig(label, images, boards, cameras=(names[0], names[1]))
             row |= _corner_measures(images, shots, tests, thin, origins[method])
             row["port_normal_err_deg"], row["port_distance_err_mm"] = _port_errors(chain.ports, thin, origins[method])
             row |= _ray_measures(chain.rays, true_rays[method], thin, origins[method])
@@ -1007,7 +1069,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
                 normal, offset = truth[depth]
                 moved = (normal, offset - float(normal @ left))
                 by_depth += plane_rows(prepared, shot, depth, moved, thin, warps, disparities, out_dir, clouds=None)
-            zncc = [r for r in by_depth if r["method"] == method and r["matcher"] == MATCHERS[0]]
+            zncc = [r for r in by_depth if r["method"] == label and r["matcher"] == MATCHERS[0]]
             row["plane_rmse_mm"] = float(np.mean([r["plane_rmse_mm"] for r in zncc]))
             row["truth_error_mm"] = float(np.mean([r["truth_error_mm"] for r in zncc]))
             row["stereo_rms_px"] = prepared.stereo.rms_px
@@ -1015,7 +1077,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         else:
             row |= {"status": "failed", "error": prepared.error}
             by_depth += [
-                {"matcher": m, "method": method, "depth_m": d, "status": "failed", "error": prepared.error}
+                {"matcher": m, "method": label, "depth_m": d, "status": "failed", "error": prepared.error}
                 for m in MATCHERS
                 for d in plane_depths
             ]
@@ -1031,9 +1093,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
     title += rig_setup(real)
     figures = (
         out_dir / "pipeline_summary.png",
-        *plane_figures(
-            out_dir, list(by_depth), disparities, plane_depths, list(METHODS), setup=title, prefix="pipeline"
-        ),
+        *plane_figures(out_dir, list(by_depth), disparities, plane_depths, labels, setup=title, prefix="pipeline"),
     )
     save_figure(summary_figure(rows, setup=title), figures[0])
     return ExperimentResult(
@@ -1053,6 +1113,7 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
             "wall": real.wall.to_dict(),
             "ports": {c.name: None if c.scene.port is None else c.scene.port.to_dict() for c in real.cameras},
             "ray_model": ray_model,
+            "syntheses": list(syntheses),
             "ray_models": {method: dict(models[method].ray_models) for method in METHODS},
             "plane_depths_m": list(plane_depths),
             "test_board_depths_m": list(TEST_BOARD_DEPTHS_M[scale]),
@@ -1135,7 +1196,7 @@ def summary_figure(rows: Sequence[dict], *, setup: str):
 
 @register(
     "pipeline",
-    options=("lens", "port_distance_m", "thickness_m", *WALL_OPTIONS, "ray_model"),
+    options=("lens", "port_distance_m", "thickness_m", *WALL_OPTIONS, "ray_model", "methods"),
     keeps_renders=True,
 )
 def run(

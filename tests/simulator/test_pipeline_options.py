@@ -26,8 +26,10 @@ from simulator.experiments.pipeline import (
     _port_errors,
     _real_rig,
     _with_sensor,
+    row_label,
     scene_signature,
     setup_for_pipeline,
+    synthesis_methods,
 )
 from simulator.experiments.rigstereo import (
     WALL_OPTIONS,
@@ -67,6 +69,12 @@ def test_the_pipeline_takes_the_port_and_ray_model_options_and_others_refuse_the
         (["--n-glass", "0.5"], "--n-glass: n_glass must lie in [1, 5], got 0.5"),
         (["--n-water", "13.3"], "--n-water: n_water must lie in [1, 5], got 13.3"),
         (["--ray-model", "spline"], "--ray-model: ray_model must be one of ['radial', 'polynomial'], got 'spline'"),
+        # a method of the registry, but not one of lfrefract synth's
+        (
+            ["--methods", "depth-aware,ideal"],
+            "--methods: the pipeline synthesizes with lfrefract synth's methods ['proposed', 'depth-aware'], "
+            "got 'ideal'",
+        ),
         # Valid each, but the wall turned 80 deg about y passes between the right camera and the rig's origin:
         # 15 mm - 30 mm sin(80 deg) = -14.54 mm.
         (
@@ -82,6 +90,16 @@ def test_invalid_port_and_ray_model_values_name_the_flag_before_any_work(tmp_pat
     assert message in err
     assert "--lens" not in err  # the experiment's own lens is not the user's
     assert not out.exists()
+
+
+def test_the_chains_synthesize_with_the_methods_given_each_its_own_rows():
+    assert synthesis_methods(ExperimentOptions()) == ("proposed",)
+    assert synthesis_methods(ExperimentOptions(methods=["depth-aware", "proposed"])) == (
+        "depth-aware",
+        "proposed",
+    )
+    assert [row_label(chain, "proposed") for chain in ("oracle", "data-only")] == ["oracle", "data-only"]
+    assert row_label("data-only", "depth-aware") == "data-only depth-aware"
 
 
 def test_options_hold_the_checked_values():
