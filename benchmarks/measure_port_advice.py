@@ -17,7 +17,8 @@ add (:func:`lfrefract.calibration.advice.advise_port_views`). This script takes 
    next port boards (K, K + 1, ...), the kind of views the user was already taking.
 
 It prints, for each set (cumulatively, one added view at a time), the normal's error (deg) and the
-distance's (mm, signed) against the true port (the port boards' ``meta.json``) beside the standard
+distance's (mm, signed) against the true port (the port boards' scene, seen from where the
+calibration puts the camera: a real lens's entrance pupil) beside the standard
 deviations the calibration states and the advice predicted. The corners are located as ``calibrate
 port`` locates them (the capture's grey mosaic developed with the camera's white image, corners in the
 light field). Calibrations are not refused for their spread (limits 90 deg, 1 m): the point is their error.
@@ -50,12 +51,13 @@ from lfrefract.calibration import BoardView, board_view_from_light_field, calibr
 from lfrefract.calibration.advice import AdvisedView, PortAdvice, advise_port_views
 from lfrefract.calibration.camera import corrected_view
 from lfrefract.calibration.port import PortCalibration, normal_std_deg
-from lfrefract.formats.capture import camera_model_from_option, port_from_file, read_capture
+from lfrefract.formats.capture import camera_model_from_option, read_capture
 from lfrefract.formats.jsonio import read_json
 from lfrefract.optics.camera_model import CameraModel
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from simulator.boards import PATTERN, advised_board_table
+from simulator.config import SceneConfig
 from simulator.experiments import ExperimentOptions
 from simulator.experiments.kept import kept_render, record_path
 from simulator.experiments.pipeline import port_board_scene, scene_signature
@@ -169,8 +171,11 @@ def _row(label: str, fit: Fit, true: FlatPort, predicted: tuple[float, float] | 
     )
 
 
-def _check_same_scenes(options: ExperimentOptions, camera_name: str, folder: Path, spp: int, frames: int) -> None:
-    """Refuse to go on unless the run's board in ``folder`` rebuilds to the scene it was rendered from."""
+def _check_same_scenes(
+    options: ExperimentOptions, camera_name: str, folder: Path, spp: int, frames: int
+) -> SceneConfig:
+    """The scene of the run's board in ``folder``, rebuilt; refuse to go on unless it is the scene it
+    was rendered from."""
     meta = read_json(folder / "meta.json")
     config = port_board_scene(
         options, camera_name, _table_of(meta), seed=int(meta["render"]["seed"]), spp=spp, frames=frames
@@ -183,6 +188,7 @@ def _check_same_scenes(options: ExperimentOptions, camera_name: str, folder: Pat
             "its boards"
         )
     print(f"{folder.name}'s scene rebuilt from the run's options: the one the run rendered")
+    return config
 
 
 def main() -> int:
@@ -210,8 +216,9 @@ def main() -> int:
         (p for p in (root / "port" / camera_name).glob("board-*") if p.is_dir()),
         key=lambda p: int(p.name.split("-")[1]),
     )
-    true = port_from_file(folders[0] / "meta.json")
-    _check_same_scenes(options, camera_name, folders[0], spp, frames)
+    scene = _check_same_scenes(options, camera_name, folders[0], spp, frames)
+    # the true port where the calibration puts the camera (a real lens's entrance pupil)
+    true = scene.port.seen_from(scene.calibration_origin_cam)
     located: dict[int, Board | None] = {}
 
     def run_board(k: int) -> Board | None:

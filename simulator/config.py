@@ -833,6 +833,17 @@ class SceneConfig:
             if self.port.n_water != expected:  # within the tolerance: the computed index, exactly
                 object.__setattr__(self, "port", dataclasses.replace(self.port, n_water=expected))
 
+    @property
+    def calibration_origin_cam(self) -> np.ndarray:
+        """Where a calibration from boards in air puts this scene's camera (3,), camera frame, metres:
+        a real main lens's paraxial entrance pupil
+        (:attr:`lfrefract.optics.real_lens.RealLensCamera.calibration_origin_cam`), the origin for the
+        thin lens. A calibrated port, ray model or board pose is compared with this scene's truth
+        moved there (e.g. ``scene.port.seen_from(scene.calibration_origin_cam)``)."""
+        if self.lens is None:
+            return np.zeros(3)
+        return RealLensCamera(camera=self.camera, lens=self.lens).calibration_origin_cam
+
     def with_overrides(self, **changes: Any) -> SceneConfig:
         """A copy with some fields replaced (validated again)."""
         return dataclasses.replace(self, **changes)

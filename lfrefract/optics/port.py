@@ -27,7 +27,7 @@ thickness in [0, :data:`MAX_THICKNESS_M`], each tilt angle in (-pi/2, pi/2) with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -441,6 +441,35 @@ class FlatPort:
         camera in air records to the radiance in the water along the same light path.
         """
         return (self.n_air / self.n_water) ** 2
+
+    def seen_from(self, origin_cam: np.ndarray) -> FlatPort:
+        """This port in the frame with the same axes and its origin at ``origin_cam``.
+
+        Parameters
+        ----------
+        origin_cam : array_like, shape (3,)
+            The new frame's origin in this port's camera frame, metres (e.g. where a calibration puts
+            a real lens's camera, :attr:`lfrefract.optics.real_lens.RealLensCamera.calibration_origin_cam`).
+
+        Returns
+        -------
+        FlatPort
+            The same tilts and glass, ``distance_m`` less ``normal . origin_cam``.
+
+        Raises
+        ------
+        ParameterError
+            If ``origin_cam`` is not 3 finite numbers, or lies at or beyond the port's face (naming
+            the distance it would have).
+
+        Examples
+        --------
+        >>> port = FlatPort.from_degrees(distance_m=0.02, tilt_x_deg=0.0)
+        >>> round(port.seen_from([0.0, 0.0, -0.0005]).distance_m, 6)  # from 0.5 mm further back
+        0.0205
+        """
+        origin = np.array(finite_vector("origin_cam", origin_cam, 3))
+        return replace(self, distance_m=self.distance_m - float(self.normal @ origin))
 
     def clearance_m(self, aperture_radius_m: float) -> float:
         """Smallest distance along z between the lens aperture disc and the air-side face."""

@@ -880,23 +880,11 @@ def _true_rays(rig: RigConfig, uv: np.ndarray) -> dict[str, CapturedRays]:
     return out
 
 
-def _calibration_origin(scene: SceneConfig) -> np.ndarray:
-    """Where a calibration from boards in air puts the camera of ``scene`` (3,), its camera frame:
-    :attr:`RealLensCamera.calibration_origin_cam`, the origin itself for a thin lens."""
-    if scene.lens is None:
-        return np.zeros(3)
-    return RealLensCamera(camera=scene.camera, lens=scene.lens).calibration_origin_cam
-
-
-def _moved_port(port: FlatPort, origin: np.ndarray) -> FlatPort:
-    """``port`` in the frame whose origin is at ``origin`` (3,) of its own (axes unchanged)."""
-    return dataclasses.replace(port, distance_m=port.distance_m - float(port.normal @ origin))
-
-
 def _origins(rig: RigConfig, *, moved: bool) -> dict[str, np.ndarray]:
-    """Each camera's frame origin for the measures: :func:`_calibration_origin` where ``moved``,
-    else the simulator's origin."""
-    return {c.name: _calibration_origin(c.scene) if moved else np.zeros(3) for c in rig.cameras}
+    """Each camera's frame origin for the measures: where a calibration puts it
+    (:attr:`~simulator.config.SceneConfig.calibration_origin_cam`) where ``moved``, else the
+    simulator's origin."""
+    return {c.name: c.scene.calibration_origin_cam if moved else np.zeros(3) for c in rig.cameras}
 
 
 def _port_errors(ports: dict[str, FlatPort], truth: RigConfig, origins: dict[str, np.ndarray]) -> tuple[float, float]:
@@ -904,7 +892,7 @@ def _port_errors(ports: dict[str, FlatPort], truth: RigConfig, origins: dict[str
     moved to ``origins``), the larger of the cameras'."""
     angles, distances = [], []
     for camera in truth.cameras:
-        true, port = _moved_port(camera.scene.port, origins[camera.name]), ports[camera.name]
+        true, port = camera.scene.port.seen_from(origins[camera.name]), ports[camera.name]
         angles.append(math.degrees(math.acos(float(np.clip(np.dot(true.normal, port.normal), -1.0, 1.0)))))
         distances.append(abs(port.distance_m - true.distance_m) * 1e3)
     return max(angles), max(distances)
@@ -922,7 +910,7 @@ def _port_rows(models: dict[str, _Models], truth: RigConfig, origins: dict[str, 
                 continue
             if camera.scene.port is None:  # a rig camera's scene has the wall as its port
                 raise ParameterError(f"rig camera {camera.name!r} has no port to measure its calibration against")
-            true, port = _moved_port(camera.scene.port, origins[method][camera.name]), chain.ports[camera.name]
+            true, port = camera.scene.port.seen_from(origins[method][camera.name]), chain.ports[camera.name]
             data = read_json(chain.port_files[camera.name])
             # (tilt_x_rad, tilt_y_rad, distance_m): the order of the port file's covariance
             delta = np.array([port.tilt_x_rad, port.tilt_y_rad, port.distance_m])
@@ -957,7 +945,7 @@ def _ray_measures(
     positions, angles = [], []
     for camera in truth.cameras:
         origin = origins[camera.name]
-        model, ref, port = rays[camera.name], true[camera.name], _moved_port(camera.scene.port, origin)
+        model, ref, port = rays[camera.name], true[camera.name], camera.scene.port.seen_from(origin)
         errors = ray_errors(
             model.origins_cam,
             model.directions_cam,

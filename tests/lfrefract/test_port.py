@@ -667,3 +667,19 @@ def test_overflowing_origins_are_flagged_not_infinite():
     tr = FlatPort(distance_m=0.05).trace_from_air([[0.0, 1.5e308, -1e308]], [[0.0, 0.6, 0.8]])
     assert not tr.valid[0]
     assert tr.misses[0]
+
+
+def test_a_port_seen_from_another_origin_keeps_its_faces_where_they_are():
+    """The same plane from a frame whose origin sits at ``o``: ``n . (X - o) = d - n . o``; a point on
+    the face stays on it, and moving back returns the port."""
+    port = FlatPort.from_degrees(distance_m=0.02, thickness_m=0.004, tilt_x_deg=20.0, tilt_y_deg=-7.0)
+    origin = np.array([0.001, -0.002, -0.0005])
+    moved = port.seen_from(origin)
+    on_face = port.normal * port.distance_m + np.cross(port.normal, [1.0, 0.0, 0.0]) * 0.01
+    assert float(moved.normal @ (on_face - origin)) == pytest.approx(moved.distance_m, abs=1e-15)
+    assert (moved.tilt_x_rad, moved.tilt_y_rad, moved.thickness_m) == (port.tilt_x_rad, port.tilt_y_rad, 0.004)
+    assert moved.seen_from(-origin).distance_m == pytest.approx(port.distance_m, abs=1e-15)
+    with pytest.raises(ParameterError, match="origin_cam must have 3 entries"):
+        port.seen_from([0.0, 0.0])
+    with pytest.raises(ParameterError, match="distance_m"):  # from beyond its face
+        port.seen_from(port.normal * 0.03)

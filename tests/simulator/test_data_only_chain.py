@@ -71,7 +71,10 @@ def test_from_lytro_files_alone_the_calibrated_chain_beats_the_thin_lens_chain(t
     assert core_cli.main([*argv, "--out", str(camera_json)]) == 0
     # The radial model reads the demosaiced image by default, and the file says how it read them.
     assert read_json(camera_json)["board_colour"] == "demosaic"
-    truth_port = boards.empty_scene(TILT).port
+    scene = boards.empty_scene(TILT)
+    scene = scene.with_overrides(lens=main_lens(LENS, scene.camera))
+    # the true port where a calibration puts the camera: the lens's entrance pupil
+    truth_port = scene.port.seen_from(scene.calibration_origin_cam)
     glass = ["--thickness-m", str(truth_port.thickness_m), "--n-glass", "1.5", "--n-water", "1.333"]
     corners, normal_errors = {}, {}
     for model, camera in (("thin", mla), ("calibrated", camera_json)):

@@ -75,11 +75,11 @@ def test_the_calibration_frame_is_the_true_rays_moved_to_the_entrance_pupil():
     pupil_z = RealLensCamera(camera=nominal, lens=main_lens(lens, nominal)).calibration_origin_cam[2]
     assert pupil_z > 5e-3  # in front of the simulator's origin: a move that matters
     rng = np.random.default_rng(2)
-    radius = 0.3 * nominal.aperture_radius_m
+    radius = 0.3 * nominal.aperture_radius_m  # where the boards were seen from
     a, t = rng.uniform(-radius, radius, (4000, 2)), rng.uniform(-0.2, 0.2, (4000, 2))
     o0, s0 = simulated.origins_and_slopes(a, t)
     o1, s1 = calibrated.origins_and_slopes(a, t)
-    # where the boards were seen from; at the port face, 30 mm in front of the pupil: the simulator's ray reaches it at z = pupil_z + 30 mm
+    # at the port face, 30 mm in front of the pupil (the simulator's ray: at z = pupil_z + 30 mm)
     at_face = (o1 + PORT.distance_m * s1) - (o0 + (pupil_z + PORT.distance_m) * s0)
     assert math.sqrt(np.mean(np.sum(at_face**2, axis=1))) < LENS_FAMILY_FRAME_M
     np.testing.assert_allclose(s1, s0, atol=LENS_FAMILY_FRAME_SLOPE)  # a move leaves the slopes

@@ -6,7 +6,6 @@ Nothing here renders: the options are checked before any work, and a kept render
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -157,12 +156,7 @@ def test_the_data_only_chain_is_measured_where_a_calibration_puts_the_camera():
         assert pupil == pytest.approx(-0.514e-3, abs=1e-6)
         assert not np.any(kept[camera.name])
     # each camera's true port as a flawless calibration reports it: from its entrance pupil
-    reported = {
-        c.name: dataclasses.replace(
-            c.scene.port, distance_m=c.scene.port.distance_m - c.scene.port.normal @ moved[c.name]
-        )
-        for c in real.cameras
-    }
+    reported = {c.name: c.scene.port.seen_from(c.scene.calibration_origin_cam) for c in real.cameras}
     angle_deg, distance_mm = _port_errors(reported, real, moved)
     assert angle_deg < 1e-5  # arccos of a unit dot product: about 1e-6 deg of rounding
     assert distance_mm == pytest.approx(0.0, abs=1e-9)
