@@ -166,6 +166,7 @@ __all__ = [
     "PipelineSetup",
     "port_board_scene",
     "ray_model_name",
+    "real_rig",
     "row_label",
     "run_pipeline",
     "scene_signature",
@@ -365,7 +366,7 @@ def port_board_scene(
     SceneConfig
     """
     setup = setup_for_pipeline(options.scale)
-    cameras = {c.name: c for c in _real_rig(setup, options).cameras}
+    cameras = {c.name: c for c in real_rig(setup, options).cameras}
     if camera_name not in cameras:
         raise ParameterError(f"camera_name must be one of the rig's cameras {sorted(cameras)}, got {camera_name!r}")
     spp = setup.board_spp if spp is None else spp
@@ -373,9 +374,9 @@ def port_board_scene(
     return _port_board_scene(cameras[camera_name].scene, table, spp, seed, frames)
 
 
-def _real_rig(setup: PipelineSetup, options: ExperimentOptions) -> RigConfig:
+def real_rig(setup: PipelineSetup, options: ExperimentOptions) -> RigConfig:
     """The rig of the real captures: ``options``'s main lens (default :data:`DEFAULT_LENS`) and wall,
-    each camera with the scale's sensor model."""
+    each camera with the scale's sensor model (``setup``: :func:`setup_for_pipeline`)."""
     lens = options.lens if options.lens is not None else DEFAULT_LENS
     return _with_sensor(experiment_rig(setup.rig, dataclasses.replace(options, lens=lens)), setup.sensor)
 
@@ -529,7 +530,7 @@ def _render(options: ExperimentOptions, work: Path, delivered: Path, *, progress
     lens = options.lens if options.lens is not None else DEFAULT_LENS
     experiment_rig(setup.rig, options)  # the user's options alone first: an impossible rig names only their flags
     thin = experiment_rig(setup.rig, dataclasses.replace(options, lens=THIN_LENS))
-    real = _real_rig(setup, options)
+    real = real_rig(setup, options)
     jobs, squares = _rig_jobs(thin, setup.rig, scale)
     renders = work / "renders"
     oracle, captures = {}, {}

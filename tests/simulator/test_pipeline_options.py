@@ -23,8 +23,8 @@ from simulator.experiments.pipeline import (
     _origins,
     _port_board_scene,
     _port_errors,
-    _real_rig,
     _with_sensor,
+    real_rig,
     row_label,
     scene_signature,
     setup_for_pipeline,
@@ -148,7 +148,7 @@ def test_the_data_only_chain_is_measured_where_a_calibration_puts_the_camera():
     entrance pupil (0.5 mm behind the simulator's origin for the double Gauss): a port calibrated
     without error reads 0 there, and about 0.48 mm long (0.514 mm times the normal's z) in the
     simulator's frame, which the thin-lens chains keep."""
-    real = _real_rig(SETUP, ExperimentOptions(lens="double-gauss", port_tilt_x_deg=20.0, port_tilt_y_deg=10.0))
+    real = real_rig(SETUP, ExperimentOptions(lens="double-gauss", port_tilt_x_deg=20.0, port_tilt_y_deg=10.0))
     moved, kept = _origins(real, moved=True), _origins(real, moved=False)
     for camera in real.cameras:
         pupil = RealLensCamera(camera=camera.scene.camera, lens=camera.scene.lens).first_order.entrance_pupil_z_m
