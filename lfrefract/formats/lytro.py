@@ -616,6 +616,15 @@ def camera_from_metadata(metadata: dict, *, where: str = "metadata") -> LightFie
     to the sensor, taken as its focal length), the sensor ``image.width`` x ``image.height`` pixels of
     ``devices.sensor.pixelPitch``.
 
+    The metadata gives the lens's f-number on the object side (``fNumber``), not its exit pupil's
+    diameter. A thin lens at the exit pupil with that f-number has the exit pupil of the entrance
+    pupil's size; where that would make the micro-images overlap (image-side f-number
+    ``exitPupilOffset.z * fNumber / focalLength`` below the microlenses', as for a lens whose exit
+    pupil is smaller than its entrance pupil, e.g. a telephoto or Petzval design close to the MLA)
+    the camera it describes has no such pupil: its f-number is then taken as the one that fills the
+    microlenses exactly (image-side f-number the microlenses'), the largest exit pupil a camera whose
+    micro-images do not overlap can have.
+
     Raises
     ------
     FileFormatError
@@ -627,21 +636,27 @@ def camera_from_metadata(metadata: dict, *, where: str = "metadata") -> LightFie
     if tiling not in grids:
         raise FileFormatError(f"{where}: devices.mla.tiling {shown(tiling)} is none of {sorted(grids)}")
     try:
+        mla = MicrolensArray(
+            grid=grids[tiling],
+            pitch_m=_number(metadata, "devices.mla.lensPitch", where),
+            focal_length_m=_number(metadata, "devices.mla.sensorOffset.z", where),
+            rotation_rad=_number(metadata, "devices.mla.rotation", where),
+            offset_m=(
+                _number(metadata, "devices.mla.sensorOffset.x", where),
+                _number(metadata, "devices.mla.sensorOffset.y", where),
+            ),
+        )
+        focal_length = _number(metadata, "devices.lens.focalLength", where)
+        exit_pupil = _number(metadata, "devices.lens.exitPupilOffset.z", where)
+        f_number = _number(metadata, "devices.lens.fNumber", where)
+        if focal_length > 0.0 and exit_pupil > 0.0 and f_number > 0.0:  # else LightFieldCamera names the value
+            f_number = max(f_number, mla.f_number * focal_length / exit_pupil)
         return LightFieldCamera(
             name="lytro-metadata",
-            focal_length_m=_number(metadata, "devices.lens.focalLength", where),
-            lens_to_mla_m=_number(metadata, "devices.lens.exitPupilOffset.z", where),
-            f_number=_number(metadata, "devices.lens.fNumber", where),
-            mla=MicrolensArray(
-                grid=grids[tiling],
-                pitch_m=_number(metadata, "devices.mla.lensPitch", where),
-                focal_length_m=_number(metadata, "devices.mla.sensorOffset.z", where),
-                rotation_rad=_number(metadata, "devices.mla.rotation", where),
-                offset_m=(
-                    _number(metadata, "devices.mla.sensorOffset.x", where),
-                    _number(metadata, "devices.mla.sensorOffset.y", where),
-                ),
-            ),
+            focal_length_m=focal_length,
+            lens_to_mla_m=exit_pupil,
+            f_number=f_number,
+            mla=mla,
             sensor=SensorGeometry(
                 width_px=_integer(metadata, "image.width", where),
                 height_px=_integer(metadata, "image.height", where),
@@ -741,8 +756,9 @@ def write_lfr(
 
     Layout: the LFP header (magic, length 0); :data:`ILLUM_DATA_SECTIONS` ``LFC`` sections: the
     metadata (:func:`illum_metadata`), the private metadata (serial numbers), the 10-bit packed raw
-    image, a JPEG thumbnail, the exact camera (``lfrefractCamera``, lfrefract's own), and six
-    ``reserved`` JSON sections that hold the count at the Illum's eleven; then the ``LFM`` table of
+    image, a JPEG thumbnail, the exact camera (``lfrefractCamera``, lfrefract's own) where the
+    metadata describes it exactly, and ``reserved`` JSON sections that hold the count at the Illum's
+    eleven; then the ``LFM`` table of
     contents naming each section by the SHA-1 of its data. Each section has a 96-byte header
     (magic, big-endian length, name, zeros) and its data zero-padded to 16 bytes.
 
@@ -756,6 +772,11 @@ def write_lfr(
         The camera whose geometry the metadata records.
     settings : LytroSettings, optional
         Colour, white balance, exit pupil, lens steps, ISO, serial (``B``-prefixed if it is not).
+        An exit pupil other than ``camera.lens_to_mla_m`` (a real main lens's) leaves the
+        ``lfrefractCamera`` section out: the thin-lens ``camera`` would then contradict the
+        metadata's micro-image geometry (the exit pupil sets where the micro-images lie), so a
+        reader takes the camera the metadata describes (:func:`camera_from_metadata`), as it does
+        for a camera's own file and for white images.
 
     Returns
     -------
@@ -768,6 +789,7 @@ def write_lfr(
         If the mosaic is not 10-bit, does not match the sensor, or the file would pass 2 GiB.
     """
     settings = LytroSettings() if settings is None else settings
+    exact = settings.exit_pupil_offset_m is None or settings.exit_pupil_offset_m == camera.lens_to_mla_m
     metadata = illum_metadata(mosaic, camera, settings)
     private = {"generator": "lfrefract", "camera": {"serialNumber": settings.serial_for("B")}}
     image = pack_10bit(mosaic.counts)
@@ -777,8 +799,9 @@ def write_lfr(
         "privateMetadataRef": _json_bytes(private),
         "imageRef": image,
         "thumbnailRef": thumbnail,
-        "cameraRef": _json_bytes({"lfrefractCamera": camera.to_dict()}),
     }
+    if exact:
+        payloads["cameraRef"] = _json_bytes({"lfrefractCamera": camera.to_dict()})
     reserved = ILLUM_DATA_SECTIONS - len(payloads)
     for k in range(reserved):
         payloads[f"reserved{k}"] = _json_bytes({"lfrefractReserved": k})
@@ -798,7 +821,7 @@ def write_lfr(
             {"imageRef": names["thumbnailRef"], "width": thumb_w, "height": thumb_h, "representation": "jpeg"}
         ],
         "lfrefract": {
-            "cameraRef": names["cameraRef"],
+            **({"cameraRef": names["cameraRef"]} if exact else {}),
             "reservedRefs": [names[f"reserved{k}"] for k in range(reserved)],
         },
     }

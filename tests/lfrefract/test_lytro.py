@@ -212,6 +212,28 @@ def test_exit_pupil_and_steps_are_recorded(tmp_path):
     assert meta["image"]["modulationExposureBias"] == 0.0
 
 
+def test_a_capture_through_a_real_lens_reads_as_its_white_image_does(tmp_path):
+    """A real main lens's exit pupil lies elsewhere than the thin lens's (the retrofocus design's at
+    18.4 mm for a 12 mm focal length): the LFR then carries no thin-lens camera section, which would
+    put the micro-images elsewhere than its metadata (the white's 3.4 px away at the tiny-2x sensor's
+    edge), and reads back the camera the metadata describes, the white image's."""
+    cam = camera_preset("tiny")
+    mosaic = full_scale_mosaic((cam.sensor.height_px, cam.sensor.width_px), 10, 64, "GRBG", 3)
+    real = LytroSettings(exit_pupil_offset_m=1.5 * cam.lens_to_mla_m)
+    capture = read_lfr(write_lfr(tmp_path / "capture.lfr", mosaic, cam, settings=real))
+    white = read_illum_raw(write_illum_raw(tmp_path / "white.raw", mosaic, cam, settings=real)[0])
+    assert capture.camera == white.camera
+    assert capture.camera.lens_to_mla_m == 1.5 * cam.lens_to_mla_m
+    assert "cameraRef" not in json.loads(_toc_bytes(tmp_path / "capture.lfr"))["lfrefract"]
+    # through the thin lens itself the exact camera travels with the file
+    thin = read_lfr(write_lfr(tmp_path / "thin.lfr", mosaic, cam, settings=LytroSettings()))
+    assert thin.camera == cam
+
+
+def _toc_bytes(path: Path) -> bytes:
+    return next(body for magic, _, body in parse_sections(path.read_bytes()) if magic == lytro.LFM_MAGIC)
+
+
 def test_square_mla_is_recorded_as_square(tmp_path):
     cam = camera_preset("tiny")
     square = dataclasses.replace(cam, mla=MicrolensArray(grid="square", pitch_m=100e-6, focal_length_m=200e-6))
@@ -603,3 +625,23 @@ def test_a_short_or_extended_lfr_says_what_is_wrong(tmp_path):
     refused(tmp_path / "tail.lfr", rf"40 bytes after the last section \(from byte {len(data)}\) are no section")
     (tmp_path / "cut.lfr").write_bytes(data + lytro.LFC_MAGIC + b"\0\0")
     refused(tmp_path / "cut.lfr", r"truncated: 14 bytes .* too few for a 96-byte section header")
+
+
+def test_a_lens_whose_exit_pupil_is_smaller_than_its_entrance_pupil_is_read_not_refused(tmp_path):
+    """The telephoto design of scenes/lenses/ at tiny-2x: exit pupil 8.8 mm from the MLA, f = 12 mm,
+    f/2.2; read as a thin lens at the exit pupil with the entrance pupil's size its image-side
+    f-number would be 1.62, below the microlenses' 2 (refused before, though the simulator rendered
+    the camera's white). The camera read fills the microlenses exactly; a non-positive f-number is
+    still refused naming the key."""
+    cam = camera_preset("tiny-2x")
+    mosaic = full_scale_mosaic((cam.sensor.height_px, cam.sensor.width_px), 10, 64, "GRBG", 4)
+    settings = LytroSettings(exit_pupil_offset_m=8.8e-3)
+    white = read_illum_raw(write_illum_raw(tmp_path / "white.raw", mosaic, cam, settings=settings)[0])
+    assert white.camera.lens_to_mla_m == 8.8e-3
+    assert white.camera.image_side_f_number == pytest.approx(cam.mla.f_number, rel=1e-12)
+    assert white.camera.f_number == pytest.approx(cam.mla.f_number * cam.focal_length_m / 8.8e-3, rel=1e-12)
+    metadata = dict(white.metadata)
+    metadata["devices"] = json.loads(json.dumps(metadata["devices"]))
+    metadata["devices"]["lens"]["fNumber"] = -2.0
+    with pytest.raises(FileFormatError, match="f_number"):
+        camera_from_metadata(metadata)
