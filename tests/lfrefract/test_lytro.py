@@ -225,6 +225,9 @@ def test_a_capture_through_a_real_lens_reads_as_its_white_image_does(tmp_path):
     assert capture.camera == white.camera
     assert capture.camera.lens_to_mla_m == 1.5 * cam.lens_to_mla_m
     assert "cameraRef" not in json.loads(_toc_bytes(tmp_path / "capture.lfr"))["lfrefract"]
+    # still eleven content sections, the count imageio's reader walks
+    sections = parse_sections((tmp_path / "capture.lfr").read_bytes())
+    assert sum(magic == lytro.LFC_MAGIC for magic, _, _ in sections) == 11
     # through the thin lens itself the exact camera travels with the file
     thin = read_lfr(write_lfr(tmp_path / "thin.lfr", mosaic, cam, settings=LytroSettings()))
     assert thin.camera == cam
