@@ -205,7 +205,7 @@ def main() -> int:
     args = parser.parse_args()
     start = time.perf_counter()
     meta = read_json(args.run / "meta.json")
-    options = ExperimentOptions(**meta["options"])
+    options = ExperimentOptions.from_dict(meta["options"])
     spp, frames = int(meta["parameters"]["board_spp"]), int(meta["parameters"]["board_frames"])
     root = (args.renders if args.renders is not None else Path(meta["renders_dir"])) / "renders"
     camera_name = args.camera_name

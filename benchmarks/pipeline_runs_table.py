@@ -64,7 +64,7 @@ def main() -> int:
     covered, total = 0, 0
     for run in args.runs:
         meta = read_json(run / "meta.json")
-        options = ExperimentOptions(**meta["options"])
+        options = ExperimentOptions.from_dict(meta["options"])
         real = real_rig(setup_for_pipeline(options.scale), options)
         pupil = ", ".join(f"{c.scene.calibration_origin_cam[2] * 1e3:+.2f}" for c in real.cameras[:1])
         rows = {row["method"]: row for row in _rows(run / "table.csv")}

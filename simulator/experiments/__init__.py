@@ -216,6 +216,29 @@ class ExperimentOptions:
             out["lens"] = self.lens.to_dict()
         return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
 
+    @classmethod
+    def from_dict(cls, data: dict) -> ExperimentOptions:
+        """The options :meth:`to_dict` wrote (e.g. a run's ``meta.json`` ``options``): the camera's
+        and a lens design's tables read back; validated as any options are.
+
+        Examples
+        --------
+        >>> options = ExperimentOptions(scale="tiny", lens="double-gauss", port_tilt_y_deg=10.0)
+        >>> ExperimentOptions.from_dict(options.to_dict()) == options
+        True
+        """
+        if not isinstance(data, dict):
+            raise ParameterError(f"experiment options must be a table, got {shown(data)}")
+        values = dict(data)
+        if isinstance(values.get("camera"), dict):
+            values["camera"] = LightFieldCamera.from_dict(values["camera"])
+        if isinstance(values.get("lens"), dict):
+            values["lens"] = LensPrescription.from_dict(values["lens"])
+        unknown = sorted(set(values) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ParameterError(f"experiment options: unknown keys {unknown}")
+        return cls(**values)
+
 
 @dataclass(frozen=True)
 class ExperimentResult:

@@ -6,16 +6,20 @@ Nothing here renders: the options are checked before any work, and a kept render
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from lfrefract import camera_preset
 from lfrefract.errors import ParameterError
 from lfrefract.optics.pinhole import virtual_camera_for
 from lfrefract.optics.real_lens import RealLensCamera
 from simulator import boards as board_scenes
 from simulator import cli as sim_cli
+from simulator.config import lens_option
 from simulator.experiments import OPTION_FLAGS, ExperimentOptions, load_experiments
 from simulator.experiments.kept import differs, keep
 from simulator.experiments.pipeline import (
@@ -99,6 +103,19 @@ def test_the_chains_synthesize_with_the_methods_given_each_its_own_rows():
     )
     assert [row_label(chain, "proposed") for chain in ("oracle", "data-only")] == ["oracle", "data-only"]
     assert row_label("data-only", "depth-aware") == "data-only depth-aware"
+
+
+def test_a_runs_options_are_read_back_from_its_meta_json_lens_design_and_camera_included():
+    """A run's meta.json records a lens design and a camera as tables (what the benchmarks that take a
+    run folder read back); a preset's name stays a name."""
+    design = lens_option(str(Path(__file__).resolve().parents[2] / "scenes" / "lenses" / "tessar.toml"))
+    camera = camera_preset("tiny-2x")
+    options = ExperimentOptions(lens=design, camera=camera, port_tilt_x_deg=20.0, methods=["proposed"])
+    back = ExperimentOptions.from_dict(json.loads(json.dumps(options.to_dict())))
+    assert back == options
+    assert ExperimentOptions.from_dict(ExperimentOptions(lens="double-gauss").to_dict()).lens == "double-gauss"
+    with pytest.raises(ParameterError, match=r"unknown keys \['tilt'\]"):
+        ExperimentOptions.from_dict({"tilt": 3})
 
 
 def test_options_hold_the_checked_values():
