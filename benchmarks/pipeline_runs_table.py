@@ -41,6 +41,11 @@ def _ratio(rows: dict, chain: str, synthesis: str, key: str) -> str:
     return f"{value:.3f} ({value / reference:.2f}x)"
 
 
+def _short(error: str, limit: int = 160) -> str:
+    """The first ``limit`` characters of a row's error (its first camera's, where both failed alike)."""
+    return error if len(error) <= limit else error[: limit - 3] + "..."
+
+
 def _lens_name(options: dict) -> str:
     lens = options.get("lens")
     if isinstance(lens, dict):
@@ -85,7 +90,7 @@ def main() -> int:
                 _ratio(rows, "data-only", synthesis, "corner_rms_px"),
                 _ratio(rows, "data-only", synthesis, "plane_rmse_mm"),
                 _ratio(rows, "data-only", synthesis, "truth_error_mm"),
-                str(row.get("status", "-")) + (f": {row['error']}" if row.get("error") else ""),
+                str(row.get("status", "-")) + (f": {_short(row['error'])}" if row.get("error") else ""),
             ]
             lines.append("| " + " | ".join(cells) + " |")
         ports = run / "ports.csv"
