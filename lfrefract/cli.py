@@ -1117,15 +1117,16 @@ def _board_views(
     warned about at the first (the polynomial model: fitted to corners read one way, it does not fit
     those read the other)."""
     views, sources, left_out = [], [], []
-    readings: list[str | None] = []  # a Lytro file's reading; None for a linear raw image (--white takes no mix)
+    first_reading: str | None = None  # how the captures were read; None: linear raw images (--white takes no mix)
     reason = NOT_LOCATED.format(cols=pattern[0], rows=pattern[1])
-    for path, size in zip(args.boards, _square_sizes(args), strict=True):
+    for k, (path, size) in enumerate(zip(args.boards, _square_sizes(args), strict=True)):
         image, reading = _board_image(
             path, camera, args.white, args.colour, default=default_colour, nonfinite=args.nonfinite
         )
-        if not readings and reading is not None:
-            _check_board_colour(in_air, reading, option=args.colour)
-        readings.append(reading)
+        if k == 0:
+            first_reading = reading
+            if reading is not None:
+                _check_board_colour(in_air, reading, option=args.colour)
         board_view = board_view_from_light_field(
             camera,
             image,
@@ -1147,7 +1148,7 @@ def _board_views(
         raise CalibrationError(
             f"the board was located in {len(views)} of {len(args.boards)} captures, under the {minimum} needed{named}"
         )
-    return _BoardViews(views=views, sources=sources, left_out=left_out, colour=readings[0])
+    return _BoardViews(views=views, sources=sources, left_out=left_out, colour=first_reading)
 
 
 def calibrate_camera_command(args: argparse.Namespace) -> int:

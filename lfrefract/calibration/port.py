@@ -45,7 +45,7 @@ from lfrefract.calibration.approx import detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
-from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance
+from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance, propagated_shifts
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import PORT_CALIBRATION_KIND
 from lfrefract.optics.camera import LightFieldCamera
@@ -816,8 +816,7 @@ def _covariance_parts(
     pixel = (bread * sigma2)[:3, :3]
     by_capture = clustered_covariance(bread, scores)[:3, :3]
     changes = [_Problem(problem.camera, list(moved), template).residuals(x) - residuals for moved in model_views]
-    # The port block of propagated_covariance's steps: each direction's first-order change of the fit.
-    shifts = np.array([-(bread @ (jac.T @ change))[:3] for change in changes]).reshape(-1, 3)
+    shifts = propagated_shifts(bread[:3] @ jac.T, changes)  # the port's rows of the fit's change
     parts = {
         "pixel_noise": pixel,
         "by_capture": by_capture,

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["clustered_covariance", "larger_covariance", "propagated_covariance", "spread_factors"]
+__all__ = ["clustered_covariance", "larger_covariance", "propagated_covariance", "propagated_shifts", "spread_factors"]
 
 #: Most directions :func:`spread_factors` keeps, and the smallest variance kept, relative to the largest.
 MAX_SPREAD_DIRECTIONS = 40
@@ -68,20 +68,26 @@ def spread_factors(covariance: np.ndarray, *, max_directions: int = MAX_SPREAD_D
     return (vectors[:, keep] * np.sqrt(values[keep])).T
 
 
-def propagated_covariance(bread_jt: np.ndarray, residual_changes: Sequence[np.ndarray]) -> np.ndarray:
-    """The covariance a fit inherits from an input known to ``sum_j f_j f_j^T``: for each direction,
-    the fit's first-order change ``-(J^T J)^-1 J^T dr_j`` with ``dr_j`` its residuals' change when the
-    input moves by ``f_j``; their outer products summed.
+def propagated_shifts(bread_jt: np.ndarray, residual_changes: Sequence[np.ndarray]) -> np.ndarray:
+    """A fit's first-order change ``-(J^T J)^-1 J^T dr_j`` for each direction ``f_j`` of an input's
+    uncertainty, ``dr_j`` its residuals' change when the input moves by ``f_j``.
 
     Parameters
     ----------
     bread_jt : ndarray, shape (P, R)
         ``(J^T J)^-1 J^T`` of the fit.
     residual_changes : sequence of ndarray, shape (R,)
+
+    Returns
+    -------
+    ndarray, shape (k, P)
+        One row per direction (k = 0: shape (0, P)).
     """
-    p = bread_jt.shape[0]
-    out = np.zeros((p, p))
-    for change in residual_changes:
-        step = -bread_jt @ change
-        out += np.outer(step, step)
-    return out
+    return np.array([-(bread_jt @ change) for change in residual_changes]).reshape(-1, bread_jt.shape[0])
+
+
+def propagated_covariance(bread_jt: np.ndarray, residual_changes: Sequence[np.ndarray]) -> np.ndarray:
+    """The covariance a fit inherits from an input known to ``sum_j f_j f_j^T``: the outer products
+    of its :func:`propagated_shifts` summed, shape (P, P)."""
+    shifts = propagated_shifts(bread_jt, residual_changes)
+    return shifts.T @ shifts
