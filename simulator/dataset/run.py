@@ -341,8 +341,16 @@ def _ignoring_sigint() -> Iterator[None]:
 def _stop_cluster(client, cluster) -> None:
     """Stop the local cluster's workers from a signal handler (Ctrl-C, SIGTERM), so that none writes on
     once the handler removes the unfinished samples. The cluster runs its own event loop in a thread,
-    which does the closing; after STOP_TIMEOUT_S the process ends anyway (its workers follow it)."""
+    which does the closing; after STOP_TIMEOUT_S the process ends anyway. Its worker processes (the
+    nannies and their workers) are waited for, and killed if still running then: closing the cluster
+    returns once the nannies report, while a worker may still be ending, and the handler removes the
+    unfinished samples as soon as this returns."""
     import threading
+
+    import psutil
+
+    workers = psutil.Process().children(recursive=True)
+    started = time.monotonic()
 
     def close() -> None:
         with contextlib.suppress(Exception):
@@ -353,12 +361,25 @@ def _stop_cluster(client, cluster) -> None:
     closer = threading.Thread(target=close, daemon=True)
     closer.start()
     closer.join(STOP_TIMEOUT_S)
+    end_processes(workers, timeout_s=max(STOP_TIMEOUT_S - (time.monotonic() - started), 1.0))
     # The process ends with os._exit, which skips the exit handlers: release multiprocessing's named
     # semaphores as a normal exit would (else its resource tracker warns of them on standard error).
     from multiprocessing import util
 
     with contextlib.suppress(Exception):
         util._run_finalizers(0)
+
+
+def end_processes(processes: list, *, timeout_s: float) -> None:
+    """Wait up to ``timeout_s`` seconds for ``processes`` (``psutil.Process``) to exit, then kill the ones
+    still running and reap them, so that none outlives the call. Processes already gone are skipped."""
+    import psutil
+
+    _, alive = psutil.wait_procs(processes, timeout=timeout_s)
+    for process in alive:
+        with contextlib.suppress(psutil.NoSuchProcess):
+            process.kill()
+    psutil.wait_procs(alive, timeout=STOP_TIMEOUT_S)
 
 
 def _remove_leftovers(out: Path) -> None:

@@ -273,6 +273,27 @@ def test_resume_after_a_kill_completes_the_same_dataset(tilt_run, tmp_path):
             assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), (a.id, name)
 
 
+def test_end_processes_leaves_no_worker_running_even_one_that_ignores_signals():
+    """A Ctrl-C'd run exited while a worker of its cluster was still ending (seen under load in CI):
+    closing the cluster returns once the nannies report. The driver now waits for its workers and kills
+    the ones still running when the time is up, so none outlives it."""
+    import psutil
+
+    from simulator.dataset.run import end_processes
+
+    code = (
+        "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+        "signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(60)"
+    )
+    stubborn = subprocess.Popen([sys.executable, "-c", code])
+    handles = [psutil.Process(stubborn.pid)]
+    t0 = time.monotonic()
+    end_processes(handles, timeout_s=0.5)
+    assert 0.5 <= time.monotonic() - t0 < 10  # waited the time given, then killed
+    assert not handles[0].is_running()  # killed and reaped
+    stubborn.wait(timeout=5)  # settles the Popen (psutil reaped the process)
+
+
 GOOD_OBJ = "v -0.05 -0.05 0\nv 0.05 -0.05 0\nv 0 0.05 0\nf 1 2 3\n"
 
 
