@@ -55,9 +55,11 @@ __all__ = [
     "MIN_WHITE_FRACTION",
     "WHITE_EVEN_SHARE",
     "WHITE_GAP_SHARE",
+    "WHITE_RING_FRACTION",
     "DevelopedCapture",
     "FlatField",
     "WhiteImage",
+    "WhiteMeasures",
     "bad_pixels",
     "develop",
     "existing_path",
@@ -69,6 +71,7 @@ __all__ = [
     "read_lytro_file",
     "same_file",
     "select_white_image",
+    "white_measures",
     "white_problem",
 ]
 
@@ -100,17 +103,22 @@ BAD_PIXEL_RATIO = 4.0
 _JUDGED_FRACTION = 0.5
 #: Percentile of a colour's white values taken as its bright level.
 _BRIGHT_PERCENTILE = 99.0
+#: Percentile of the micro-image peaks at one distance from the light's centre taken as the white's
+#: level there (:func:`white_problem`): a tenth of a ring may be brighter (noise, a hot micro-image).
+_RING_PERCENTILE = 90.0
 #: Most pixels of a white image that may be saturated: a white is exposed below saturation (hot pixels
 #: are a few in a million).
 MAX_SATURATED_SHARE = 0.01
 #: Least share of a white's lit field with a darker gap within one micro-image pitch (:func:`white_problem`).
 #: Measured: 100 % on the simulator's tiny whites and the test's drawn whites, 0 % on a uniform image.
 WHITE_GAP_SHARE = 0.5
-#: Least share of a white's lit field whose micro-images within 1.5 pitches are all at least half as
-#: bright as the brightest (:func:`white_problem`). Measured: 100 % on the simulator's tiny whites and the
-#: test's drawn whites; 33 % on a tiny render of the default scene, 0-34 % on boards of 1.5-6 micro-image
-#: squares. The margin is for the field's rim, where a real lens vignettes whole micro-images.
-WHITE_EVEN_SHARE = 0.8
+#: Least share of a white's lit field whose micro-images are at least half as bright as those at the same
+#: distance from the light's centre (:func:`white_problem`). Measured: see the test of the rule.
+WHITE_EVEN_SHARE = 0.9
+#: A white's micro-image is as bright as those at its distance from the light's centre when its peak is
+#: at least this fraction of theirs (:func:`white_problem`). A lens's fall-off is rotationally symmetric;
+#: a scene's texture is not.
+WHITE_RING_FRACTION = 0.8
 #: Farthest (pixels) a white's micro-image centres may lie from the capture's, by the two files'
 #: metadata (:func:`micro_image_shift_px`): beyond it a white of another zoom or focus setting would
 #: devignette a micro-image's rim by its neighbour's gap (the synthesis leaves 0.71 px of the rim out).
@@ -304,26 +312,41 @@ def _white_of_file(path: str, stat_key: tuple[int, ...]) -> tuple[FlatField, Lig
     return field, white.camera, problem
 
 
-def white_problem(mosaic: RawMosaic, field: FlatField, *, micro_image_pitch_px: float) -> str | None:
-    """Why ``mosaic`` (with its :func:`flat_field`) is no white image; None if it is one.
+@dataclass(frozen=True)
+class WhiteMeasures:
+    """What :func:`white_problem` judges a white image by (:func:`white_measures`).
 
-    A white image is a diffuser's uniform light through the camera: under :data:`MAX_SATURATED_SHARE`
-    of its pixels saturated, some light, micro-images separated by darker gaps (in at least
-    :data:`WHITE_GAP_SHARE` of its lit field a window of one micro-image pitch holds a pixel under half
-    its brightest), and every lit micro-image near the level of its neighbours (in at least
-    :data:`WHITE_EVEN_SHARE` of the lit field the dimmest micro-image peak within 1.5 pitches is at least
-    half the brightest). Each colour is taken relative to its bright level, bad pixels left out. A
-    capture of a scene or a board fails the last test, an image with no micro-images the gaps'.
+    Attributes
+    ----------
+    saturated_share : float
+        Share of its pixels at the white level.
+    lit : bool
+        Whether any usable pixel holds light above the black level.
+    gap_share : float
+        Share of its lit field (where a micro-image within 1.5 pitches peaks above
+        2 * :data:`MIN_WHITE_FRACTION` of its colour's bright level) whose window of one micro-image
+        pitch holds a pixel under half its brightest: the gaps between micro-images. NaN if not lit.
+    even_share : float
+        Share of the lit field whose micro-image peaks at least :data:`WHITE_RING_FRACTION` of the
+        level of the peaks at its distance from the light's centre (:func:`_ring_levels`). NaN if not lit.
+    """
+
+    saturated_share: float
+    lit: bool
+    gap_share: float
+    even_share: float
+
+
+def white_measures(mosaic: RawMosaic, field: FlatField, *, micro_image_pitch_px: float) -> WhiteMeasures:
+    """The measures of ``mosaic`` (with its :func:`flat_field`) that tell a white image from a capture.
+
+    Each colour is taken relative to its bright level, bad pixels left out; a micro-image's peak is
+    the brightest pixel within half a pitch. ``micro_image_pitch_px`` is the micro-image pitch, pixels.
     """
     saturated = float(mosaic.saturated.mean())
-    if saturated > MAX_SATURATED_SHARE:
-        return (
-            f"{100 * saturated:.1f} % of its pixels are saturated (at the white level {mosaic.white_level_dn}); "
-            f"a white image is exposed below saturation (at most {100 * MAX_SATURATED_SHARE:g} %)"
-        )
     levels = field.lit_dn[field.usable & ~field.bad]
     if levels.size == 0 or float(levels.max()) <= 0.0:
-        return f"it holds no light (every pixel at or below the black level {mosaic.black_level_dn})"
+        return WhiteMeasures(saturated_share=saturated, lit=False, gap_share=math.nan, even_share=math.nan)
     bright = _bright_levels(field.lit_dn.astype(np.float64), mosaic.channel_index())
     relative = np.divide(field.lit_dn, bright, out=np.zeros(field.shape), where=(bright > 0.0) & ~field.bad)
     relative = relative.astype(np.float32)
@@ -332,23 +355,81 @@ def white_problem(mosaic: RawMosaic, field: FlatField, *, micro_image_pitch_px: 
     border = cv2.BORDER_REPLICATE
     peak = cv2.dilate(relative, near, borderType=border)
     valley = cv2.erode(relative, near, borderType=border)
-    dimmest = cv2.erode(peak, around, borderType=border)
     brightest = cv2.dilate(peak, around, borderType=border)
     lit = brightest >= 2.0 * MIN_WHITE_FRACTION
     gaps = float((valley < 0.5 * peak)[lit].mean())
-    if gaps < WHITE_GAP_SHARE:
+    step = max(1, int(micro_image_pitch_px // 2))  # the peak map is flat within a micro-image
+    peaks, judged = peak[::step, ::step], lit[::step, ::step]
+    level = _ring_levels(peaks, judged, ring_px=1.0, reach_px=micro_image_pitch_px / step)
+    even = float((peaks >= WHITE_RING_FRACTION * level)[judged].mean())
+    return WhiteMeasures(saturated_share=saturated, lit=True, gap_share=gaps, even_share=even)
+
+
+def white_problem(mosaic: RawMosaic, field: FlatField, *, micro_image_pitch_px: float) -> str | None:
+    """Why ``mosaic`` (with its :func:`flat_field`) is no white image; None if it is one.
+
+    A white image is a diffuser's uniform light through the camera (:func:`white_measures`): under
+    :data:`MAX_SATURATED_SHARE` of its pixels saturated, some light, micro-images separated by darker
+    gaps (in at least :data:`WHITE_GAP_SHARE` of its lit field), and every lit micro-image near the
+    level of those at its distance from the light's centre (in at least :data:`WHITE_EVEN_SHARE` of the
+    lit field). A capture of a scene or a board fails the last test, an image with no micro-images the
+    gaps'. A lens's fall-off is rotationally symmetric about its axis, however steep: the edge of an
+    image circle smaller than the sensor (a Petzval or a near-telecentric design) passes.
+    """
+    measures = white_measures(mosaic, field, micro_image_pitch_px=micro_image_pitch_px)
+    if measures.saturated_share > MAX_SATURATED_SHARE:
         return (
-            f"it shows no micro-images: only {100 * gaps:.0f} % of its lit field has darker gaps within one "
-            f"micro-image pitch ({micro_image_pitch_px:.1f} px), a white image's has them nearly everywhere"
+            f"{100 * measures.saturated_share:.1f} % of its pixels are saturated (at the white level "
+            f"{mosaic.white_level_dn}); a white image is exposed below saturation (at most "
+            f"{100 * MAX_SATURATED_SHARE:g} %)"
         )
-    even = float((dimmest >= 0.5 * brightest)[lit].mean())
-    if even < WHITE_EVEN_SHARE:
+    if not measures.lit:
+        return f"it holds no light (every pixel at or below the black level {mosaic.black_level_dn})"
+    if measures.gap_share < WHITE_GAP_SHARE:
         return (
-            f"its light is not uniform: in {100 * (1 - even):.0f} % of its lit field a micro-image is under half as "
-            "bright as one within 1.5 pitches (a scene or board capture?); a white image's micro-images follow the "
-            f"lens's smooth fall-off (allowed: {100 * (1 - WHITE_EVEN_SHARE):.0f} %)"
+            f"it shows no micro-images: only {100 * measures.gap_share:.0f} % of its lit field has darker gaps "
+            f"within one micro-image pitch ({micro_image_pitch_px:.1f} px), a white image's has them nearly everywhere"
+        )
+    if measures.even_share < WHITE_EVEN_SHARE:
+        return (
+            f"its light is not uniform: in {100 * (1 - measures.even_share):.0f} % of its lit field a micro-image "
+            f"is under {100 * WHITE_RING_FRACTION:.0f} % as bright as those at its distance from the light's "
+            "centre (a scene or board capture?); a white image's micro-images follow the lens's rotationally "
+            f"symmetric fall-off (allowed: {100 * (1 - WHITE_EVEN_SHARE):.0f} %)"
         )
     return None
+
+
+def _ring_levels(peaks: np.ndarray, lit: np.ndarray, *, ring_px: float, reach_px: float) -> np.ndarray:
+    """The level of a white's light about each pixel's distance from the light's centre, shape of ``peaks``.
+
+    ``peaks`` (H, W) holds the relative micro-image peaks, ``lit`` (H, W) where they are judged. The
+    light's centre is the peaks' centroid over ``lit``; the lit pixels are binned into rings ``ring_px``
+    wide about it, a ring's level is its :data:`_RING_PERCENTILE` th percentile (0 for a ring with no lit
+    pixel), and each pixel gets the lowest level of the rings within ``reach_px`` of its own: where the
+    light falls off steeply (an image circle's edge, drawn in micro-images) a micro-image is judged
+    against the fall-off one pitch farther out.
+    """
+    rows, cols = np.nonzero(lit)
+    if rows.size == 0:
+        return np.zeros(peaks.shape)
+    values = peaks[rows, cols].astype(np.float64)
+    weights = np.maximum(values, 0.0)
+    total = float(weights.sum()) or 1.0
+    centre = (float(rows @ weights) / total, float(cols @ weights) / total)
+    grid_rows, grid_cols = np.indices(peaks.shape)
+    ring = (np.hypot(grid_rows - centre[0], grid_cols - centre[1]) / ring_px).astype(np.int64)
+    lit_ring = ring[rows, cols]
+    order = np.lexsort((values, lit_ring))  # by ring, then by value within it
+    sorted_rings, sorted_values = lit_ring[order], values[order]
+    starts = np.flatnonzero(np.r_[True, sorted_rings[1:] != sorted_rings[:-1]])
+    counts = np.diff(np.r_[starts, sorted_rings.size])
+    level = np.zeros(int(ring.max()) + 1)
+    level[sorted_rings[starts]] = sorted_values[
+        starts + np.floor(_RING_PERCENTILE / 100 * (counts - 1)).astype(np.int64)
+    ]
+    reach = math.ceil(reach_px / ring_px)
+    return ndimage.minimum_filter1d(level, 2 * reach + 1, mode="constant", cval=0.0)[ring]
 
 
 def micro_image_shift_px(a: LightFieldCamera, b: LightFieldCamera) -> float:

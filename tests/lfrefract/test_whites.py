@@ -27,6 +27,7 @@ from lfrefract.formats.whites import (
     flat_field,
     read_lytro_file,
     select_white_image,
+    white_problem,
 )
 from tests.lfrefract.test_calibration_mla import small_camera, synthetic_white
 
@@ -504,3 +505,47 @@ def test_calibrate_port_warns_of_boards_read_otherwise_than_its_camera_calibrati
     assert core_cli.main(argv) == 2
     err = capsys.readouterr().err
     assert f"warning: {camera_file} does not say how its board captures were read" in err
+
+
+def _shaded(shade) -> RawMosaic:
+    """The drawn white times ``shade(rows, cols)`` (its light's fraction at each pixel)."""
+    lit = white_mosaic().counts.astype(np.float64) - BLACK
+    rows, cols = np.mgrid[: lit.shape[0], : lit.shape[1]].astype(np.float64)
+    counts = np.rint(BLACK + shade(rows, cols) * lit).astype(np.uint16)
+    return RawMosaic(counts=counts, cfa_pattern="GRBG", black_level_dn=BLACK, white_level_dn=WHITE_LEVEL, bit_depth=10)
+
+
+def test_a_white_through_a_lens_whose_image_circle_is_smaller_than_the_sensor_is_one():
+    """A Petzval and a near-telecentric design at tiny-2x light a disk of the sensor whose edge falls off
+    within one or two micro-images: their whites were refused as not uniform (23 % and 26 % of the lit
+    field under half a micro-image within 1.5 pitches, 20 % allowed), so the data-only chain could not
+    start. The rule now compares a micro-image with those at its distance from the light's centre."""
+    camera = small_camera()
+    height, width = white_mosaic().shape
+    pitch = camera.micro_image_pitch_px
+    centre = (0.5 * height + 0.7 * pitch, 0.5 * width - 0.4 * pitch)  # the axis a little off the sensor's centre
+    radius = 0.42 * min(height, width)
+
+    def image_circle(rows, cols):
+        r = np.hypot(rows - centre[0], cols - centre[1])
+        return np.clip((radius - r) / (1.5 * pitch), 0.0, 1.0) * (1.0 - 0.3 * (r / radius) ** 2)
+
+    mosaic = _shaded(image_circle)
+    assert white_problem(mosaic, flat_field(mosaic), micro_image_pitch_px=pitch) is None
+
+
+def test_a_capture_of_a_low_contrast_scene_is_no_white():
+    """A textured plane through the tiny camera read as a white (18 % of its lit field uneven, 20 %
+    allowed): a capture in the white folder would have been taken as the white, and every capture
+    devignetted by the scene's texture. Its texture is not rotationally symmetric about the light's
+    centre, a lens's fall-off is."""
+    camera = small_camera()
+    pitch = camera.micro_image_pitch_px
+
+    def texture(rows, cols):
+        return 0.775 + 0.225 * np.sin(rows / (2.3 * pitch)) * np.cos(cols / (3.1 * pitch))  # 0.55-1
+
+    mosaic = _shaded(texture)
+    problem = white_problem(mosaic, flat_field(mosaic), micro_image_pitch_px=pitch)
+    assert problem is not None
+    assert "not uniform" in problem, problem
