@@ -447,7 +447,7 @@ def synth(args: argparse.Namespace) -> int:
             classes = warp.filled_classes
         else:
             synthesis = DepthAwareSynthesis(warp=warp, rays=rays, options=depth_options)
-            result = synthesis.apply(capture.raw, recorded=capture.recorded)
+            result = synthesis.apply_capture(capture)
             image, classes = result.image, result.classes
         apply_seconds = time.perf_counter() - start
         nonzeros = float(len(warp.indices) / max(1, len(warp.gain)))

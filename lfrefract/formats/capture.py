@@ -424,6 +424,20 @@ class Capture:
         return virtual_camera_for(self.camera)
 
     @property
+    def ray_recorded(self) -> np.ndarray | None:
+        """Raw pixels holding a measurement whose ray is the camera model's, shape (H, W), or None for all.
+
+        :attr:`recorded`, and for a Lytro capture developed by a white image its fully lit pixels
+        (:attr:`lfrefract.formats.whites.DevelopedCapture.fully_lit`): a stop vignettes the others in
+        part (a real lens's micro-images are smaller than the thin lens's usable disc), so their light
+        passes the aperture off the point the model gives their ray.
+        """
+        if self.developed is None or self.developed.white is None:
+            return self.recorded
+        lit = self.developed.fully_lit
+        return lit if self.recorded is None else self.recorded & lit
+
+    @property
     def channels(self) -> int:
         """Channels of the raw image (1 for a 2-D one)."""
         return 1 if self.raw.ndim == 2 else int(self.raw.shape[2])
