@@ -113,6 +113,10 @@ CONFIDENCE_GAP_PX = 1.0
 #: ``4 (7 + 3 C)`` float64 per output pixel: 0.4 GB at Illum size with RGB).
 RENDER_CHUNKS_MAX = 4
 
+#: Below this share of the camera's rays kept (recorded, and lit fully), an image without any depth is
+#: blamed on the masks rather than on the depth range.
+_FEW_RAYS_SHARE = 0.5
+
 #: Raw pixels traced per block in :func:`trace_scene_rays` (a block's float64 buffers: about 1 kB each).
 _TRACE_BLOCK = 1 << 20
 
@@ -818,6 +822,15 @@ class DepthAwareSynthesis:
             groups = np.asarray(search_groups).reshape(-1)[rays.raw_index]
         depth = estimate_depth(rays, searched, self.output, self.options, groups=groups)
         if not np.any(np.isfinite(depth.depth_m)):
+            used_share = np.count_nonzero(keep) / max(len(keep), 1)
+            if used_share < _FEW_RAYS_SHARE:  # the masks, not the depths, left too few rays
+                raise ParameterError(
+                    f"no output pixel has a depth: only {100 * used_share:.0f} % of the camera's rays hold a recorded "
+                    f"value whose ray is the model's ({unrecorded} raw pixels masked as unrecorded or lit only in "
+                    "part: for a Lytro capture, a white image that lights few pixels fully, a lens whose micro-images "
+                    f"are much smaller than the camera model's), too few for min_rays={self.options.min_rays} at any "
+                    "pixel"
+                )
             raise ParameterError(
                 f"no output pixel has a depth: no plane of {_depth_range(self.options)} gathered "
                 f"min_rays={self.options.min_rays} rays for any pixel; choose the depths of the scene behind the port"

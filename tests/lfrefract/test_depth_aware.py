@@ -329,6 +329,19 @@ def test_a_frame_where_no_pixel_finds_a_depth_is_refused():
         many.apply(plane_raw(synthesis))
 
 
+def test_a_frame_whose_masks_leave_too_few_rays_for_a_depth_names_the_masks():
+    """Masks that leave most rays out (a Lytro capture through a lens whose micro-images are much smaller
+    than the camera model's: the retrofocus design at tiny-2x lights 13 % of the rays fully) and no pixel
+    with a depth: the refusal blamed the depth range; it names the share of rays the masks left."""
+    synthesis = setup()
+    options = DepthAwareOptions(min_rays=10**6)
+    many = DepthAwareSynthesis(warp=synthesis.warp, rays=synthesis.rays, options=options)
+    recorded = np.zeros(synthesis.rays.raw_shape, dtype=bool)
+    recorded[::3] = True
+    with pytest.raises(ParameterError, match=r"no output pixel has a depth: only 3\d % of the camera's rays .*part"):
+        many.apply(plane_raw(synthesis), recorded=recorded)
+
+
 def test_a_frame_whose_every_ray_is_masked_is_refused_naming_the_mask():
     """Every raw pixel masked as unrecorded (``--nonfinite mask`` on an all-NaN raw): the refusal blamed the
     depth range (no pixel finds a depth); it names the masked pixels instead, before the sweep."""
