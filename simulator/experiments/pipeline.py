@@ -636,17 +636,22 @@ def _synth_all(
     chain: str,
     camera: str,
     syntheses: Sequence[str],
+    models: _Models,
 ) -> None:
     """``lfrefract synth --method M`` of each capture (name -> raw file) for each of ``syntheses``
     into ``products/synth/<M>/<chain>/<camera>/<name>.exr``, k = the paper's 32 (the warp maps
-    cached in ``products/maps``)."""
+    cached in ``products/maps``). A synthesis method that fails is noted in ``models`` for that method
+    (:meth:`_Models.fail_synthesis`); the other methods still run."""
     for synthesis in syntheses:
         out = products / "synth" / synthesis / chain / camera
         out.mkdir(parents=True, exist_ok=True)
-        for name, raw in captures.items():
-            target = out / f"{name}.exr"
-            method = ["--method", synthesis, "--quiet", "--map-cache", products / "maps"]
-            core("synth", raw, *model_args, "--k", PAPER_K, *method, "--out", target)
+        try:
+            for name, raw in captures.items():
+                target = out / f"{name}.exr"
+                method = ["--method", synthesis, "--quiet", "--map-cache", products / "maps"]
+                core("synth", raw, *model_args, "--k", PAPER_K, *method, "--out", target)
+        except Exception as exc:  # this method's rows fail; the chain's others stand
+            models.fail_synthesis(synthesis, camera, exc)
 
 
 def _images(synth_dir: Path, cameras: Sequence[str], reference: str) -> CentralImages:
@@ -687,11 +692,25 @@ class _Models:
     #: Each camera's ray model as the chain's port and synthesis used it (:func:`ray_model_name`).
     ray_models: dict[str, str] = dataclasses.field(default_factory=dict)
 
+    #: Synthesis methods that failed (method -> what failed, per camera): only their rows fail.
+    synthesis_errors: dict[str, str] = dataclasses.field(default_factory=dict)
+
     def fail(self, camera: str, exc: BaseException) -> None:
         """Note that the chain failed for ``camera`` (the other cameras' chains still run, so that each
         camera's calibrations are reported)."""
         failure = f"{camera}: {describe_error(exc)}"
         self.error = failure if self.error is None else f"{self.error}; {failure}"
+
+    def fail_synthesis(self, synthesis: str, camera: str, exc: BaseException) -> None:
+        """Note that synthesis method ``synthesis`` failed for ``camera`` (the chain's calibrations and
+        its other methods stand)."""
+        failure = f"{camera}: {describe_error(exc)}"
+        earlier = self.synthesis_errors.get(synthesis)
+        self.synthesis_errors[synthesis] = failure if earlier is None else f"{earlier}; {failure}"
+
+    def error_of(self, synthesis: str) -> str | None:
+        """Why the rows of synthesis method ``synthesis`` failed (the chain's error first); None if not."""
+        return self.error if self.error is not None else self.synthesis_errors.get(synthesis)
 
     def note_left_out(self, calibration: Path, delivered: Path) -> None:
         """Add the captures that the calibration file ``calibration`` lists as left out."""
@@ -832,7 +851,7 @@ def _core_stage(
                 model = out / REFINED_CAMERA_NAME if refine else model
                 captures = {p.stem: p for p in sorted(rig.glob("*.lfr"))}
                 args = ["--white", whites, "--camera", model, "--port", port]
-                _synth_all(core, captures, args, products, method, camera, syntheses)
+                _synth_all(core, captures, args, products, method, camera, syntheses, chain)
                 chain.ports[camera] = port_from_file(port)
                 chain.port_files[camera] = port
                 given = camera_model_from_option(model)
@@ -860,7 +879,7 @@ def _oracle_stage(
     try:
         for camera in thin.cameras:
             captures = {name: capture.folder / camera.name / RAW_NAME for name, capture in oracle.items()}
-            _synth_all(core, captures, [], products, "oracle", camera.name, syntheses)
+            _synth_all(core, captures, [], products, "oracle", camera.name, syntheses, models)
             models.ports[camera.name] = camera.scene.port
             models.rays[camera.name] = camera.scene.camera.captured_rays(uv)
             models.ray_models[camera.name] = "true thin lens"
@@ -1043,8 +1062,9 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         row: dict = {"method": label, "synthesis": synthesis} | dict.fromkeys(MEASURES, math.nan)
         row |= {"test_boards_found": "", "boards_left_out": " ".join(chain.left_out)}
         row["ray_model"] = ", ".join(f"{camera} {name}" for camera, name in chain.ray_models.items())
-        prepared = PreparedMethod(name=label, error=chain.error)
-        if chain.error is None:
+        error = chain.error_of(synthesis)
+        prepared = PreparedMethod(name=label, error=error)
+        if error is None:
             images = _images(products / "synth" / synthesis / method, names, jobs[0][0])
             boards = [(shots[name], size) for name, size in squares.items()]
             prepared = calibrate_method_rig(label, images, boards, cameras=(names[0], names[1]))

@@ -206,3 +206,27 @@ def test_a_kept_render_is_not_reused_behind_another_port(tmp_path, option):
         keep(folder, keys["own"][kind])
         assert differs(folder, keys["own"][kind]) is None
         assert differs(folder, keys["moved"][kind]) == (None if reused else "rendered for another scene"), kind
+
+
+def test_a_failing_synthesis_method_fails_its_own_rows_only(tmp_path):
+    """``--methods proposed,depth-aware``: a depth-aware synth that failed on one capture (the
+    retrofocus design, whose white lights 13 % of the rays fully) failed the whole data-only chain, so
+    the proposed rows of its calibrated ports were lost too. It now fails the depth-aware rows alone."""
+    from simulator.experiments.pipeline import _Models, _synth_all
+
+    calls = []
+
+    def core(*args):
+        calls.append(args)
+        if "depth-aware" in args:
+            raise RuntimeError("lfrefract synth: no output pixel has a depth")
+
+    models = _Models()
+    captures = {"board-0": tmp_path / "board-0.lfr", "board-1": tmp_path / "board-1.lfr"}
+    _synth_all(core, captures, [], tmp_path, "data-only", "left", ("proposed", "depth-aware"), models)
+    assert len(calls) == 3  # both proposed, the first depth-aware
+    assert models.error is None
+    assert models.error_of("proposed") is None
+    assert models.error_of("depth-aware").startswith("left: RuntimeError: lfrefract synth: no output pixel has a depth")
+    models.fail("right", ValueError("no board"))
+    assert models.error_of("proposed").startswith("right: ValueError: no board")
