@@ -109,6 +109,7 @@ from lfrefract.formats.capture import (
     SIDECAR_NAME,
     Capture,
     CaptureParameters,
+    apply_depth_aware,
     camera_model_from_option,
     capture_parameters,
     check_lens_modelled,
@@ -403,8 +404,7 @@ def synth(args: argparse.Namespace) -> int:
         how = "; ".join(f"{colour}: {h}" for colour, (_, h) in built.items())
         compile_seconds = built["G"][0].compile_for(developed.values)  # the colours' maps share the gather
         start = time.perf_counter()
-        recorded = developed.fully_lit & ~developed.flagged  # as Capture.ray_recorded, on the mosaic's sites
-        maps = {colour: mask_warp_map(w, recorded) for colour, (w, _) in built.items()}
+        maps = {colour: mask_warp_map(w, ~developed.flagged) for colour, (w, _) in built.items()}
         image = np.maximum(apply_cfa(maps, developed.values) @ developed.color_matrix.T, 0.0).astype(np.float32)
         apply_seconds = time.perf_counter() - start
         warp = maps["G"]  # the colours share the coverage (it is the necessary rays'); G for the figures
@@ -442,15 +442,13 @@ def synth(args: argparse.Namespace) -> int:
             rays_seconds = time.perf_counter() - start
         compile_seconds = warp.compile_for(capture.raw)  # numba's first compilation, apart from the apply
         start = time.perf_counter()
-        # unrecorded raw pixels, and those a stop vignettes in part (their ray is not the model's): no weight
-        # (the cache keeps the full map)
-        warp = mask_warp_map(warp, capture.ray_recorded)
+        warp = mask_warp_map(warp, capture.recorded)  # unrecorded raw pixels: no weight (the cache keeps the full map)
         if depth_options is None:
             image = warp.apply(capture.raw)
             classes = warp.filled_classes
         else:
             synthesis = DepthAwareSynthesis(warp=warp, rays=rays, options=depth_options)
-            result = synthesis.apply_capture(capture)
+            result = apply_depth_aware(synthesis, capture)
             image, classes = result.image, result.classes
         apply_seconds = time.perf_counter() - start
         nonzeros = float(len(warp.indices) / max(1, len(warp.gain)))

@@ -56,14 +56,12 @@ import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 from scipy import ndimage
 
 from lfrefract.errors import ParameterError
-from lfrefract.formats.mosaic import cfa_channels
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.camera_model import CameraModel, as_camera_model
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
@@ -80,9 +78,6 @@ from lfrefract.synthesis.warp_map import (
     build_warp_map,
 )
 from lfrefract.validate import bounded_float, non_negative_float, positive_float, positive_int
-
-if TYPE_CHECKING:
-    from lfrefract.formats.capture import Capture
 
 __all__ = [
     "FILLED_EXACT_GIVEN_DEPTH",
@@ -728,28 +723,6 @@ class DepthAwareSynthesis:
         """Geometry of the images and depth maps."""
         return self.warp.output
 
-    def apply_capture(self, capture: Capture) -> DepthAwareResult:
-        """:meth:`apply` to a capture as read (:func:`lfrefract.formats.capture.read_capture`).
-
-        Its rays whose value and ray are the camera model's (:attr:`Capture.ray_recorded
-        <lfrefract.formats.capture.Capture.ray_recorded>`); a Lytro capture's depth searched on its
-        mosaic, not demosaiced (:meth:`DevelopedCapture.grey
-        <lfrefract.formats.whites.DevelopedCapture.grey>`) comparing each colour's sites with each other
-        only (its rays, not mixed by demosaicing; a coloured texture's colours differ), its image
-        rendered from the demosaiced raw.
-        """
-        developed = capture.developed
-        if developed is None:
-            return self.apply(capture.raw, recorded=capture.ray_recorded)
-        search = developed.grey()
-        return self.apply(
-            capture.raw,
-            recorded=capture.ray_recorded,
-            search_raw=search,
-            search_recorded=np.isfinite(search),
-            search_groups=cfa_channels(developed.cfa_pattern, search.shape),
-        )
-
     def apply(
         self,
         raw: np.ndarray,
@@ -769,7 +742,8 @@ class DepthAwareSynthesis:
             Raw pixels holding a measurement whose ray is the camera model's; the others are used by
             neither the depth search nor the render (the warp map's pixels are the caller's to mask:
             :func:`lfrefract.formats.capture.mask_warp_map`). A developed Lytro capture's partly
-            vignetted pixels belong out (:attr:`lfrefract.formats.capture.Capture.ray_recorded`): a real
+            vignetted pixels belong out (:attr:`lfrefract.formats.capture.Capture.ray_recorded`;
+            :func:`lfrefract.formats.capture.apply_depth_aware` passes it): a real
             lens's micro-images are smaller than the thin lens's usable disc, and the rim pixels' light
             passes the aperture elsewhere (through the double Gauss at tiny-2x, 30 % of the rays; with
             them the depth search's median confidence on a plane was 0.20, without them 0.72, the

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from lfrefract import camera_preset
-from lfrefract.formats.capture import mask_warp_map, read_capture
+from lfrefract.formats.capture import apply_depth_aware, read_capture
 from lfrefract.formats.exr import read_exr
 from lfrefract.optics.camera_model import CameraModel
 from lfrefract.synthesis.depth_aware import (
@@ -25,7 +25,7 @@ from lfrefract.synthesis.depth_aware import (
     DepthAwareSynthesis,
     trace_scene_rays,
 )
-from lfrefract.synthesis.warp_map import FILLED_EXACT, SynthesisOptions, build_warp_map
+from lfrefract.synthesis.warp_map import build_warp_map
 from simulator import cli as sim_cli
 from simulator.lens_family import truth_model
 
@@ -98,11 +98,11 @@ def _figures(result, truth_depth) -> tuple[float, float, float]:
 def test_depth_aware_finds_depth_on_a_real_lens_capture(rendered):
     camera, truth = truth_model("double-gauss", camera="tiny-2x", calibration_frame=False)
     synthesis, capture, _, truth_depth = _synthesis(rendered / "dg", CameraModel(camera=camera, correction=truth))
-    confidence, share, error = _figures(synthesis.apply_capture(capture), truth_depth)
+    confidence, share, error = _figures(apply_depth_aware(synthesis, capture), truth_depth)
     thin, thin_capture, thin_render, thin_depth = _synthesis(
         rendered / "thin", CameraModel(camera=camera_preset("tiny-2x"), correction=None)
     )
-    thin_figures = _figures(thin.apply_capture(thin_capture), thin_depth)
+    thin_figures = _figures(apply_depth_aware(thin, thin_capture), thin_depth)
     noiseless = _figures(thin.apply(thin_render.raw), thin_depth)
     print(f"double Gauss, Lytro: median confidence {confidence:.2f}, exact given depth {100 * share:.1f} %, "
           f"depth {100 * error:.1f} % off; thin lens, Lytro: {thin_figures[0]:.2f}, {100 * thin_figures[1]:.1f} %, "
@@ -120,28 +120,3 @@ def test_depth_aware_finds_depth_on_a_real_lens_capture(rendered):
     assert (
         np.mean(thin.apply(thin_capture.raw, recorded=thin_capture.recorded).classes == FILLED_EXACT_GIVEN_DEPTH) < 0.01
     )
-
-
-def test_the_warp_map_gives_the_rays_a_stop_vignettes_in_part_no_weight(rendered):
-    """The paper's synthesis of the same capture: a real lens's rim pixels, devignetted by the white
-    but lit through another part of the aperture than their modelled ray, took 0.097 RMS off the
-    ideal image in the exact pixels (the thin lens's capture 0.044); given no weight
-    (``Capture.ray_recorded``, as ``lfrefract synth`` does), 0.056. The pixels that only such rays
-    filled (41 % of the image, beyond the field the camera sees) are left empty."""
-    camera, truth = truth_model("double-gauss", camera="tiny-2x", calibration_frame=False)
-    folder = rendered / "dg"
-    render = read_capture(folder / "cap")
-    capture = read_capture(folder / "cap" / "capture.lfr", white=folder / "whites", camera=camera)
-    warp = build_warp_map(camera, render.port, output=render.output, options=SynthesisOptions(ray_correction=truth))
-    ideal = read_exr(folder / "cap" / "ideal.exr").mean(axis=2)
-
-    def rms(recorded) -> float:
-        masked = mask_warp_map(warp, recorded)
-        image = np.nan_to_num(masked.apply(capture.raw)).mean(axis=2)
-        exact = masked.filled_classes == FILLED_EXACT
-        gain = np.sum(image[exact] * ideal[exact]) / np.sum(image[exact] ** 2)  # the render's exposure
-        return float(np.sqrt(np.mean((gain * image[exact] - ideal[exact]) ** 2)))
-
-    everything, fully_lit = rms(np.ones(warp.raw_shape, dtype=bool)), rms(capture.ray_recorded)
-    print(f"exact pixels off the ideal image: every ray {everything:.4f} RMS, fully lit rays {fully_lit:.4f}")
-    assert fully_lit < 0.75 * everything
