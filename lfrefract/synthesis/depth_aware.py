@@ -497,9 +497,13 @@ def estimate_depth(
     # of one plane per thread keeps the threads busy, and between groups Python runs its signal handlers
     # (SIGTERM, Ctrl-C: one call over every plane held them for the whole sweep, 39 s an Illum frame).
     per_call = sweep_planes_per_call()
-    for group in np.unique(groups):
-        member = groups == group
-        o, d, v, q = (np.ascontiguousarray(a[member]) for a in (origins, directions, values, quadrant))
+    every = np.unique(groups)
+    for group in every:
+        if len(every) == 1:  # one group: the kept rays as they are, not copied
+            o, d, v, q = origins, directions, values, quadrant
+        else:
+            member = groups == group
+            o, d, v, q = (np.ascontiguousarray(a[member]) for a in (origins, directions, values, quadrant))
         for first in range(0, len(depths), per_call):
             part = sweep_cost(
                 o, d, v, q, depths[first : first + per_call], fx, cx, cy, width, height,
