@@ -41,7 +41,7 @@ def main() -> int:
     sizes = args.square_size_m * len(args.boards) if len(args.square_size_m) == 1 else args.square_size_m
     if len(sizes) != len(args.boards):
         parser.error(f"--square-size-m takes one size or one per board ({len(args.boards)}), got {len(sizes)}")
-    camera = camera_model_from_option(args.camera).camera
+    camera = camera_model_from_option(args.camera).described_camera
     view = virtual_camera_for(camera)
     pattern = (args.squares[0] - 1, args.squares[1] - 1)
     print(

@@ -415,9 +415,11 @@ def _experiment(args: argparse.Namespace) -> int:
         "n_water": args.n_water,
         "ray_model": args.ray_model,
     }
+    # read here, so that a bad --camera is named by its flag
+    camera = None if args.camera is None else camera_model_from_option(args.camera).described_camera
     options = ExperimentOptions(
         scale=args.scale,
-        camera=None if args.camera is None else camera_model_from_option(args.camera).camera,  # names --camera
+        camera=camera,
         **fields_by_flag(ExperimentOptions, {OPTION_FLAGS[key]: {key: value} for key, value in given.items()}),
     )
     experiment = load_experiments().get(args.name)

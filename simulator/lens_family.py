@@ -72,8 +72,7 @@ def truth_model(
     """
     nominal = camera_preset(camera)
     real = RealLensCamera(camera=nominal, lens=main_lens(lens_name, nominal))
-    scale = real.micro_image_scale / nominal.micro_image_scale
-    camera = dataclasses.replace(nominal, mla=dataclasses.replace(nominal.mla, pitch_m=nominal.mla.pitch_m * scale))
+    camera = real.lattice_camera
     vv, uu = np.mgrid[0 : nominal.sensor.height_px : pixel_step, 0 : nominal.sensor.width_px : pixel_step]
     uv = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(float)
     thin, true = camera.captured_rays(uv), real.chief_rays(uv)

@@ -35,7 +35,6 @@ Frames and units: camera frame (OpenCV axes), metres, radians; residuals in pixe
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -55,7 +54,7 @@ from lfrefract.calibration.port import (
     port_from_parameters,
     port_result,
 )
-from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance
+from lfrefract.calibration.uncertainty import fit_covariances, larger_covariance
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.optics.port import FlatPort
@@ -349,9 +348,7 @@ def _joint_fit(
     # one more cluster. With the Jacobian's alone 2 of 25 synthetic joint ports (five lenses, five seeds)
     # lay beyond three stated sigma (benchmarks/measure_port_uncertainty.py --ray-model radial --refine).
     bounds = np.cumsum([0, npar, *(2 * size for size in problem.sizes)])
-    scores = [jac[a:b].T @ fit.fun[a:b] for a, b in itertools.pairwise(bounds)]
-    pixel = bread * (float(np.sum(fit.fun**2)) / dof)
-    by_capture = clustered_covariance(bread, scores)
+    pixel, by_capture = fit_covariances(jac, fit.fun, bread, float(np.sum(fit.fun**2)) / dof, bounds)
     covariance = larger_covariance(pixel, by_capture)
     block = slice(npar, npar + 3)
     port = port_result(

@@ -45,7 +45,7 @@ from lfrefract.calibration.approx import detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
-from lfrefract.calibration.uncertainty import clustered_covariance, larger_covariance, propagated_shifts
+from lfrefract.calibration.uncertainty import fit_covariances, larger_covariance, propagated_shifts
 from lfrefract.errors import CalibrationError, ParameterError
 from lfrefract.formats.jsonio import PORT_CALIBRATION_KIND
 from lfrefract.optics.camera import LightFieldCamera
@@ -812,9 +812,7 @@ def _covariance_parts(
     """The port's covariance parts (:attr:`PortCalibration.covariance_parts`), port block (3, 3), and the
     port's shift per direction of the camera model's spread (:attr:`PortCalibration.camera_model_shifts`)."""
     bounds = np.cumsum([0, *(2 * s for s in problem.sizes)])
-    scores = [jac[a:b].T @ residuals[a:b] for a, b in itertools.pairwise(bounds)]
-    pixel = (bread * sigma2)[:3, :3]
-    by_capture = clustered_covariance(bread, scores)[:3, :3]
+    pixel, by_capture = (c[:3, :3] for c in fit_covariances(jac, residuals, bread, sigma2, bounds))
     changes = [_Problem(problem.camera, list(moved), template).residuals(x) - residuals for moved in model_views]
     shifts = propagated_shifts(bread[:3] @ jac.T, changes)  # the port's rows of the fit's change
     parts = {

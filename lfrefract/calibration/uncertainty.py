@@ -14,11 +14,19 @@ calibrations combine:
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["clustered_covariance", "larger_covariance", "propagated_covariance", "propagated_shifts", "spread_factors"]
+__all__ = [
+    "clustered_covariance",
+    "fit_covariances",
+    "larger_covariance",
+    "propagated_covariance",
+    "propagated_shifts",
+    "spread_factors",
+]
 
 #: Most directions :func:`spread_factors` keeps, and the smallest variance kept, relative to the largest.
 MAX_SPREAD_DIRECTIONS = 40
@@ -40,6 +48,40 @@ def clustered_covariance(bread: np.ndarray, scores: Sequence[np.ndarray]) -> np.
     meat = stacked.T @ stacked * (n / max(1, n - 1))
     out = bread @ meat @ bread
     return (out + out.T) / 2.0
+
+
+def fit_covariances(
+    jac: np.ndarray, residuals: np.ndarray, bread: np.ndarray, sigma2: float, bounds: Sequence[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """A least-squares fit's two covariances of its parameters: the Jacobian's, ``bread * sigma2``
+    (every residual independent, of variance ``sigma2``), and the one clustered by capture
+    (:func:`clustered_covariance`; each capture's residuals ``bounds[k]:bounds[k + 1]`` one sample: a
+    capture's corners share errors a model cannot follow). Callers state the larger of the two
+    (:func:`larger_covariance`) of the parameters they report.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (M, P)
+        The Jacobian at the solution.
+    residuals : ndarray, shape (M,)
+        The residuals there.
+    bread : ndarray, shape (P, P)
+        ``(J^T J)^-1``.
+    sigma2 : float
+        The residuals' variance.
+    bounds : sequence of int
+        Where each cluster's rows start, and the last's end (``K + 1`` numbers for ``K`` clusters).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> jac, r = np.ones((4, 1)), np.array([1.0, 1.0, -1.0, -1.0])
+    >>> pixel, by_capture = fit_covariances(jac, r, np.array([[0.25]]), 1.0, [0, 2, 4])
+    >>> float(pixel[0, 0]), float(by_capture[0, 0])  # two captures that each err one way: 2 x 4 / 16
+    (0.25, 1.0)
+    """
+    scores = [jac[a:b].T @ residuals[a:b] for a, b in itertools.pairwise(bounds)]
+    return bread * sigma2, clustered_covariance(bread, scores)
 
 
 def larger_covariance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

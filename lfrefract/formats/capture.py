@@ -75,11 +75,13 @@ from lfrefract.formats.whites import (
 )
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.camera_model import BOARD_COLOURS, CameraModel
+from lfrefract.optics.lens import LensPrescription
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
 from lfrefract.optics.ray_correction import Correction, CorrectionEstimate, RayCorrection, correction_from_dict
+from lfrefract.optics.real_lens import RealLensCamera, TracedLens
 from lfrefract.synthesis.depth_aware import DepthAwareResult, DepthAwareSynthesis
 from lfrefract.validate import file_problem, one_of, shown
 
@@ -111,6 +113,7 @@ __all__ = [
     "read_lytro_capture",
     "read_sidecar",
     "recorded_main_lens",
+    "recorded_prescription",
     "white_for",
     "write_capture",
     "write_capture_files",
@@ -805,7 +808,11 @@ def camera_model_from_option(value: str | os.PathLike) -> CameraModel:
     its ``correction_spread`` rows (none, shape (0, n), where the file has none: a port's covariance
     then leaves the camera model out). A JSON file of another kind holding a ray model is refused
     (:func:`lfrefract.formats.paramfile.read_parameter_json`). The real main lens a render's
-    ``meta.json`` records is kept as :attr:`CameraModel.main_lens` (:func:`check_lens_modelled`).
+    ``meta.json`` records is kept as :attr:`CameraModel.main_lens` (:func:`check_lens_modelled`),
+    and its prescription (:func:`recorded_prescription`) is traced: the model is the render's true
+    rays (:class:`~lfrefract.optics.real_lens.TracedLens`, ray model ``"traced"``) on the camera
+    with the lens's micro-image lattice (:attr:`~lfrefract.optics.real_lens.RealLensCamera.lattice_camera`,
+    what an MLA calibration of its white measures), what a calibration from data is measured against.
 
     Returns
     -------
@@ -838,8 +845,16 @@ def camera_model_from_option(value: str | os.PathLike) -> CameraModel:
             if colour not in (None, *BOARD_COLOURS):
                 where = f"{str(path)!r}: board_colour"
                 raise FileFormatError(f"{where} must be one of {BOARD_COLOURS}, got {shown(colour)}")
+        camera = camera_from_json(path, data)
+        lens = None if correction is not None else recorded_prescription(path, data)
+        if lens is not None:  # a render's truth: its main lens traced, indexed by its micro-images
+            try:
+                correction = TracedLens(real=RealLensCamera(camera=camera, lens=lens))
+            except ParameterError as exc:
+                raise FileFormatError(f"{str(path)!r}: scene.lens does not fit its camera: {exc}") from None
+            camera = correction.camera
         return CameraModel(
-            camera=camera_from_json(path, data),
+            camera=camera,
             correction=correction,
             covariance=covariance,
             spread=spread,
@@ -976,6 +991,25 @@ def recorded_main_lens(data: Mapping | None) -> str | None:
     return next((name for name in found if isinstance(name, str) and name), "an unnamed prescription")
 
 
+def recorded_prescription(path: str | os.PathLike, data: Mapping | None) -> LensPrescription | None:
+    """The real main lens's prescription a render's ``meta.json`` content ``data`` records
+    (``scene.lens``, a table; ``"thin"`` or nothing: None), read from ``path``.
+
+    Raises
+    ------
+    FileFormatError
+        If ``scene.lens`` is a table that is no valid prescription (the message names the file and key).
+    """
+    scene = data.get("scene") if isinstance(data, Mapping) else None
+    table = scene.get("lens") if isinstance(scene, Mapping) else None
+    if not isinstance(table, Mapping):
+        return None
+    try:
+        return LensPrescription.from_dict(dict(table))
+    except ParameterError as exc:
+        raise FileFormatError(f"{str(path)!r}: scene.lens is no valid lens prescription: {exc}") from None
+
+
 def check_lens_modelled(capture: Capture | CaptureParameters, model: CameraModel | None) -> None:
     """Refuse a capture taken through a real main lens when the camera model is the bare thin lens.
 
@@ -984,8 +1018,9 @@ def check_lens_modelled(capture: Capture | CaptureParameters, model: CameraModel
     double-gauss``) records that lens (:func:`recorded_main_lens`), and the thin lens it is scaled to
     does not give its rays: a synthesis or a port fit on it is wrong without saying so (the board
     of a double-Gauss render was not found in the refraction-free image). The core does not trace
-    the recorded prescription instead: its ray model comes from calibration on data, which holds
-    for any lens, not from a render's truth.
+    the recorded prescription unless asked (``--camera`` the render's ``meta.json``: its true rays,
+    :func:`camera_model_from_option`): a user's ray model comes from calibration on data, which
+    holds for any lens.
 
     Parameters
     ----------
@@ -1021,7 +1056,8 @@ def check_lens_modelled(capture: Capture | CaptureParameters, model: CameraModel
                 f"{path!r} says {what} through the real main lens {lens!r}, but the camera model is "
                 f"{given} with no calibrated ray model: its rays are not that lens's, and the result would be "
                 "wrong without saying so. Calibrate the camera from in-air boards (lfrefract calibrate camera "
-                "BOARD ... --out camera.json) and pass --camera camera.json"
+                "BOARD ... --out camera.json) and pass --camera camera.json (or, for a render, --camera its meta.json: "
+                "its recorded lens traced, the true rays)"
             )
 
 

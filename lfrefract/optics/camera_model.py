@@ -4,7 +4,8 @@ A :class:`CameraModel` is what every command and function of the core takes wher
 camera's rays: the thin-lens geometry (:class:`~lfrefract.optics.camera.LightFieldCamera`), the
 calibrated correction of its rays (:mod:`lfrefract.optics.ray_correction`: the radial
 :class:`~lfrefract.optics.ray_correction.RayCorrection`, the generic
-:class:`~lfrefract.optics.ray_correction.PolynomialCorrection`, or None for the thin lens itself) and
+:class:`~lfrefract.optics.ray_correction.PolynomialCorrection`, a known main lens traced,
+:class:`~lfrefract.optics.real_lens.TracedLens`, or None for the thin lens itself) and
 what a camera calibration (``lfrefract calibrate camera``) says of that correction's uncertainty.
 :func:`lfrefract.formats.capture.camera_model_from_option` reads one from a ``--camera`` value (a
 preset, a camera file, a render's ``meta.json`` or a camera calibration), reading the file once.
@@ -28,13 +29,14 @@ from lfrefract.optics.ray_correction import (
     RayCorrection,
     moved,
 )
+from lfrefract.optics.real_lens import TracedLens
 from lfrefract.validate import shown
 
 __all__ = ["BOARD_COLOURS", "RAY_MODELS", "CameraModel", "as_camera_model"]
 
-#: The names of the ray models (:attr:`CameraModel.ray_model`): the thin lens, the radial correction
-#: and the polynomial one.
-RAY_MODELS = ("thin-lens", "radial", "polynomial")
+#: The names of the ray models (:attr:`CameraModel.ray_model`): the thin lens, the radial correction,
+#: the polynomial one and a known prescription traced (a render's truth, not calibrated).
+RAY_MODELS = ("thin-lens", "radial", "polynomial", "traced")
 #: How a Lytro board capture is read for the light-field corners: its devignetted Bayer mosaic as one
 #: grey light field, or its demosaiced image (:attr:`CameraModel.board_colour`).
 BOARD_COLOURS = ("cfa", "demosaic")
@@ -48,8 +50,9 @@ class CameraModel:
     ----------
     camera : LightFieldCamera
         The thin-lens geometry (main lens, MLA, sensor) the rays are indexed by.
-    correction : RayCorrection, PolynomialCorrection or None
-        How the camera's rays depart from the thin lens's; None (the default): the thin lens.
+    correction : RayCorrection, PolynomialCorrection, TracedLens or None
+        How the camera's rays depart from the thin lens's; None (the default): the thin lens. A
+        :class:`~lfrefract.optics.real_lens.TracedLens` must be of :attr:`camera`.
     covariance : ndarray, shape (5, 5), or None
         Covariance of the radial correction's parameters
         (:data:`~lfrefract.optics.ray_correction.PARAMETERS`; the drift's entries in metres): what a
@@ -105,9 +108,16 @@ class CameraModel:
         if not isinstance(self.camera, LightFieldCamera):
             raise ParameterError(f"camera must be a LightFieldCamera, got {type(self.camera).__name__}")
         correction = self.correction
-        if correction is not None and not isinstance(correction, (RayCorrection, PolynomialCorrection)):
+        if correction is not None and not isinstance(correction, (RayCorrection, PolynomialCorrection, TracedLens)):
             raise ParameterError(
-                f"correction must be a RayCorrection, a PolynomialCorrection or None, got {shown(correction)}"
+                "correction must be a RayCorrection, a PolynomialCorrection, a TracedLens or None, "
+                f"got {shown(correction)}"
+            )
+        if isinstance(correction, TracedLens) and correction.camera != self.camera:
+            raise ParameterError(
+                f"correction maps the thin-lens rays of camera {correction.camera.name!r} to lens "
+                f"{correction.real.lens.name!r}'s, not those of this model's camera {self.camera.name!r} "
+                "(TracedLens.on_camera)"
             )
         for name in ("source", "main_lens"):
             value = getattr(self, name)
@@ -139,10 +149,28 @@ class CameraModel:
 
     @property
     def ray_model(self) -> str:
-        """Which model the rays follow: ``"thin-lens"``, ``"radial"`` or ``"polynomial"`` (:data:`RAY_MODELS`)."""
+        """Which model the rays follow: ``"thin-lens"``, ``"radial"``, ``"polynomial"`` or ``"traced"``
+        (:data:`RAY_MODELS`)."""
         if self.correction is None:
             return "thin-lens"
+        if isinstance(self.correction, TracedLens):
+            return "traced"
         return "radial" if isinstance(self.correction, RayCorrection) else "polynomial"
+
+    @property
+    def described_camera(self) -> LightFieldCamera:
+        """The camera geometry the model's source describes: :attr:`camera`, but for a traced lens the
+        camera the lens was rendered on (:attr:`camera` is then its micro-image lattice,
+        :attr:`lfrefract.optics.real_lens.RealLensCamera.lattice_camera`): what a render or a camera
+        option takes.
+
+        Examples
+        --------
+        >>> from lfrefract.optics.presets import camera_preset
+        >>> CameraModel(camera=camera_preset("tiny")).described_camera.name
+        'tiny'
+        """
+        return self.correction.real.camera if isinstance(self.correction, TracedLens) else self.camera
 
     @property
     def named(self) -> str:
@@ -202,7 +230,8 @@ class CameraModel:
         return dataclasses.replace(self, correction=correction, covariance=covariance, spread=spread)
 
     def with_camera(self, camera: LightFieldCamera) -> CameraModel:
-        """The same ray model on another camera geometry (an MLA calibration's, a capture's own).
+        """The same ray model on another camera geometry (an MLA calibration's, a capture's own); a
+        traced lens is traced for that camera (:meth:`TracedLens.on_camera`).
 
         Examples
         --------
@@ -212,7 +241,10 @@ class CameraModel:
         >>> CameraModel(camera=tiny).with_camera(dataclasses.replace(tiny, name="mine")).camera.name
         'mine'
         """
-        return dataclasses.replace(self, camera=camera)
+        correction = self.correction
+        if isinstance(correction, TracedLens):
+            correction = correction.on_camera(camera)
+        return dataclasses.replace(self, camera=camera, correction=correction)
 
     def spread_corrections(self) -> tuple[Correction, ...]:
         """The correction moved along each direction of :attr:`spread` (``k`` models; none for the thin

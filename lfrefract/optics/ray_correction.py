@@ -36,6 +36,7 @@ import numpy as np
 
 from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import CapturedRays
+from lfrefract.optics.real_lens import TRACED_FAMILY, TracedLens
 from lfrefract.validate import (
     bounded_float,
     bounded_int,
@@ -50,11 +51,13 @@ __all__ = [
     "HELD_SLOPE_SCALE_STD",
     "PARAMETERS",
     "POLYNOMIAL_CAPACITIES",
+    "UNSTRUCTURED",
     "Capacity",
     "Correction",
     "CorrectionEstimate",
     "PolynomialCorrection",
     "RayCorrection",
+    "TracedLens",
     "apply_correction",
     "corrected_slopes",
     "correction_from_dict",
@@ -748,8 +751,14 @@ def symmetric_directions(degree: int, aperture_degree: int) -> np.ndarray:
     return _symmetric_table(int(degree), int(aperture_degree))
 
 
-#: Every member of the ray-model family: the thin lens is ``None`` (no correction).
-Correction = RayCorrection | PolynomialCorrection
+#: Every member of the ray-model family: the thin lens is ``None`` (no correction); the calibrated
+#: :class:`RayCorrection` and :class:`PolynomialCorrection`; a known prescription traced,
+#: :class:`~lfrefract.optics.real_lens.TracedLens` (a render's truth).
+Correction = RayCorrection | PolynomialCorrection | TracedLens
+
+#: The members whose rays of one microlens are not parallel and share no centre per view: the
+#: synthesis searches their rays with the k-d tree, sub-aperture views refuse them.
+UNSTRUCTURED = (PolynomialCorrection, TracedLens)
 
 
 def moved(correction: Correction, delta: np.ndarray) -> Correction:
@@ -760,19 +769,23 @@ def moved(correction: Correction, delta: np.ndarray) -> Correction:
         raise ParameterError(f"delta must be {correction.vector().size} finite numbers, got shape {step.shape}")
     if isinstance(correction, RayCorrection):
         return RayCorrection.from_vector(correction.vector() + step)
+    if isinstance(correction, TracedLens):  # no parameters: delta is empty
+        return correction
     return dataclasses.replace(correction, coefficients=correction.coefficients + step.reshape(-1, 4))
 
 
 def correction_from_dict(data: Any, *, where: str = "correction") -> Correction:
     """A ray correction from its plain data: :class:`PolynomialCorrection` when ``family`` is
-    ``"polynomial"``, else :class:`RayCorrection` (its files carry no ``family``; ``"radial"`` is
-    accepted for it)."""
+    ``"polynomial"``, :class:`~lfrefract.optics.real_lens.TracedLens` when it is ``"traced"``, else
+    :class:`RayCorrection` (its files carry no ``family``; ``"radial"`` is accepted for it)."""
     table: Any = data
     if not isinstance(table, Mapping):
         raise ParameterError(f"{where} must be a table, got {shown(table)}")
     family = table.get("family", "radial")
     if family == "polynomial":
         return PolynomialCorrection.from_dict(table, where=where)
+    if family == TRACED_FAMILY:
+        return TracedLens.from_dict(table, where=where)
     if family != "radial":
-        raise ParameterError(f"{where}.family must be 'radial' or 'polynomial', got {shown(family)}")
+        raise ParameterError(f"{where}.family must be 'radial', 'polynomial' or {TRACED_FAMILY!r}, got {shown(family)}")
     return RayCorrection.from_dict({k: v for k, v in table.items() if k != "family"}, where=where)

@@ -27,6 +27,7 @@ ray of every raw pixel (:meth:`RealLensCamera.chief_rays`).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from lfrefract.optics.camera import CapturedRays, LightFieldCamera
 from lfrefract.optics.lens import D_LINE_M, FirstOrder, LensPrescription, lens_preset, trace_lens
 from lfrefract.validate import as_points, as_table, reject_unknown_keys, require_keys
 
-__all__ = ["FIRST_ORDER_MATCH_RTOL", "RealLensCamera"]
+__all__ = ["FIRST_ORDER_MATCH_RTOL", "TRACED_FAMILY", "RealLensCamera", "TracedLens"]
 
 #: Relative agreement required between the lens's first-order data (d-line focal length and
 #: f-number) and the camera's thin-lens equivalent. Presets are scaled and stopped to the camera
@@ -49,6 +50,9 @@ __all__ = ["FIRST_ORDER_MATCH_RTOL", "RealLensCamera"]
 FIRST_ORDER_MATCH_RTOL = 1e-6
 
 _EXTENT_SAMPLES = 33  # heights per surface at which the lens's extent along z is evaluated
+
+#: How far in front of the lens's frontmost point a ray traced back into the lens starts, metres.
+_TRACE_START_GAP_M = 1e-4
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -170,6 +174,29 @@ class RealLensCamera:
         d = self.exit_pupil_distance_m
         return (d + self.camera.mla.focal_length_m) / d
 
+    @functools.cached_property
+    def lattice_camera(self) -> LightFieldCamera:
+        """The thin-lens camera whose micro-images lie where this lens's do: :attr:`camera` with the
+        microlens lattice (pitch and offset) scaled by this lens's :attr:`micro_image_scale` over the
+        thin lens's. What an MLA calibration from a white image of this lens measures; its thin-lens
+        rays index the raw pixels by the real micro-images (:class:`TracedLens`).
+
+        Examples
+        --------
+        >>> from lfrefract import camera_preset
+        >>> real = RealLensCamera.from_preset(camera_preset("tiny-2x"), "double-gauss")
+        >>> lattice = real.lattice_camera
+        >>> centre = lattice.mla.pitch_m * lattice.micro_image_scale  # of the first lens along x
+        >>> bool(np.isclose(centre, real.camera.mla.pitch_m * real.micro_image_scale))
+        True
+        """
+        cam = self.camera
+        ratio = self.micro_image_scale / cam.micro_image_scale
+        mla = dataclasses.replace(
+            cam.mla, pitch_m=cam.mla.pitch_m * ratio, offset_m=tuple(float(v) * ratio for v in cam.mla.offset_m)
+        )
+        return dataclasses.replace(cam, mla=mla)
+
     @property
     def micro_image_radius_px(self) -> float:
         """Radius of a micro-image (the exit pupil's paraxial image through a microlens), pixels."""
@@ -245,3 +272,188 @@ class RealLensCamera:
         reject_unknown_keys("real-lens camera", table, {"camera", "lens"})
         require_keys("real-lens camera", table, {"camera", "lens"})
         return cls(camera=LightFieldCamera.from_dict(table["camera"]), lens=LensPrescription.from_dict(table["lens"]))
+
+
+#: The ``family`` a :class:`TracedLens` is written with in a ray model's table.
+TRACED_FAMILY = "traced"
+
+
+@dataclass(frozen=True, kw_only=True)
+class TracedLens:
+    """The ray model of a camera whose main lens's prescription is known: its rays traced exactly.
+
+    The member of the ray-model family (:data:`lfrefract.optics.ray_correction.Correction`) that a
+    render's ``meta.json`` gives, where the simulator records the real main lens it rendered through:
+    what a calibration from data can at best reach, so the oracle a data-only calibration of a
+    real-lens render is measured against. Like the calibrated models it maps the thin-lens ray of a
+    raw pixel (:meth:`LightFieldCamera.captured_rays`) to the camera's ray, here by tracing: the
+    thin-lens ray is followed back to its raw pixel, which :meth:`RealLensCamera.chief_rays` traces
+    (through the microlens whose real micro-image holds it, which at a micro-image's rim can be the
+    neighbour of the thin lens's). It has no parameters (:meth:`vector` is empty) and is not fitted.
+
+    Attributes
+    ----------
+    real : RealLensCamera
+        The camera and its main lens.
+    camera : LightFieldCamera, optional
+        The thin-lens camera whose rays it maps (:class:`lfrefract.optics.camera_model.CameraModel`
+        checks that it is the model's): its pixel grid must be ``real``'s. Default
+        :attr:`RealLensCamera.lattice_camera`, whose micro-images are the lens's, so that the thin-lens
+        model's rim and coverage follow the real micro-images.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfrefract import camera_preset
+    >>> real = RealLensCamera.from_preset(camera_preset("tiny-2x"), "double-gauss")
+    >>> model = TracedLens(real=real)
+    >>> uv = np.array([[50.0, 90.0], [56.0, 90.0], [57.0, 90.0]])
+    >>> traced = model.corrected(model.camera.captured_rays(uv))
+    >>> traced.in_aperture.tolist()  # the first is vignetted by the lens (its ray is NaN)
+    [False, True, True]
+    >>> bool(np.allclose(traced.directions_cam, real.chief_rays(uv).directions_cam, equal_nan=True))
+    True
+    """
+
+    real: RealLensCamera
+    camera: LightFieldCamera | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.real, RealLensCamera):
+            raise ParameterError(f"real must be a RealLensCamera, got {type(self.real).__name__}")
+        if self.camera is None:
+            object.__setattr__(self, "camera", self.real.lattice_camera)
+        if not isinstance(self.camera, LightFieldCamera):
+            raise ParameterError(f"camera must be a LightFieldCamera or None, got {type(self.camera).__name__}")
+        if self.camera.sensor != self.real.camera.sensor:
+            raise ParameterError(
+                f"camera {self.camera.name!r} has another sensor than the traced camera {self.real.camera.name!r}: "
+                "its thin-lens rays index other pixels"
+            )
+
+    @property
+    def name(self) -> str:
+        """How reports name the model: ``"traced <lens name>"``."""
+        return f"{TRACED_FAMILY} {self.real.lens.name}"
+
+    def pixels(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+        """The raw pixel (N, 2) of each thin-lens ray of :attr:`camera` (aperture points on z = 0
+        (N, 2), metres; slopes (N, 2)): the inverse of :meth:`LightFieldCamera.captured_rays`."""
+        cam = self.camera
+        a, t = np.asarray(aperture_points_m, dtype=np.float64), np.asarray(slopes, dtype=np.float64)
+        slope_in = t + a / cam.focal_length_m  # before the thin main lens
+        centre_img = -(a - slope_in * cam.lens_to_mla_m)  # the microlens centre, image plane
+        return cam.sensor.image_plane_to_pixels(centre_img + slope_in * cam.mla.focal_length_m)
+
+    def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The traced rays of thin-lens rays (aperture points (N, 2), slopes (N, 2)): origins (N, 3)
+        where they cross z = 0 and unit directions (N, 3), as the calibrated models give them; NaN
+        where the real lens stops the ray (a clear aperture, total reflection)."""
+        traced = self.real.chief_rays(self.pixels(aperture_points_m, slopes))
+        o, d = traced.origins_cam, traced.directions_cam
+        with np.errstate(invalid="ignore"):
+            origins = o - (o[:, 2:3] / d[:, 2:3]) * d
+        origins[:, 2] = 0.0
+        return origins, d
+
+    def thin_lens_rays(
+        self, points_cam: np.ndarray, directions_cam: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The thin-lens rays that :meth:`apply` maps to the given rays (its inverse): each ray traced
+        back through the lens to the MLA, to the sensor point its microlens sends it to (the sensor is
+        at the microlenses' focal plane: every ray of one slope through a microlens meets the sensor at
+        one point), and that point's thin-lens ray of :attr:`camera`. Exact for the chief rays
+        :meth:`apply` gives; a ray through no microlens centre gets the ray of the pixel that records it.
+
+        Parameters
+        ----------
+        points_cam : ndarray, shape (N, 3)
+            A point on each ray, camera frame, metres.
+        directions_cam : ndarray, shape (N, 3)
+            Their directions (any length, ``z > 0``).
+
+        Returns
+        -------
+        aperture_points_m : ndarray, shape (N, 2)
+            The thin-lens rays' points on the plane z = 0, metres.
+        slopes : ndarray, shape (N, 2)
+            Their slopes.
+        found : ndarray of bool, shape (N,)
+            The ray passes the lens (not stopped by a clear aperture nor totally reflected, and not
+            NaN); both outputs are NaN where not.
+        """
+        p = np.asarray(points_cam, dtype=np.float64)
+        d = np.asarray(directions_cam, dtype=np.float64)
+        n = len(p)
+        a, t = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
+        live = (
+            np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(d), axis=1) & (d[:, 2] > 0.0)
+            if n
+            else np.zeros(0, bool)
+        )
+        found = np.zeros(n, dtype=bool)
+        if not np.any(live):
+            return a, t, found
+        cam = self.camera
+        start_z = self.extent_z_m_front + _TRACE_START_GAP_M  # in front of the lens, in air
+        pl, dl = p[live], d[live]
+        start = pl + dl * ((start_z - pl[:, 2]) / dl[:, 2])[:, None]
+        trace = trace_lens(self.real.lens, start, -dl, toward="image")
+        q, e = trace.points_cam, trace.directions_cam
+        true = self.real.camera
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope_in = e[:, :2] / e[:, 2:3]  # the same line towards +z
+            crossing_img = -(q[:, :2] + slope_in * (true.mla_z_m - q[:, 2:3]))  # at the MLA, image plane
+        ok = trace.passed & np.all(np.isfinite(crossing_img), axis=1) & np.all(np.isfinite(slope_in), axis=1)
+        centre_img = true.mla.centres_m(true.mla.nearest_indices(crossing_img[ok]))
+        uv = true.sensor.image_plane_to_pixels(centre_img + slope_in[ok] * true.mla.focal_length_m)
+        twin = cam.captured_rays(uv)
+        rows = np.flatnonzero(live)[ok]
+        a[rows] = twin.origins_cam[:, :2]
+        t[rows] = twin.directions_cam[:, :2] / twin.directions_cam[:, 2:3]
+        found[rows] = True
+        return a, t, found
+
+    @property
+    def extent_z_m_front(self) -> float:
+        """Camera-frame z of the lens's frontmost point, metres (:attr:`RealLensCamera.extent_z_m`)."""
+        return self.real.extent_z_m[1]
+
+    def corrected(self, rays: CapturedRays) -> CapturedRays:
+        """``rays`` (thin-lens captured rays of :attr:`camera`) traced; ``in_aperture`` also
+        False where the real lens stops a ray; the lens indices kept."""
+        d = rays.directions_cam
+        origins, directions = self.apply(rays.origins_cam[:, :2], d[:, :2] / d[:, 2:3])
+        passed = np.all(np.isfinite(directions), axis=1)
+        return CapturedRays(
+            origins_cam=origins,
+            directions_cam=directions,
+            in_aperture=rays.in_aperture & passed,
+            lens_indices=rays.lens_indices,
+        )
+
+    def vector(self) -> np.ndarray:
+        """No parameters: an empty array (0,)."""
+        return np.zeros(0)
+
+    def on_camera(self, camera: LightFieldCamera) -> TracedLens:
+        """The same true rays mapped from the thin-lens rays of ``camera`` (an MLA calibration's, a
+        capture's own geometry, of the same pixel grid)."""
+        return self if camera == self.camera else TracedLens(real=self.real, camera=camera)
+
+    def to_dict(self) -> dict:
+        """Plain data: ``family`` ``"traced"``, the traced camera and its lens
+        (:meth:`RealLensCamera.to_dict`) and ``thin_lens_camera``, :attr:`camera`."""
+        return {"family": TRACED_FAMILY, **self.real.to_dict(), "thin_lens_camera": self.camera.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: Any, *, where: str = "correction") -> TracedLens:
+        """From :meth:`to_dict`'s data."""
+        table = as_table(where, data)
+        keys = {"family", "camera", "lens", "thin_lens_camera"}
+        reject_unknown_keys(where, table, keys)
+        require_keys(where, table, keys)
+        if table["family"] != TRACED_FAMILY:
+            raise ParameterError(f"{where}.family must be {TRACED_FAMILY!r}, got {table['family']!r}")
+        real = RealLensCamera.from_dict({"camera": table["camera"], "lens": table["lens"]})
+        return cls(real=real, camera=LightFieldCamera.from_dict(table["thin_lens_camera"]))

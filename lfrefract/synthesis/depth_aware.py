@@ -360,6 +360,8 @@ def trace_scene_rays(
         origins, directions, index = rays.origins_cam[keep], rays.directions_cam[keep], index[keep]
         if correction is not None:  # only the rays kept: the model costs per ray
             origins, directions = correction.apply(origins[:, :2], directions[:, :2] / directions[:, 2:3])
+            passed = np.all(np.isfinite(directions), axis=1)  # a traced lens stops some (NaN)
+            origins, directions, index = origins[passed], directions[passed], index[passed]
         gain = np.ones(len(index))
         if port is not None:
             trace = port.trace_from_air(origins, directions)

@@ -60,7 +60,7 @@ from lfrefract.errors import ParameterError
 from lfrefract.optics.camera import LightFieldCamera
 from lfrefract.optics.camera_model import CameraModel, as_camera_model
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
-from lfrefract.optics.ray_correction import Correction, PolynomialCorrection, RayCorrection
+from lfrefract.optics.ray_correction import UNSTRUCTURED, Correction, RayCorrection
 from lfrefract.synthesis.empty import masked_reason, output_geometry, require_a_value
 from lfrefract.validate import finite_vector, one_of, positive_float
 
@@ -627,7 +627,7 @@ def _centre_m(camera: LightFieldCamera, correction: RayCorrection | None, offset
 
 def checked_correction(ray_correction: object) -> RayCorrection | None:
     """``ray_correction`` if it is a :class:`RayCorrection` or None; else :class:`ParameterError`."""
-    if isinstance(ray_correction, PolynomialCorrection):
+    if isinstance(ray_correction, UNSTRUCTURED):
         raise ParameterError(
             f"the {ray_correction.name} ray model has no sub-aperture views: its rays of one view do not share a "
             "centre of projection (sub-aperture views and stacks take the thin lens or the radial model)"

@@ -52,7 +52,7 @@ from lfrefract.formats.outputs import atomic_file
 from lfrefract.optics.camera import LightFieldCamera, image_side_px
 from lfrefract.optics.pinhole import PinholeCamera, virtual_camera_for
 from lfrefract.optics.port import FlatPort
-from lfrefract.optics.ray_correction import Correction, PolynomialCorrection, RayCorrection
+from lfrefract.optics.ray_correction import UNSTRUCTURED, Correction, RayCorrection
 from lfrefract.synthesis._kernels import (
     THIN_LENS,
     AirFace,
@@ -201,13 +201,12 @@ class SynthesisOptions:
         if self.cfa_pattern is not None:
             one_of("cfa_pattern", self.cfa_pattern, CFA_PATTERNS)
             one_of("cfa_colour", self.cfa_colour, ("R", "G", "B"))
-        if self.ray_correction is not None and not isinstance(
-            self.ray_correction, (RayCorrection, PolynomialCorrection)
-        ):
+        if self.ray_correction is not None and not isinstance(self.ray_correction, (RayCorrection, *UNSTRUCTURED)):
             raise ParameterError(
-                f"ray_correction must be a RayCorrection, a PolynomialCorrection or None, got {self.ray_correction!r}"
+                "ray_correction must be a RayCorrection, a PolynomialCorrection, a TracedLens or None, "
+                f"got {self.ray_correction!r}"
             )
-        if isinstance(self.ray_correction, PolynomialCorrection) and self.search == "analytic":
+        if isinstance(self.ray_correction, UNSTRUCTURED) and self.search == "analytic":
             raise ParameterError(
                 f"search='analytic' does not take the {self.ray_correction.name} ray model (its rays of one microlens "
                 "are not parallel): use search='kdtree' or 'auto'"
@@ -243,12 +242,13 @@ class SynthesisOptions:
 
 def uses_kdtree(camera: LightFieldCamera, options: SynthesisOptions) -> bool:
     """Whether the build searches every sample with the k-d tree: ``search="kdtree"``, or
-    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``) or with a polynomial ray
-    model (:class:`PolynomialCorrection`: the rays of one microlens are not parallel)."""
+    ``"auto"`` with the MLA off the main lens's focal plane (``f' != f``) or with a polynomial or
+    traced ray model (:data:`~lfrefract.optics.ray_correction.UNSTRUCTURED`: the rays of one
+    microlens are not parallel)."""
     if options.search == "kdtree":
         return True
     return options.search == "auto" and (
-        camera.lens_to_mla_m != camera.focal_length_m or isinstance(options.ray_correction, PolynomialCorrection)
+        camera.lens_to_mla_m != camera.focal_length_m or isinstance(options.ray_correction, UNSTRUCTURED)
     )
 
 

@@ -95,11 +95,18 @@ def test_a_calibration_file_is_read_once(tmp_path, monkeypatch):
     assert model.correction == CORRECTION
 
 
-def test_a_renders_meta_json_gives_the_thin_lens_and_its_recorded_lens(tmp_path):
+def test_a_renders_meta_json_gives_its_recorded_lens_or_names_what_is_wrong_with_it(tmp_path):
     path = tmp_path / "meta.json"
-    write_json(path, {"kind": "lfsim.render", "camera": TINY.to_dict(), "scene": {"lens": {"name": "double-gauss"}}})
+    write_json(path, {"kind": "lfsim.render", "camera": TINY.to_dict(), "scene": {"lens": "thin"}})
     model = camera_model_from_option(path)
-    assert (model.camera, model.correction, model.main_lens) == (TINY, None, "double-gauss")
+    assert (model.camera, model.correction, model.main_lens) == (TINY, None, None)
+    # a lens table that is no prescription (a name alone) is not silently the thin lens
+    write_json(path, {"kind": "lfsim.render", "camera": TINY.to_dict(), "scene": {"lens": {"name": "double-gauss"}}})
+    with pytest.raises(FileFormatError, match=r"scene\.lens is no valid lens prescription"):
+        camera_model_from_option(path)
+    # the derived summary alone (no scene.lens) names the lens, for the refusal of a thin-lens model
+    write_json(path, {"kind": "lfsim.render", "camera": TINY.to_dict(), "derived": {"main_lens": {"name": "dg"}}})
+    assert camera_model_from_option(path).main_lens == "dg"
 
 
 def test_a_polynomial_model_has_its_spread_but_no_radial_estimate(tmp_path):
@@ -152,7 +159,10 @@ def test_a_bad_spread_in_a_file_names_the_file_and_the_key(tmp_path, spread, say
     ("fields", "says"),
     [
         ({"camera": "tiny"}, "camera must be a LightFieldCamera, got str"),
-        ({"correction": {"k1": 0.1}}, "correction must be a RayCorrection, a PolynomialCorrection or None, got"),
+        (
+            {"correction": {"k1": 0.1}},
+            "correction must be a RayCorrection, a PolynomialCorrection, a TracedLens or None",
+        ),
         ({"covariance": np.eye(5)}, "covariance is that of the radial model's parameters, but the ray model is thin"),
         ({"correction": CORRECTION, "covariance": np.eye(4)}, "covariance must be a finite 5 x 5 matrix, got shape"),
         ({"correction": CORRECTION, "covariance": -np.eye(5)}, "covariance must be positive definite"),

@@ -1,7 +1,8 @@
 """A render through a real main lens, given to the core: the thin lens it is scaled to does not
 stand for it. Every command that uses the camera's rays refuses it without a calibrated ray model
 (``lfrefract synth`` on a ``--lens double-gauss`` render used the thin lens, and the board could not
-be found in its result), and names what to do; with a camera calibration it runs."""
+be found in its result), and names what to do; with a camera calibration it runs, and with the
+render's ``meta.json`` as its camera the recorded lens is traced (the true rays)."""
 
 from __future__ import annotations
 
@@ -62,14 +63,23 @@ def test_the_commands_refuse_a_real_lens_render_on_the_thin_lens(double_gauss, t
 
 
 @pytest.mark.render
-def test_a_real_lens_renders_meta_json_is_no_thin_lens_camera_for_a_bare_raw_image(double_gauss, tmp_path, capsys):
+def test_a_real_lens_renders_meta_json_as_camera_traces_its_lens(double_gauss, tmp_path, capsys):
+    # Asked for (--camera the render's meta.json), the core traces the recorded prescription: the
+    # render's true rays, the oracle of a calibration from its data; on a bare raw image too.
     bare = tmp_path / "bare"
     bare.mkdir()
     shutil.copy(double_gauss / "raw.exr", bare / "raw.exr")  # no meta.json beside it
     meta = str(double_gauss / "meta.json")
-    argv = ["synth", str(bare / "raw.exr"), "--camera", meta, "--port", meta, "--out", str(tmp_path / "s.exr")]
-    err = _refused(capsys, argv)
-    assert f"{meta!r} says the camera of --camera was taken through the real main lens 'double-gauss'" in err
+    out = tmp_path / "s.exr"
+    argv = ["synth", str(bare / "raw.exr"), "--camera", meta, "--port", meta, "--out", str(out), "--quiet"]
+    assert core_main(argv) == 0, capsys.readouterr().err
+    written = read_json(out.with_suffix(".json"))
+    assert written["options"]["ray_correction"]["family"] == "traced"
+    assert written["options"]["ray_correction"]["lens"]["name"] == "double-gauss"
+    # the views take no traced model (its rays of one view share no centre): refused, by name
+    views = ["views", str(bare / "raw.exr"), "--camera", meta, "--out", str(tmp_path / "v"), "--grid", "3"]
+    assert "no sub-aperture views" in _refused(capsys, views)
+    assert not (tmp_path / "v").exists()
 
 
 @pytest.mark.render
