@@ -4,10 +4,11 @@ For each run folder (an ``lfsim experiment pipeline --out`` folder) it prints th
 calibration puts the camera (the lens's paraxial entrance pupil, from the simulator's camera origin,
 mm), each camera's ray model, the data-only chain's rays against the true ones at the port face, its
 test-board corners, plane RMSE and error against the true plane as multiples of the oracle's (with
-each synthesis method the run used: ``--methods``), and each camera's port: normal and distance
-errors beside the standard deviations its port file states, and the error's length in that file's
-covariance. Then the coverage of the stated uncertainty over every data-only port of the runs: the
-share whose normal and distance errors each lie within three stated standard deviations.
+each synthesis method the run used: ``--methods``) and of the true-rays chain's (the same real
+captures synthesized with the lens traced and the true port: the calibration's own share), and each
+camera's port: normal and distance errors beside the standard deviations its port file states, and
+the error's length in that file's covariance. Then the coverage of the stated uncertainty over every
+data-only port of the runs: the share whose normal and distance errors each lie within three stated standard deviations.
 
     python benchmarks/pipeline_runs_table.py RUN [RUN ...]
 
@@ -33,12 +34,16 @@ def _rows(path: Path) -> list[dict]:
 
 
 def _ratio(rows: dict, chain: str, synthesis: str, key: str) -> str:
-    data = rows.get(row_label(chain, synthesis), {}).get(key, "nan")
-    oracle = rows.get(row_label("oracle", synthesis), {}).get(key, "nan")
-    value, reference = float(data), float(oracle)
-    if not (math.isfinite(value) and math.isfinite(reference) and reference > 0):
+    """``chain``'s ``key`` for ``synthesis``, with its ratio to the oracle's and to the true-rays chain's
+    (the real captures with the lens traced: what a perfect calibration gives on them), where known."""
+    value = float(rows.get(row_label(chain, synthesis), {}).get(key, "nan"))
+    if not math.isfinite(value):
         return "-"
-    return f"{value:.3f} ({value / reference:.2f}x)"
+    ratios = []
+    for reference in ("oracle", "true-rays"):
+        known = float(rows.get(row_label(reference, synthesis), {}).get(key, "nan"))
+        ratios.append(f"{value / known:.2f}x" if math.isfinite(known) and known > 0 else "-")
+    return f"{value:.3f} ({' / '.join(ratios)})"
 
 
 def _short(error: str, limit: int = 160) -> str:
@@ -58,8 +63,9 @@ def main() -> int:
     parser.add_argument("runs", type=Path, nargs="+", help="lfsim experiment pipeline --out folders")
     args = parser.parse_args()
     header = (
-        "| lens | pupil z, mm | ray model | rays at the port, mm / mrad | synthesis | corners, px (x oracle) "
-        "| plane RMSE, mm (x oracle) | error to the true plane, mm (x oracle) | status |"
+        "| lens | pupil z, mm | ray model | rays at the port, mm / mrad | synthesis "
+        "| corners, px (x oracle / x true rays) | plane RMSE, mm (x oracle / x true rays) "
+        "| error to the true plane, mm (x oracle / x true rays) | status |"
     )
     lines = [header, "|" + " --- |" * 9]
     port_lines = [
