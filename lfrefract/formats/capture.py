@@ -82,7 +82,7 @@ from lfrefract.optics.pose import Pose
 from lfrefract.optics.presets import PRESETS, camera_preset
 from lfrefract.optics.ray_correction import Correction, CorrectionEstimate, RayCorrection, correction_from_dict
 from lfrefract.optics.real_lens import RealLensCamera, TracedLens
-from lfrefract.synthesis.depth_aware import DepthAwareResult, DepthAwareSynthesis
+from lfrefract.synthesis.depth_aware import DepthAwareResult, DepthAwareSynthesis, SearchImage
 from lfrefract.validate import file_problem, one_of, shown
 
 __all__ = [
@@ -1120,14 +1120,9 @@ def apply_depth_aware(synthesis: DepthAwareSynthesis, capture: Capture) -> Depth
     developed = capture.developed
     if developed is None:
         return synthesis.apply(capture.raw, recorded=capture.ray_recorded)
-    search = developed.grey()
-    return synthesis.apply(
-        capture.raw,
-        recorded=capture.ray_recorded,
-        search_raw=search,
-        search_recorded=np.isfinite(search),
-        search_groups=cfa_channels(developed.cfa_pattern, search.shape),
-    )
+    grey = developed.grey()
+    search = SearchImage(raw=grey, recorded=np.isfinite(grey), groups=cfa_channels(developed.cfa_pattern, grey.shape))
+    return synthesis.apply(capture.raw, recorded=capture.ray_recorded, search=search)
 
 
 def mask_warp_map(warp, recorded: np.ndarray | None):

@@ -86,6 +86,7 @@ __all__ = [
     "DepthAwareSynthesis",
     "DepthEstimate",
     "SceneRays",
+    "SearchImage",
     "depth_planes_m",
     "estimate_depth",
     "render_given_depth",
@@ -114,6 +115,64 @@ _FEW_RAYS_SHARE = 0.5
 
 #: Raw pixels traced per block in :func:`trace_scene_rays` (a block's float64 buffers: about 1 kB each).
 _TRACE_BLOCK = 1 << 20
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SearchImage:
+    """The image the depth search reads, where it is not the one rendered (:meth:`DepthAwareSynthesis.apply`).
+
+    For a Lytro capture it is the mosaic, not demosaiced
+    (:meth:`lfrefract.formats.whites.DevelopedCapture.grey`): the search compares rays with each
+    other, and demosaicing mixes each pixel with its neighbours, other rays of the same micro-image
+    (a Gaussian blur of 1 px took the median confidence from 0.80 to 0.28).
+
+    Attributes
+    ----------
+    raw : ndarray, shape (H, W) or (H, W, C)
+        The image, the raw images' shape.
+    recorded : ndarray of bool, shape (H, W), optional
+        Its pixels holding a measurement (default: every pixel): the search and the render both use the
+        rays where it and the render's ``recorded`` hold.
+    groups : ndarray of int, shape (H, W), optional
+        A group per raw pixel whose rays the search compares only with each other (a mosaic's colours:
+        :func:`estimate_depth`'s ``groups``); default one group.
+
+    Raises
+    ------
+    ParameterError
+        If ``raw`` is not (H, W) or (H, W, C), or ``recorded`` or ``groups`` has another (H, W) (the
+        message names the field and the shapes).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mosaic = np.ones((4, 6))
+    >>> SearchImage(raw=mosaic, groups=np.zeros((4, 6), dtype=int)).shape
+    (4, 6)
+    """
+
+    raw: np.ndarray
+    recorded: np.ndarray | None = None
+    groups: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        raw = np.asarray(self.raw)
+        if raw.ndim not in (2, 3):
+            raise ParameterError(f"raw must be an (H, W) or (H, W, C) image, got shape {raw.shape}")
+        object.__setattr__(self, "raw", raw)
+        for name, kind in (("recorded", bool), ("groups", np.int64)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            array = np.asarray(value)
+            if array.shape != raw.shape[:2]:
+                raise ParameterError(f"{name} must have the image's shape {raw.shape[:2]}, got {array.shape}")
+            object.__setattr__(self, name, array.astype(kind, copy=False))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the image."""
+        return self.raw.shape[:2]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -734,9 +793,7 @@ class DepthAwareSynthesis:
         raw: np.ndarray,
         *,
         recorded: np.ndarray | None = None,
-        search_raw: np.ndarray | None = None,
-        search_recorded: np.ndarray | None = None,
-        search_groups: np.ndarray | None = None,
+        search: SearchImage | None = None,
     ) -> DepthAwareResult:
         """Depth, then the refraction-free image of one raw frame.
 
@@ -754,18 +811,9 @@ class DepthAwareSynthesis:
             passes the aperture elsewhere (through the double Gauss at tiny-2x, 30 % of the rays; with
             them the depth search's median confidence on a plane was 0.20, without them 0.72, the
             thin-lens render's 0.82).
-        search_raw : ndarray, shape (H, W) or (H, W, C), optional
-            The image the depth search reads instead of ``raw`` (the render reads ``raw``): for a
-            Lytro capture its mosaic, not demosaiced
-            (:meth:`lfrefract.formats.whites.DevelopedCapture.grey`). The search compares rays with
-            each other, and demosaicing mixes each pixel with its neighbours, other rays of the same
-            micro-image (a Gaussian blur of 1 px took the median confidence from 0.80 to 0.28).
-        search_recorded : ndarray of bool, shape (H, W), optional
-            Raw pixels of ``search_raw`` holding a measurement (with ``search_raw`` only; default
-            ``recorded``): the search and the render both use the rays where it and ``recorded`` hold.
-        search_groups : ndarray of int, shape (H, W), optional
-            A group per raw pixel of ``search_raw`` whose rays the search compares only with each other
-            (a mosaic's colours: :func:`estimate_depth`'s ``groups``); default one group.
+        search : SearchImage, optional
+            The image the depth search reads instead of ``raw`` (the render reads ``raw``), with its
+            recorded pixels and the groups of rays it compares; default ``raw``, one group.
 
         Returns
         -------
@@ -777,12 +825,16 @@ class DepthAwareSynthesis:
             For a raw image of another shape, and for an image with no value anywhere: every ray masked as
             unrecorded (named before the depth search), or no pixel finding a depth in the range.
         """
-        if search_raw is None and search_recorded is not None:
-            raise ParameterError("search_recorded is given without search_raw, the image it describes")
-        if search_raw is not None and search_recorded is not None:
-            recorded = search_recorded if recorded is None else np.asarray(recorded) & np.asarray(search_recorded)
+        if search is not None and not isinstance(search, SearchImage):
+            raise ParameterError(f"search must be a SearchImage or None, got {type(search).__name__}")
+        if search is not None and search.shape != tuple(self.rays.raw_shape):
+            raise ParameterError(
+                f"search must have the raw images' shape {tuple(self.rays.raw_shape)}, got {search.shape}"
+            )
+        if search is not None and search.recorded is not None:
+            recorded = search.recorded if recorded is None else np.asarray(recorded) & search.recorded
         values, keep = self.rays.values(raw, recorded=recorded)
-        searched = values if search_raw is None else self.rays.values(search_raw, recorded=recorded)[0]
+        searched = values if search is None else self.rays.values(search.raw, recorded=recorded)[0]
         unrecorded = 0 if recorded is None else int(np.size(recorded) - np.count_nonzero(recorded))
 
         def why() -> str:
@@ -792,14 +844,7 @@ class DepthAwareSynthesis:
 
         require_a_value(keep, what="the depth-aware image", because=why)  # before the sweep: it would blame the depths
         rays = self.rays.kept(keep)  # once for the sweep and the render
-        groups = None
-        if search_groups is not None:
-            if np.shape(search_groups) != tuple(self.rays.raw_shape):
-                shape = tuple(self.rays.raw_shape)
-                raise ParameterError(
-                    f"search_groups must have the raw images' shape {shape}, got {np.shape(search_groups)}"
-                )
-            groups = np.asarray(search_groups).reshape(-1)[rays.raw_index]
+        groups = None if search is None or search.groups is None else search.groups.reshape(-1)[rays.raw_index]
         depth = estimate_depth(rays, searched, self.output, self.options, groups=groups)
         if not np.any(np.isfinite(depth.depth_m)):
             used_share = np.count_nonzero(keep) / max(len(keep), 1)

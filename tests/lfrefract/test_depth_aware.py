@@ -28,6 +28,7 @@ from lfrefract.synthesis.depth_aware import (
     DepthAwareOptions,
     DepthAwareSynthesis,
     SceneRays,
+    SearchImage,
     depth_planes_m,
     estimate_depth,
     render_given_depth,
@@ -397,3 +398,16 @@ def test_the_sweep_in_groups_of_planes_gives_the_single_calls_depth_bit_for_bit(
     assert np.isfinite(whole.depth_m).any()
     for name in ("depth_m", "confidence", "plane_index", "depths_m"):
         np.testing.assert_array_equal(getattr(grouped, name), getattr(whole, name))
+
+
+def test_a_search_image_is_checked_once_where_it_is_made():
+    mosaic = np.zeros((4, 6))
+    with pytest.raises(ParameterError, match=r"groups must have the image's shape \(4, 6\), got \(4, 5\)"):
+        SearchImage(raw=mosaic, groups=np.zeros((4, 5), dtype=int))
+    with pytest.raises(ParameterError, match=r"recorded must have the image's shape"):
+        SearchImage(raw=mosaic, recorded=np.ones((3, 6), dtype=bool))
+    with pytest.raises(ParameterError, match="raw must be an"):
+        SearchImage(raw=np.zeros(5))
+    search = SearchImage(raw=mosaic, recorded=np.ones((4, 6)), groups=np.ones((4, 6)))
+    assert search.recorded.dtype == bool
+    assert search.groups.dtype == np.int64
