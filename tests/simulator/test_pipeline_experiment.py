@@ -66,9 +66,16 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert all(row["status"] == "ok" for row in rows.values()), [r["error"] for r in rows.values()]
     assert all(math.isfinite(rows[m][k]) for m in METHODS for k in MEASURES)
     oracle, data, thin = rows["oracle"], rows["data-only"], rows["thin-lens-assumed"]
+    true_rays = rows["true-rays"]
     for key in ("plane_rmse_mm", "truth_error_mm"):
         assert data[key] < PIPELINE_PLANE_RATIO * oracle[key], key
+        assert data[key] < PIPELINE_PLANE_RATIO * true_rays[key], key
     assert data["corner_rms_px"] < PIPELINE_CORNER_RATIO * oracle["corner_rms_px"]
+    # the real captures with the lens traced and the true port: the oracle of a real-lens capture
+    assert data["corner_rms_px"] < PIPELINE_CORNER_RATIO * true_rays["corner_rms_px"]
+    assert true_rays["ray_rms_mm"] < 1e-9
+    assert true_rays["port_normal_err_deg"] < 1e-5
+    assert true_rays["ray_model"] == "left traced double-gauss, right traced double-gauss"
     assert data["corner_rms_px"] < PIPELINE_CORNER_GAIN * thin["corner_rms_px"]
     assert data["port_normal_err_deg"] < PIPELINE_PORT_NORMAL_DEG < thin["port_normal_err_deg"]
     assert data["ray_rms_mm"] < thin["ray_rms_mm"]
