@@ -5,7 +5,8 @@ calibration puts the camera (the lens's paraxial entrance pupil, from the simula
 mm), each camera's ray model, the data-only chain's rays against the true ones at the port face, its
 test-board corners, plane RMSE and error against the true plane as multiples of the oracle's (with
 each synthesis method the run used: ``--methods``) and of the true-rays chain's (the same real
-captures synthesized with the lens traced and the true port: the calibration's own share), and each
+captures synthesized with the lens traced and the true port: the calibration's own share), the
+share of the test-board corners each renders exactly (where the run measured it), and each
 camera's port: normal and distance errors beside the standard deviations its port file states, and
 the error's length in that file's covariance. Then the coverage of the stated uncertainty over every
 data-only port of the runs: the share whose normal and distance errors each lie within three stated standard deviations.
@@ -46,6 +47,15 @@ def _ratio(rows: dict, chain: str, synthesis: str, key: str) -> str:
     return f"{value:.3f} ({' / '.join(ratios)})"
 
 
+def _exact_share(rows: dict, synthesis: str) -> str:
+    """The share of the test-board corners the data-only and the true-rays chains render exactly."""
+    shares = []
+    for chain in ("data-only", "true-rays"):
+        value = float(rows.get(row_label(chain, synthesis), {}).get("corners_exact_share", "nan") or "nan")
+        shares.append(f"{100 * value:.0f} %" if math.isfinite(value) else "-")
+    return f"{shares[0]} ({shares[1]})"
+
+
 def _short(error: str, limit: int = 160) -> str:
     """The first ``limit`` characters of a row's error (its first camera's, where both failed alike)."""
     return error if len(error) <= limit else error[: limit - 3] + "..."
@@ -65,9 +75,9 @@ def main() -> int:
     header = (
         "| lens | pupil z, mm | ray model | rays at the port, mm / mrad | synthesis "
         "| corners, px (x oracle / x true rays) | plane RMSE, mm (x oracle / x true rays) "
-        "| error to the true plane, mm (x oracle / x true rays) | status |"
+        "| error to the true plane, mm (x oracle / x true rays) | corners rendered exactly (true rays) | status |"
     )
-    lines = [header, "|" + " --- |" * 9]
+    lines = [header, "|" + " --- |" * 10]
     port_lines = [
         "| lens | camera | normal error, deg (stated) | distance error, mm (stated) | error / stated covariance |",
         "|" + " --- |" * 5,
@@ -96,6 +106,7 @@ def main() -> int:
                 _ratio(rows, "data-only", synthesis, "corner_rms_px"),
                 _ratio(rows, "data-only", synthesis, "plane_rmse_mm"),
                 _ratio(rows, "data-only", synthesis, "truth_error_mm"),
+                _exact_share(rows, synthesis),
                 str(row.get("status", "-")) + (f": {_short(row['error'])}" if row.get("error") else ""),
             ]
             lines.append("| " + " | ".join(cells) + " |")

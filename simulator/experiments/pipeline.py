@@ -62,6 +62,9 @@ triangulated, as in ``planes``. Columns (units in the names):
   alignment) and the angle between them;
 - ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``;
 - ``test_boards_found``: of the test boards' views, how many the method's images show the board in;
+  ``corners_exact_share``: of their corners found, the share on output pixels the method renders
+  exactly (its synthesis's classes: exact, or exact given the pixel's depth), the rest from nearby
+  rays (a real lens's vignetted pupil narrows its exact cone);
   ``boards_left_out``: the board captures (relative to ``delivered/``) that the method's camera and
   port calibrations left out, their board not located (``lfrefract calibrate``'s ``left_out``).
 - ``ray_model``: each camera's ray model as its port and synthesis used it (:func:`ray_model_name`).
@@ -116,7 +119,8 @@ from lfrefract.optics.port import FlatPort
 from lfrefract.optics.pose import Pose
 from lfrefract.optics.ray_correction import PolynomialCorrection
 from lfrefract.optics.real_lens import RealLensCamera
-from lfrefract.synthesis.warp_map import PAPER_K
+from lfrefract.synthesis.depth_aware import FILLED_EXACT_GIVEN_DEPTH
+from lfrefract.synthesis.warp_map import FILLED_EXACT, PAPER_K
 from simulator import boards as board_scenes
 from simulator.config import (
     THIN_LENS,
@@ -1021,10 +1025,13 @@ def _corner_measures(
     tests: dict[str, Chessboard],
     rig: RigConfig,
     origins: dict[str, np.ndarray],
+    synth_dir: Path,
 ) -> dict:
-    """The test boards' corners in the method's images against their true projections by its ``K``
-    from each camera's ``origins``."""
-    squared, found, total = [], 0, 0
+    """The test boards' corners in the method's images (``synth_dir/<camera>/<capture>.exr``) against
+    their true projections by its ``K`` from each camera's ``origins``, and the share of the corners
+    found whose output pixel the method renders exactly (its ``.filled.exr`` class: exact, or exact
+    given its depth)."""
+    squared, found, total, exact = [], 0, 0, []
     for name, board in tests.items():
         world = board_scenes.chessboard_corners_world(board)
         for camera in rig.cameras:
@@ -1035,8 +1042,13 @@ def _corner_measures(
             found += 1
             expected = images.outputs[camera.name].project(camera.scene.pose.to_camera(world) - origins[camera.name])
             squared.append(np.sum(board_scenes.aligned_errors_px(corners, expected) ** 2, axis=1))
+            classes = np.asarray(read_exr(synth_dir / camera.name / f"{shots[name].folder.name}.filled.exr"))
+            classes = classes[..., 0] if classes.ndim == 3 else classes
+            col, row = np.clip(np.rint(corners).astype(int), 0, [classes.shape[1] - 1, classes.shape[0] - 1]).T
+            exact.append(np.isin(classes[row, col], (FILLED_EXACT, FILLED_EXACT_GIVEN_DEPTH)))
     rms = float(np.sqrt(np.mean(np.concatenate(squared)))) if squared else math.nan
-    return {"corner_rms_px": rms, "test_boards_found": f"{found}/{total}"}
+    share = float(np.mean(np.concatenate(exact))) if exact else math.nan
+    return {"corner_rms_px": rms, "test_boards_found": f"{found}/{total}", "corners_exact_share": share}
 
 
 def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *, progress: bool) -> ExperimentResult:
@@ -1097,15 +1109,16 @@ def _run(out_dir: Path, options: ExperimentOptions, work: Path, scratch: Path, *
         labels.append(label)
         chain, shots = models[method], oracle if method == "oracle" else captures
         row: dict = {"method": label, "synthesis": synthesis} | dict.fromkeys(MEASURES, math.nan)
-        row |= {"test_boards_found": "", "boards_left_out": " ".join(chain.left_out)}
+        row |= {"test_boards_found": "", "corners_exact_share": math.nan, "boards_left_out": " ".join(chain.left_out)}
         row["ray_model"] = ", ".join(f"{camera} {name}" for camera, name in chain.ray_models.items())
         error = chain.error_of(synthesis)
         prepared = PreparedMethod(name=label, error=error)
         if error is None:
-            images = _images(products / "synth" / synthesis / method, names, jobs[0][0])
+            synth_dir = products / "synth" / synthesis / method
+            images = _images(synth_dir, names, jobs[0][0])
             boards = [(shots[name], size) for name, size in squares.items()]
             prepared = calibrate_method_rig(label, images, boards, cameras=(names[0], names[1]))
-            row |= _corner_measures(images, shots, tests, thin, origins[method])
+            row |= _corner_measures(images, shots, tests, thin, origins[method], synth_dir)
             row["port_normal_err_deg"], row["port_distance_err_mm"] = _port_errors(chain.ports, thin, origins[method])
             row |= _ray_measures(chain.rays, true_rays[method], thin, origins[method])
         if prepared.ok:
