@@ -76,6 +76,8 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert true_rays["ray_rms_mm"] < 1e-9
     assert true_rays["port_normal_err_deg"] < 1e-5
     assert true_rays["ray_model"] == "left traced double-gauss, right traced double-gauss"
+    # at tiny the test boards lie inside the exact cone of the thin lens and of the double Gauss's true rays
+    assert oracle["corners_exact_share"] == true_rays["corners_exact_share"] == 1.0
     assert data["corner_rms_px"] < PIPELINE_CORNER_GAIN * thin["corner_rms_px"]
     assert data["port_normal_err_deg"] < PIPELINE_PORT_NORMAL_DEG < thin["port_normal_err_deg"]
     assert data["ray_rms_mm"] < thin["ray_rms_mm"]
