@@ -543,7 +543,8 @@ def _unrecorded_summary(capture: Capture, by_cfa: bool) -> dict | None:
     if not developed.flagged.any():
         return None
     return {
-        "policy": "masked as unrecorded (a Lytro capture's saturated pixels and its white image's bad pixels)",
+        "policy": "masked as unrecorded (a Lytro capture's saturated pixels, its white image's bad pixels and the "
+        "pixels the white does not light)",
         "pixels": int(developed.flagged.sum()),
     }
 

@@ -453,7 +453,11 @@ class Capture:
         if self.recorded is None:
             return None
         lytro = bool(self.sidecar) and "lytro" in (self.sidecar or {})
-        policy = "a Lytro capture's saturated pixels and its white image's bad pixels" if lytro else "--nonfinite mask"
+        policy = (
+            "a Lytro capture's saturated pixels, its white image's bad pixels and the pixels the white does not light"
+            if lytro
+            else "--nonfinite mask"
+        )
         return {"policy": f"masked as unrecorded ({policy})", **self.unrecorded.to_dict()}
 
 

@@ -12,13 +12,14 @@ capture's mosaic into the linear image the core works on:
 2. each pixel is divided by the white's (devignetting: the main lens's fall-off, each micro-image's
    edge and the colour filters' response all cancel), so 1 is the white image's brightness; where
    the white holds less than :data:`MIN_WHITE_FRACTION` of its bright level (the gaps between
-   micro-images, a vignetted rim) there is no light to measure and the value is 0;
+   micro-images, a vignetted rim) there is no light to measure: the value is 0 for the demosaicing,
+   and the pixel is unrecorded;
 3. pixels that cannot be trusted are flagged: saturated in the capture (at the white level, so their
    value is only a lower bound) and bad in the white (:func:`bad_pixels`: saturated there, or far
    darker than their bright neighbours);
 4. the result is demosaiced (OpenCV, :func:`lfrefract.formats.mosaic.demosaic_values`) into camera
-   RGB, and every flagged pixel with the 3 x 3 neighbourhood its value was spread to is NaN
-   (unrecorded: the core's commands give it no weight);
+   RGB, and every flagged pixel with the 3 x 3 neighbourhood its value was spread to, and every
+   pixel the white does not light, is NaN (unrecorded: the core's commands give it no weight);
 5. the file's colour matrix takes the (balanced) camera RGB to linear RGB: the colour filters pass
    mixtures of the scene's colours, which devignetting by a white alone does not undo. Its negative
    entries can take a dark, noisy pixel's colour below 0, which is clipped to 0.
@@ -585,7 +586,12 @@ class DevelopedCapture:
         Lit pixels that no stop vignettes in part (:attr:`FlatField.fully_lit`; every pixel without a
         white): those whose ray is the camera model's.
     unrecorded : ndarray of bool, shape (H, W)
-        The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach).
+        The NaN pixels of ``image``: ``flagged`` grown by one pixel (the demosaicing's reach), and
+        the pixels not ``lit``. A real main lens's micro-images are smaller than the disc a camera
+        model's aperture gives them (its stops vignette them), so unlit pixels lie inside it too: read
+        as 0 they were black samples in the synthesis (through the Heliar design at tiny-2x a test
+        board's corners 0.36 px RMS off where they were found, and in one view of four not found;
+        with them unrecorded 0.32 px and found).
     white : WhiteImage or None
         The white image used.
     color_matrix : ndarray, shape (3, 3)
@@ -608,13 +614,12 @@ class DevelopedCapture:
     def measured(self) -> np.ndarray:
         """:attr:`image` with the pixels the white does not light fully unrecorded (NaN) too.
 
-        In :attr:`image` unlit pixels are 0, which suits a synthesis (they lie in the gaps between
-        micro-images, outside every micro-image's usable disc) but not a fit on every raw pixel: at
-        the field's edge the main lens vignettes parts of micro-images, and read as 0 those parts
-        are black samples (an Illum in-air board 17.5 deg off the axis had 9 of its 24 corners
-        located in the light field so; 24 with them unrecorded). The pixels on the edge of such a
-        part, lit in part (not :attr:`fully_lit`), are unrecorded too: their light passes the
-        aperture away from where the camera model puts their ray.
+        In :attr:`image` unlit pixels are unrecorded; a fit on every raw pixel (the light field's
+        chessboard corners) leaves out those lit in part as well (not :attr:`fully_lit`): their light
+        passes the aperture away from where the camera model puts their ray (at the field's edge,
+        where the main lens vignettes parts of micro-images, an Illum in-air board 17.5 deg off the
+        axis had 9 of its 24 corners located in the light field with its unlit pixels read as 0, 24
+        with them unrecorded).
 
         Returns
         -------
@@ -721,7 +726,7 @@ def develop(
     # The colour matrix has negative entries: in dark pixels noise can take a colour below 0, which is
     # no radiance; it is clipped to 0 (a bias of a fraction of the noise there).
     image = np.maximum(demosaic_values(kept, mosaic.cfa_pattern, method=method) @ matrix.T, 0.0).astype(np.float32)
-    unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool))
+    unrecorded = ndimage.binary_dilation(flagged, structure=np.ones((3, 3), dtype=bool)) | ~usable
     image[unrecorded] = np.nan
     return DevelopedCapture(
         image=image,

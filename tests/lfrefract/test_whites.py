@@ -211,7 +211,10 @@ def test_read_capture_takes_lytro_files_and_their_white(tmp_path):
     assert capture.raw.shape == (150, 200, 3)
     assert capture.sidecar["lytro"]["white"]["file"] == str(white_path)
     assert capture.sidecar_path is None
-    assert capture.recorded is None
+    # What the white does not light records nothing: a synthesis gives it no weight (nothing here is
+    # saturated or bad, so that is all that is unrecorded).
+    np.testing.assert_array_equal(capture.recorded, capture.developed.lit)
+    assert (~capture.developed.lit).any()
     # A board command reads what the white does not light as unrecorded, not as black: at the
     # field's edge the main lens vignettes parts of micro-images, which the light-field corner fit
     # took for black squares (an Illum in-air board 17.5 deg off the axis: 9 of 24 corners located).
