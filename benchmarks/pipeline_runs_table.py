@@ -107,7 +107,9 @@ def main() -> int:
                 _ratio(rows, "data-only", synthesis, "plane_rmse_mm"),
                 _ratio(rows, "data-only", synthesis, "truth_error_mm"),
                 _exact_share(rows, synthesis),
-                str(row.get("status", "-")) + (f": {_short(row['error'])}" if row.get("error") else ""),
+                str(row.get("status", "-"))
+                + (f": {_short(row['error'])}" if row.get("error") else "")
+                + f" (true rays: {rows.get(row_label('true-rays', synthesis), {}).get('status', '-')})",
             ]
             lines.append("| " + " | ".join(cells) + " |")
         ports = run / "ports.csv"
