@@ -67,9 +67,12 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert all(math.isfinite(rows[m][k]) for m in METHODS for k in MEASURES)
     oracle, data, thin = rows["oracle"], rows["data-only"], rows["thin-lens-assumed"]
     true_rays = rows["true-rays"]
+    # Against the oracle of a real-lens capture (its lens traced, the true port: the same images), and the
+    # error to the true plane against the thin-lens oracle's too; the plane fit's RMSE is not held to the
+    # thin-lens oracle's (tests/tolerances.py: it also carries the real lens's image formation).
     for key in ("plane_rmse_mm", "truth_error_mm"):
-        assert data[key] < PIPELINE_PLANE_RATIO * oracle[key], key
         assert data[key] < PIPELINE_PLANE_RATIO * true_rays[key], key
+    assert data["truth_error_mm"] < PIPELINE_PLANE_RATIO * oracle["truth_error_mm"]
     assert data["corner_rms_px"] < PIPELINE_CORNER_RATIO * oracle["corner_rms_px"]
     # the real captures with the lens traced and the true port: the oracle of a real-lens capture
     assert data["corner_rms_px"] < PIPELINE_CORNER_RATIO * true_rays["corner_rms_px"]
