@@ -144,7 +144,7 @@ class CameraCalibration:
     """
 
     camera: LightFieldCamera
-    correction: Correction
+    correction: RayCorrection | PolynomialCorrection
     ray_rms_m: float
     initial_ray_rms_m: float
     per_view_rms_m: tuple[float, ...]

@@ -51,7 +51,7 @@ def clustered_covariance(bread: np.ndarray, scores: Sequence[np.ndarray]) -> np.
 
 
 def fit_covariances(
-    jac: np.ndarray, residuals: np.ndarray, bread: np.ndarray, sigma2: float, bounds: Sequence[int]
+    jac: np.ndarray, residuals: np.ndarray, bread: np.ndarray, sigma2: float, bounds: Sequence[int] | np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """A least-squares fit's two covariances of its parameters: the Jacobian's, ``bread * sigma2``
     (every residual independent, of variance ``sigma2``), and the one clustered by capture
@@ -69,7 +69,7 @@ def fit_covariances(
         ``(J^T J)^-1``.
     sigma2 : float
         The residuals' variance.
-    bounds : sequence of int
+    bounds : sequence of int, or ndarray of int
         Where each cluster's rows start, and the last's end (``K + 1`` numbers for ``K`` clusters).
 
     Examples

@@ -192,8 +192,9 @@ class RealLensCamera:
         """
         cam = self.camera
         ratio = self.micro_image_scale / cam.micro_image_scale
+        offset_x, offset_y = cam.mla.offset_m
         mla = dataclasses.replace(
-            cam.mla, pitch_m=cam.mla.pitch_m * ratio, offset_m=tuple(float(v) * ratio for v in cam.mla.offset_m)
+            cam.mla, pitch_m=cam.mla.pitch_m * ratio, offset_m=(offset_x * ratio, offset_y * ratio)
         )
         return dataclasses.replace(cam, mla=mla)
 
@@ -316,7 +317,7 @@ class TracedLens:
     """
 
     real: RealLensCamera
-    camera: LightFieldCamera | None = None
+    camera: LightFieldCamera = None  # type: ignore[assignment]  # None: real.lattice_camera (__post_init__)
 
     def __post_init__(self) -> None:
         if not isinstance(self.real, RealLensCamera):
