@@ -396,7 +396,7 @@ class TracedLens:
         if not np.any(live):
             return a, t, found
         cam = self.camera
-        start_z = self.extent_z_m_front + _TRACE_START_GAP_M  # in front of the lens, in air
+        start_z = self.real.extent_z_m[1] + _TRACE_START_GAP_M  # in front of the lens, in air
         pl, dl = p[live], d[live]
         start = pl + dl * ((start_z - pl[:, 2]) / dl[:, 2])[:, None]
         trace = trace_lens(self.real.lens, start, -dl, toward="image")
@@ -414,11 +414,6 @@ class TracedLens:
         t[rows] = twin.directions_cam[:, :2] / twin.directions_cam[:, 2:3]
         found[rows] = True
         return a, t, found
-
-    @property
-    def extent_z_m_front(self) -> float:
-        """Camera-frame z of the lens's frontmost point, metres (:attr:`RealLensCamera.extent_z_m`)."""
-        return self.real.extent_z_m[1]
 
     def corrected(self, rays: CapturedRays) -> CapturedRays:
         """``rays`` (thin-lens captured rays of :attr:`camera`) traced; ``in_aperture`` also
