@@ -87,7 +87,7 @@ from lfrefract._memory import available_cpus, depth_aware_bytes, require_memory,
 from lfrefract.calibration import calibrate_approx, calibrate_mla, calibrate_port, calibrate_port_and_camera
 from lfrefract.calibration.advice import PortAdvice, advise_port_views
 from lfrefract.calibration.approx import KIND as APPROX_KIND
-from lfrefract.calibration.approx import MIN_PX_PER_SQUARE, square_size
+from lfrefract.calibration.approx import MIN_PATTERN_SIDE, MIN_PX_PER_SQUARE, PART_MIN_CORNERS, square_size
 from lfrefract.calibration.camera import CAMERA_CALIBRATION_KIND, RAY_MODELS, calibrate_camera, corrected_view
 from lfrefract.calibration.camera import MIN_VIEWS as CAMERA_MIN_VIEWS
 from lfrefract.calibration.joint import JointCalibration
@@ -722,16 +722,10 @@ def _known(camera: LightFieldCamera | None, where: object) -> LightFieldCamera:
 def _board_parameters(args: argparse.Namespace, given: CameraModel | None) -> CaptureParameters:
     """The parameters of the first board capture, after every capture's sidecar is checked (before
     any raw image is read) and found to have the same camera (or ``--camera`` is given)."""
-    if min(args.squares) < 3:
+    if min(args.squares) < MIN_PATTERN_SIDE + 1:
         raise ParameterError(
-            "--squares must be at least 3 x 3 (2 x 2 inner corners, the fewest the detector finds), "
-            f"got {args.squares!r}"
-        )
-    inner = (args.squares[0] - 1) * (args.squares[1] - 1)
-    if args.target != "approx" and inner < MIN_BOARD_CORNERS:
-        raise ParameterError(
-            f"--squares {args.squares[0]} {args.squares[1]} has {inner} inner corners; a board located in the light "
-            f"field needs at least {MIN_BOARD_CORNERS}"
+            f"--squares must be at least {MIN_PATTERN_SIDE + 1} x {MIN_PATTERN_SIDE + 1} ({MIN_PATTERN_SIDE} x "
+            f"{MIN_PATTERN_SIDE} inner corners, the fewest the detector finds), got {args.squares!r}"
         )
     for size in args.square_size_m if isinstance(args.square_size_m, list) else [args.square_size_m]:
         square_size("--square-size-m", size)
@@ -1058,7 +1052,10 @@ def _square_sizes(args: argparse.Namespace) -> list[float]:
 
 
 #: Why a board capture is left out of a calibration (``left_out`` of its JSON file).
-NOT_LOCATED = "no chessboard with {cols} x {rows} inner corners found in its central view, or under 8 located"
+NOT_LOCATED = (
+    "no chessboard of {cols} x {rows} inner corners, nor a part of one with "
+    f"{PART_MIN_CORNERS} or more, found in its central view, or under {MIN_BOARD_CORNERS} located"
+)
 
 
 @dataclass(frozen=True)

@@ -49,12 +49,25 @@ from lfrefract.formats.jsonio import read_json, write_json
 from lfrefract.optics.pinhole import PinholeCamera
 from lfrefract.validate import as_points, finite_float, positive_float, positive_int, reject_unknown_keys, require_keys
 
-__all__ = ["DISTORTION_MODEL", "MIN_PX_PER_SQUARE", "ApproxCalibration", "calibrate_approx", "detect_chessboard"]
+__all__ = [
+    "DISTORTION_MODEL",
+    "MIN_PATTERN_SIDE",
+    "MIN_PX_PER_SQUARE",
+    "PART_MIN_CORNERS",
+    "ApproxCalibration",
+    "BoardLattice",
+    "calibrate_approx",
+    "detect_board_lattice",
+    "detect_chessboard",
+]
 
 #: Fewest pixels a chessboard square spans in an image where :func:`detect_chessboard` can find it
 #: (OpenCV's detector needs a few pixels of each square around every corner): a board of more
 #: squares than the image holds at this size is no board the commands could locate.
 MIN_PX_PER_SQUARE = 3
+
+#: Fewest inner corners per side of a pattern OpenCV's sector-based detector looks for.
+MIN_PATTERN_SIDE = 3
 
 #: Names of the distortion coefficients, in OpenCV's order.
 DISTORTION_MODEL = ("k1", "k2", "p1", "p2", "k3")
@@ -100,8 +113,11 @@ def _pattern(pattern: Any) -> tuple[int, int]:
     if len(items) != 2:
         raise ParameterError(f"pattern must be (columns, rows) of inner corners, got {pattern!r}")
     cols, rows = (positive_int(f"pattern[{i}]", n) for i, n in enumerate(items))
-    if cols < 2 or rows < 2:
-        raise ParameterError(f"pattern must have at least 2 inner corners per side, got {pattern!r}")
+    if cols < MIN_PATTERN_SIDE or rows < MIN_PATTERN_SIDE:
+        raise ParameterError(
+            f"pattern must have at least {MIN_PATTERN_SIDE} inner corners per side (OpenCV's detector finds no "
+            f"fewer), got {pattern!r}"
+        )
     return cols, rows
 
 
@@ -228,10 +244,7 @@ def detect_chessboard(
         # finds no pattern on such a board or a scrambled one (below): look for the board's own.
         _refuse_larger_board(grey, (cols, rows), name, candidates=[(cols + 1, rows + 1)])
         return None
-    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-    linear = grey.astype(np.float32)  # unclipped: the saddle of the board's own edges
-    refined = cv2.cornerSubPix(linear, corners.astype(np.float32), (half, half), (-1, -1), criteria)
-    found = refined.reshape(-1, 2).astype(np.float64)
+    found = _sub_pixel(grey, corners.reshape(-1, 2), half)
     lattice, continues = _lattice_check(grey, found, (cols, rows))
     if lattice and not continues:
         return found
@@ -303,9 +316,10 @@ def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, in
     return lattice, continues
 
 
-def _find_chessboard(grey: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
-    """OpenCV's corners (N, 1, 2) of ``pattern`` in ``grey`` (:func:`_grey`) scaled to each of
-    :data:`WHITE_PERCENTILES` in turn, unrefined; None if not found."""
+def _detector_images(grey: np.ndarray):
+    """``grey`` (:func:`_grey`) as the 8-bit images OpenCV's detector is given: scaled to each of
+    :data:`WHITE_PERCENTILES` in turn (one black at a percentile, a small board on a black
+    background, skipped), OpenCV's random generator seeded before each."""
     for percentile in WHITE_PERCENTILES:
         gray8 = _gray8(grey, percentile=percentile)
         if gray8 is None:
@@ -313,11 +327,31 @@ def _find_chessboard(grey: np.ndarray, pattern: tuple[int, int]) -> np.ndarray |
         # The exhaustive search draws from OpenCV's random generator: unseeded, a pattern smaller
         # than the board was found in 3 of 8 calls on one image. Seeded, one image gives one answer.
         cv2.setRNGSeed(0)
-        found, corners = cv2.findChessboardCornersSB(
-            gray8, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-        )
+        yield gray8
+
+
+_DETECTOR_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+
+
+def _find_chessboard(grey: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
+    """OpenCV's corners (N, 1, 2) of ``pattern`` in ``grey`` (:func:`_grey`), unrefined; None if not
+    found in any of :func:`_detector_images`."""
+    for gray8 in _detector_images(grey):
+        found, corners = cv2.findChessboardCornersSB(gray8, pattern, flags=_DETECTOR_FLAGS)
         if found:
             return corners
+    return None
+
+
+def _find_lattice(grey: np.ndarray) -> tuple[np.ndarray, tuple[int, int]] | None:
+    """OpenCV's largest lattice of chessboard corners in ``grey`` (at least 3 x 3, as far as squares
+    are seen): its corners (N, 2), unrefined, and its shape (rows, columns); None if none is found."""
+    for gray8 in _detector_images(grey):
+        found, corners, meta = cv2.findChessboardCornersSBWithMeta(
+            gray8, (3, 3), flags=_DETECTOR_FLAGS | cv2.CALIB_CB_LARGER
+        )
+        if found:
+            return corners.reshape(-1, 2).astype(np.float64), (int(meta.shape[0]), int(meta.shape[1]))
     return None
 
 
@@ -348,6 +382,153 @@ def _refuse_larger_board(
                 f"pattern {pattern!r} gives ({cols + 1} x {rows + 1} squares); give the board's own squares "
                 f"(--squares {c + 1} {r + 1})"
             )
+
+
+#: Fewest inner corners a board seen in part (:func:`detect_board_lattice`) must show as X-junctions.
+PART_MIN_CORNERS = 9
+
+
+@dataclass(frozen=True, eq=False)
+class BoardLattice:
+    """The inner corners of a chessboard seen whole or in part: a ``rows x columns`` lattice of them.
+
+    Attributes
+    ----------
+    corners_px : ndarray, float64, shape (rows * columns, 2)
+        Corner pixels ``(u, v)``, row by row with the column index fastest (OpenCV's convention:
+        pixel centres at integers). Where ``valid`` is False, the lattice's place for a corner the
+        image does not show (a projective fit to the valid corners): a start, not a measurement.
+    shape : (int, int)
+        ``(rows, columns)`` of the lattice: the pattern's (either way round) for a whole board, fewer
+        where the view cuts the board.
+    valid : ndarray of bool, shape (rows * columns,)
+        Which corners the image shows as chessboard corners (X-junctions at their lattice places).
+    whole : bool
+        Whether the lattice is the whole pattern and every corner of it is valid.
+    """
+
+    corners_px: np.ndarray
+    shape: tuple[int, int]
+    valid: np.ndarray
+    whole: bool
+
+    @property
+    def pattern(self) -> tuple[int, int]:
+        """``(columns, rows)``: the lattice as an OpenCV ``patternSize``."""
+        return self.shape[1], self.shape[0]
+
+    def board_points_m(self, square_size_m: float) -> np.ndarray:
+        """The corners' places on the board, shape (rows * columns, 2), metres, centred on the lattice.
+
+        A chessboard's inner corners are a square lattice, so which part of the board a lattice is,
+        and which way round, is a rigid motion of the board that its pose absorbs."""
+        rows, cols = self.shape
+        jj, ii = np.mgrid[0:rows, 0:cols]
+        points = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
+        return points * square_size_m
+
+
+def detect_board_lattice(
+    image: np.ndarray, pattern: tuple[int, int], *, refine_half_window_px: int = 3, name: str = "image"
+) -> BoardLattice | None:
+    """Find a chessboard's inner corners in an image: the whole board, or the part of it seen.
+
+    The whole board first (:func:`detect_chessboard`). Where the view cuts the board (it reaches
+    past the image's edge, or past a lens's image circle), OpenCV's detector looks for any lattice
+    of at least 3 x 3 corners and grows it as far as the image shows squares
+    (``findChessboardCornersSBWithMeta`` with ``CALIB_CB_LARGER``), else (its search can take a wrong
+    turn at the cut) for every smaller pattern, largest first. The corners are refined as
+    :func:`detect_chessboard`'s and each is valid if it is an X-junction at its lattice place; rows
+    and columns without one are trimmed away. A calibration needs only the corners' places on the
+    board (:meth:`BoardLattice.board_points_m`), not which of the board's corners they are.
+
+    Parameters
+    ----------
+    image, pattern, refine_half_window_px, name
+        As for :func:`detect_chessboard`.
+
+    Returns
+    -------
+    BoardLattice or None
+        None if no lattice with at least :data:`PART_MIN_CORNERS` valid corners is found.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`detect_chessboard`; also if the lattice seen is larger than ``pattern`` either way
+        round (the board has more squares than the pattern says).
+    """
+    cols, rows = _pattern(pattern)
+    whole = detect_chessboard(image, (cols, rows), refine_half_window_px=refine_half_window_px, name=name)
+    if whole is not None:
+        return BoardLattice(whole, (rows, cols), np.ones(len(whole), dtype=bool), True)
+    half = positive_int("refine_half_window_px", refine_half_window_px)
+    grey = _grey(name, _as_image(name, image))
+    found = _find_lattice(grey)
+    lattice = None if found is None else _seen_lattice(grey, *found, half=half, pattern=(cols, rows), name=name)
+    if lattice is not None:
+        return lattice
+    # OpenCV's growing search can take a wrong turn where the image cuts the board (its corners then
+    # are no lattice): every smaller pattern, largest first, as OpenCV finds it (not grown).
+    smaller = {
+        (c, r)
+        for c in range(3, max(cols, rows) + 1)
+        for r in range(3, max(cols, rows) + 1)
+        if ((c <= cols and r <= rows) or (c <= rows and r <= cols)) and {c, r} != {cols, rows}
+    }
+    for c, r in sorted(smaller, key=lambda cr: (-cr[0] * cr[1], cr)):
+        corners = _find_chessboard(grey, (c, r))
+        lattice = (
+            None
+            if corners is None
+            else _seen_lattice(grey, corners, (r, c), half=half, pattern=(cols, rows), name=name)
+        )
+        if lattice is not None:
+            return lattice
+    return None
+
+
+def _seen_lattice(
+    grey: np.ndarray, corners: np.ndarray, shape: tuple[int, int], *, half: int, pattern: tuple[int, int], name: str
+) -> BoardLattice | None:
+    """A lattice OpenCV found (``corners`` row by row, ``shape`` (rows, columns)) as the part of the
+    board it shows (:func:`detect_board_lattice`); None if it shows under :data:`PART_MIN_CORNERS`."""
+    cols, rows = pattern
+    grid = _sub_pixel(grey, corners, half).reshape((*shape, 2))
+    score, spread = _x_junctions(grey, grid, np.gradient(grid, axis=1), np.gradient(grid, axis=0))
+    valid = (score > X_JUNCTION_MIN_SCORE) & (spread > X_JUNCTION_MIN_CONTRAST * float(np.median(spread)))
+    kept_rows, kept_cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    if np.count_nonzero(valid) < PART_MIN_CORNERS or len(kept_rows) < 2 or len(kept_cols) < 2:
+        return None
+    box = np.s_[kept_rows[0] : kept_rows[-1] + 1, kept_cols[0] : kept_cols[-1] + 1]
+    grid, valid = grid[box], valid[box]
+    seen_rows, seen_cols = valid.shape
+    if not ((seen_cols <= cols and seen_rows <= rows) or (seen_cols <= rows and seen_rows <= cols)):
+        raise ParameterError(
+            f"{name}: a lattice of {seen_cols} x {seen_rows} inner corners is seen, more than pattern "
+            f"{pattern!r} holds ({cols + 1} x {rows + 1} squares): the board has more squares; give "
+            "the board's own squares (--squares)"
+        )
+    # The corners not shown: where the lattice puts them (a homography from the valid ones).
+    jj, ii = np.mgrid[0:seen_rows, 0:seen_cols]
+    index = np.stack([ii, jj], axis=-1).astype(np.float64)
+    homography, _ = cv2.findHomography(index[valid], grid[valid])
+    if homography is None:
+        return None
+    placed = cv2.perspectiveTransform(index.reshape(-1, 1, 2), homography).reshape(seen_rows, seen_cols, 2)
+    grid = np.where(valid[..., None], grid, placed)
+    whole = {seen_cols, seen_rows} == {cols, rows} and bool(valid.all())
+    return BoardLattice(grid.reshape(-1, 2), (seen_rows, seen_cols), valid.ravel(), whole)
+
+
+def _sub_pixel(grey: np.ndarray, points: np.ndarray, half: int) -> np.ndarray:
+    """``points`` (N, 2) refined on the saddle points of the linear image (``cornerSubPix``; unclipped:
+    the saddle of the board's own edges)."""
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
+    refined = cv2.cornerSubPix(
+        grey.astype(np.float32), points.reshape(-1, 1, 2).astype(np.float32), (half, half), (-1, -1), criteria
+    )
+    return refined.reshape(-1, 2).astype(np.float64)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

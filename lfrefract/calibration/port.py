@@ -41,7 +41,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from lfrefract.calibration.approx import detect_chessboard, square_size
+from lfrefract.calibration.approx import BoardLattice, detect_board_lattice, detect_chessboard, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
@@ -253,14 +253,16 @@ def board_view_from_light_field(
 ) -> BoardView | None:
     """Chessboard corners of one light-field capture, as seen from points of the main lens.
 
-    The board is found in the central view (OpenCV). Then, with ``method="light-field"``, every
-    corner is refined on all raw pixels around it (:func:`lfrefract.calibration.corners.light_field_corners`:
+    The board is found in the central view (OpenCV). Then, with ``method="light-field"``, the whole
+    board or the part of it the view shows (:func:`lfrefract.calibration.approx.detect_board_lattice`:
+    a board reaching past the image, or past a lens's image circle), every corner is refined on all
+    raw pixels around it (:func:`lfrefract.calibration.corners.light_field_corners`:
     0.01-0.03 px RMS from the exact refracted projection on the tiny-2x camera, against 0.2-0.4 px
     for the central view's corners) and reported from the main-lens centre and from four points at
     ``aperture_fraction`` of the usable aperture radius on the axes: its affine track over the
     aperture is fixed by three of them, and five keep the weights symmetric. Corners whose fit
-    failed are left out. With ``method="views"``, OpenCV's corners in the sub-aperture views at
-    ``offsets_px`` are used as found.
+    failed are left out. With ``method="views"``, OpenCV's corners of the whole board in the
+    sub-aperture views at ``offsets_px`` are used as found.
 
     Parameters
     ----------
@@ -289,7 +291,8 @@ def board_view_from_light_field(
     BoardView or None
         The corners, each with the centre of projection it is seen from; None if the central view
         does not show the board, or fewer than 8 corners were located. Board coordinates are
-        centred on the inner-corner grid, so a detector's half-turned order is just another pose.
+        centred on the inner-corner lattice seen, so a detector's half-turned order, or a part of
+        the board, is just another pose.
     """
     one_of("method", method, CORNER_METHODS)
     offsets: list[tuple[float, float]] = []
@@ -303,26 +306,30 @@ def board_view_from_light_field(
     fraction = positive_float("aperture_fraction", aperture_fraction)
     if fraction > 1.0:
         raise ParameterError(f"aperture_fraction must be in (0, 1], got {aperture_fraction!r}")
-    cols, rows = pattern
-    jj, ii = np.mgrid[0:rows, 0:cols]
-    board = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
-    board = board * square_size("square_size_m", square_size_m)
+    square = square_size("square_size_m", square_size_m)
     recorded = finite_pixels(raw)
-    central = detect_chessboard(
-        subaperture_view(camera, raw, (0.0, 0.0), output=view, recorded=recorded), pattern, name=name
-    )
-    if central is None:
-        return None
-    corners, centres = [central], [np.zeros((len(central), 3))]
+    central_view = subaperture_view(camera, raw, (0.0, 0.0), output=view, recorded=recorded)
     if method == "light-field":
-        tracks = light_field_corners(camera, raw, central, pattern=pattern, square_size_m=square_size_m, view=view)
-        if np.count_nonzero(tracks.ok) < MIN_BOARD_CORNERS:
+        lattice = detect_board_lattice(central_view, pattern, name=name)
+        if lattice is None:
+            return None
+        tracks = light_field_corners(
+            camera, raw, lattice.corners_px, pattern=lattice.pattern, square_size_m=square, view=view
+        )
+        located = tracks.ok & lattice.valid
+        if np.count_nonzero(located) < MIN_BOARD_CORNERS:
             return None
         reach = fraction * camera.usable_aperture_radius_m(LIGHT_FIELD_RIM_MARGIN_PX)
         points = [(0.0, 0.0), (reach, 0.0), (-reach, 0.0), (0.0, reach), (0.0, -reach)]
-        corners = [tracks.at(a)[tracks.ok] for a in points]
-        centres = [np.tile([a[0], a[1], 0.0], (int(np.count_nonzero(tracks.ok)), 1)) for a in points]
-        board = board[tracks.ok]
+        corners = [tracks.at(a)[located] for a in points]
+        centres = [np.tile([a[0], a[1], 0.0], (int(np.count_nonzero(located)), 1)) for a in points]
+        board = lattice.board_points_m(square)[located]
+    else:
+        central = detect_chessboard(central_view, pattern, name=name)
+        if central is None:
+            return None
+        corners, centres = [central], [np.zeros((len(central), 3))]
+        board = BoardLattice(central, pattern[::-1], np.ones(len(central), dtype=bool), True).board_points_m(square)
     for offset in offsets[1:] if method == "views" else ():
         found = detect_chessboard(
             subaperture_view(camera, raw, offset, output=view, recorded=recorded), pattern, name=name

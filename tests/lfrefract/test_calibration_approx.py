@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from lfrefract import ParameterError, PinholeCamera
 from lfrefract.calibration import ApproxCalibration, calibrate_approx, detect_chessboard
-from lfrefract.calibration.approx import DISTORTION_MODEL, INTRINSIC_NAMES
+from lfrefract.calibration.approx import DISTORTION_MODEL, INTRINSIC_NAMES, detect_board_lattice
 from lfrefract.errors import CalibrationError
 from lfrefract.optics.pose import rotation_from_euler_xyz
 from tests.tolerances import (
@@ -265,7 +265,7 @@ def test_bad_input_names_what_and_which_view(images):
         calibrate_approx(
             images[:3], intrinsics=PinholeCamera(focal_px=1, cx_px=0, cy_px=0, width_px=100, height_px=100), **options
         )
-    with pytest.raises(ParameterError, match="pattern must have at least 2 inner corners"):
+    with pytest.raises(ParameterError, match="pattern must have at least 3 inner corners per side"):
         calibrate_approx(images[:3], pattern=(1, 5), square_size_m=SQUARE_M)
     with pytest.raises(ParameterError, match=r"square_size_m must be a board square's edge in metres, .* got 0\.0"):
         calibrate_approx(images[:3], pattern=PATTERN, square_size_m=0.0)
@@ -288,6 +288,55 @@ def test_a_board_with_more_squares_than_the_pattern_is_refused_naming_its_square
     with pytest.raises(ParameterError, match=r"board\.exr: the chessboard has (8 x 6|6 x 8) squares") as info:
         detect_chessboard(images[0], pattern, name="board.exr")
     assert re.search(r"\((7 x 5|5 x 7) inner corners\).*\(--squares (8 6|6 8)\)", str(info.value))
+
+
+def _true_corners(index: int) -> np.ndarray:
+    """Board ``index``'s inner corners (35, 2) in its image, pixels, row by row."""
+    rotation, position = _pose(index)
+    local = (_corners_cam(index) - position) @ rotation  # board frame
+    rvec, _ = cv2.Rodrigues(rotation)
+    projected, _ = cv2.projectPoints(local, rvec, position, K_TRUE, DIST_TRUE)
+    return projected.reshape(-1, 2)
+
+
+@pytest.mark.parametrize("index", [0, 3, 6])
+def test_a_board_the_image_cuts_is_found_as_the_lattice_it_shows(images, index):
+    # The image ends (dark, as past a lens's image circle) at the board's middle column.
+    true = _true_corners(index)
+    middle = float(np.median(true[:, 0]))
+    cut = np.where(np.arange(SIZE[0]) < middle + 4.0, images[index], 0.0)
+    assert detect_chessboard(cut, PATTERN) is None
+    lattice = detect_board_lattice(cut, PATTERN)
+    assert lattice is not None
+    assert not lattice.whole
+    seen = lattice.corners_px[lattice.valid]
+    distance = np.linalg.norm(seen[:, None] - true[None], axis=2)
+    nearest = distance.argmin(axis=1)
+    assert len(set(nearest)) == len(seen) >= 12  # every corner left of the cut: 3-4 columns of 5
+    assert distance.min(axis=1).max() < 0.5
+    # Its places on the board are the true ones up to a rigid motion of the board.
+    board = lattice.board_points_m(SQUARE_M)[lattice.valid]
+    jj, ii = np.mgrid[0 : PATTERN[1], 0 : PATTERN[0]]
+    local = np.stack([ii.ravel(), jj.ravel()], axis=1)[nearest] * SQUARE_M
+    pairs = np.linalg.norm(board[:, None] - board[None], axis=2)
+    np.testing.assert_allclose(pairs, np.linalg.norm(local[:, None] - local[None], axis=2), atol=1e-12)
+    # The whole board is found whole, as detect_chessboard finds it.
+    whole = detect_board_lattice(images[index], PATTERN)
+    assert whole.whole
+    assert whole.valid.all()
+    np.testing.assert_array_equal(whole.corners_px, detect_chessboard(images[index], PATTERN))
+
+
+def test_a_lattice_seen_larger_than_the_pattern_is_refused(images):
+    true = _true_corners(6)
+    cut = np.where(np.arange(SIZE[0]) < float(np.median(true[:, 0])) + 4.0, images[6], 0.0)
+    assert detect_board_lattice(cut, PATTERN).shape == (5, 4)
+    with pytest.raises(ParameterError, match=r"board\.exr: .* more squares"):
+        detect_board_lattice(cut, (3, 3), name="board.exr")
+    with pytest.raises(
+        ParameterError, match=r"board\.exr: a lattice of 4 x 5 inner corners is seen, more than pattern"
+    ):
+        detect_board_lattice(cut, (6, 3), name="board.exr")
 
 
 def test_a_board_of_the_pattern_is_not_taken_for_a_larger_one(images):

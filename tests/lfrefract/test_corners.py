@@ -11,8 +11,10 @@ import pytest
 
 from lfrefract import FlatPort, ParameterError, Pose, camera_preset, virtual_camera_for
 from lfrefract.calibration import corners as corners_module
+from lfrefract.calibration.approx import detect_chessboard
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.port import board_view_from_light_field, project_through_port
+from lfrefract.synthesis.views import finite_pixels, subaperture_view
 from tests.tolerances import LF_CORNER_ANALYTIC_PX
 
 CAMERA = camera_preset("tiny")
@@ -151,3 +153,32 @@ def test_a_board_view_leaves_unrecorded_pixels_out_of_the_central_view():
     assert np.count_nonzero(found.central) == PATTERN[0] * PATTERN[1]
     moved = np.linalg.norm(found.corners_px[found.central] - whole.corners_px[whole.central], axis=1)
     assert np.max(moved) < LF_CORNER_ANALYTIC_PX
+
+
+@pytest.mark.parametrize("cut", ["dark", "unrecorded"])
+def test_a_board_the_view_cuts_gives_the_corners_it_shows(cut):
+    """A board reaching past what the lens lights (a Petzval's image circle at tiny-2x cut 17 of
+    20 calibration boards, which were all left out): its lattice of seen corners is located, each
+    corner where the exact refracted projection puts it, at its place on the board up to a rigid
+    motion of the board (which the pose absorbs)."""
+    pose, square = _board(PORT, 0.3, (10.0, -5.0, 0.0), px_per_square=10.0)
+    raw = _raw(PORT, pose, square, bounded=True)
+    raw[:, int(0.55 * raw.shape[1]) :] = 0.0 if cut == "dark" else np.nan
+    kwargs = {"pattern": PATTERN, "square_size_m": square, "view": VIEW}
+    central = subaperture_view(CAMERA, raw, (0.0, 0.0), output=VIEW, recorded=finite_pixels(raw))
+    assert detect_chessboard(central, PATTERN) is None  # the whole board is not seen
+    found = board_view_from_light_field(CAMERA, raw, **kwargs)
+    assert found is not None
+    world = _corners_world(pose, square)
+    expected = project_through_port(VIEW, PORT, world)
+    seen = found.corners_px[found.central]
+    distance = np.linalg.norm(seen[:, None] - expected[None], axis=2)
+    nearest = distance.argmin(axis=1)
+    assert len(set(nearest)) == len(seen) >= 9
+    assert len(seen) < PATTERN[0] * PATTERN[1]
+    assert np.sqrt(np.mean(distance.min(axis=1) ** 2)) < LF_CORNER_ANALYTIC_PX
+    jj, ii = np.mgrid[0 : PATTERN[1], 0 : PATTERN[0]]
+    local = np.stack([ii.ravel(), jj.ravel()], axis=1)[nearest] * square
+    board = found.board_points_m[found.central]
+    pairs = np.linalg.norm(board[:, None] - board[None], axis=2)
+    np.testing.assert_allclose(pairs, np.linalg.norm(local[:, None] - local[None], axis=2), atol=1e-12)

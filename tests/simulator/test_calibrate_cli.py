@@ -124,7 +124,7 @@ def test_calibrate_approx_and_port_from_board_captures(port_captures, tmp_path, 
         )
         == 2
     )
-    assert "--squares must be at least 3 x 3" in capsys.readouterr().err
+    assert "--squares must be at least 4 x 4" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("command", ["port", "approx"])
@@ -176,7 +176,7 @@ def test_a_capture_without_a_located_board_is_left_out_and_named(tmp_path, capsy
     board_args = ["--squares", *map(str, SQUARES), "--square-size-m", str(boards[0]["square_size_m"])]
     out = tmp_path / "port.json"
     assert core_cli.main(["calibrate", "port", captures[0], small, *captures[1:], *board_args, "--out", str(out)]) == 0
-    assert f"{small}: left out: no chessboard with 6 x 4 inner corners found" in capsys.readouterr().err
+    assert f"{small}: left out: no chessboard of 6 x 4 inner corners, nor a part of one" in capsys.readouterr().err
     written = read_json(out)
     assert written["sources"] == captures  # in the order of the views' poses and residuals
     assert [item["source"] for item in written["left_out"]] == [small]
