@@ -73,7 +73,7 @@ def main() -> int:
     parser.add_argument("runs", type=Path, nargs="+", help="lfsim experiment pipeline --out folders")
     args = parser.parse_args()
     header = (
-        "| lens | pupil z, mm | ray model | rays at the port, mm / mrad | synthesis "
+        "| lens | pupil z, mm | ray model | rays at the port, mm (aligned along the axis, shift mm) / mrad | synthesis "
         "| corners, px (x oracle / x true rays) | plane RMSE, mm (x oracle / x true rays) "
         "| error to the true plane, mm (x oracle / x true rays) | corners rendered exactly (true rays) | status |"
     )
@@ -94,7 +94,12 @@ def main() -> int:
         data = rows.get("data-only", {})
         rays = "-"
         if data and math.isfinite(float(data["ray_rms_mm"])):
-            rays = f"{float(data['ray_rms_mm']):.3f} / {float(data['ray_angle_mrad']):.3f}"
+            aligned = data.get("ray_rms_aligned_mm", "nan")  # runs before the aligned measure: nan
+            shift = data.get("frame_shift_mm", "nan")
+            rays = (
+                f"{float(data['ray_rms_mm']):.3f} ({float(aligned):.3f}, {float(shift):+.2f}) "
+                f"/ {float(data['ray_angle_mrad']):.3f}"
+            )
         for synthesis in syntheses:
             row = rows.get(row_label("data-only", synthesis), {})
             cells = [

@@ -408,6 +408,9 @@ class RayErrors:
         RMS and largest angle between their directions, radians.
     count : int
         Rays compared.
+    axis_shift_m : float
+        With ``along_axis=True``: how far the model's rays were moved along the frame's z axis before
+        they were compared (metres); else 0.
     """
 
     position_rms_m: float
@@ -415,6 +418,7 @@ class RayErrors:
     angle_rms_rad: float
     angle_max_rad: float
     count: int
+    axis_shift_m: float = 0.0
 
 
 def ray_errors(
@@ -426,8 +430,15 @@ def ray_errors(
     plane_normal: Any = (0.0, 0.0, 1.0),
     plane_distance_m: float,
     valid: Any = None,
+    along_axis: bool = False,
 ) -> RayErrors:
     """Ray model against true rays: where each pair crosses a plane, and the angle between them.
+
+    Boards seen in air fix a camera's rays except for a shift of all of them along the optical axis
+    (every ray then meets the same boards: a calibration puts its frame's origin by a convention,
+    e.g. at its model's paraxial entrance pupil). ``along_axis=True`` measures the model up to that
+    shift: its rays are first moved along z by the shift that brings their crossings nearest the
+    true ones' (least squares, closed form: a crossing moves linearly with the shift).
 
     Parameters
     ----------
@@ -442,6 +453,8 @@ def ray_errors(
     valid : array_like of bool, shape (N,), optional
         The pairs to compare; pairs with a non-finite value or a ray parallel to the plane are left
         out as well.
+    along_axis : bool
+        Compare up to the best shift of the model's rays along z (above; :attr:`RayErrors.axis_shift_m`).
     """
 
     def rows(name: str, value: Any) -> np.ndarray:  # NaN allowed: vignetted pixels have no ray
@@ -473,7 +486,15 @@ def ray_errors(
     keep &= np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(tp), axis=1)
     if not np.any(keep):
         raise ParameterError("no pair of rays to compare (none valid, finite and crossing the plane)")
-    distance = np.linalg.norm(p[keep] - tp[keep], axis=1)
+    gap = p[keep] - tp[keep]
+    shift = 0.0
+    if along_axis:
+        # Moving a ray's origin by s along z moves its crossing by s * (z - (n_z / (d . n)) d).
+        dk = d[keep]
+        slope = np.array([0.0, 0.0, 1.0]) - (n[2] / (dk @ n))[:, None] * dk
+        shift = -float(np.sum(gap * slope) / np.sum(slope * slope))
+        gap = gap + shift * slope
+    distance = np.linalg.norm(gap, axis=1)
     unit = d[keep] / np.linalg.norm(d[keep], axis=1, keepdims=True)
     true_unit = td[keep] / np.linalg.norm(td[keep], axis=1, keepdims=True)
     angle = 2.0 * np.arcsin(np.clip(np.linalg.norm(unit - true_unit, axis=1) / 2.0, 0.0, 1.0))
@@ -483,6 +504,7 @@ def ray_errors(
         angle_rms_rad=float(np.sqrt(np.mean(angle**2))),
         angle_max_rad=float(angle.max()),
         count=int(keep.sum()),
+        axis_shift_m=shift,
     )
 
 

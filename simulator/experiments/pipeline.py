@@ -59,7 +59,9 @@ triangulated, as in ``planes``. Columns (units in the names):
 - ``ray_rms_mm``, ``ray_angle_mrad``: the method's ray model of the camera against the simulator's
   true rays (every :data:`RAY_PIXEL_STEP` th raw pixel, chief rays through the microlens centres):
   where they cross the true port's air-side face (RMS over both cameras, in the camera frame, no
-  alignment) and the angle between them;
+  alignment) and the angle between them; ``ray_rms_aligned_mm``: the same up to the one thing in-air
+  boards leave free, a shift of the model's frame along its axis (:func:`lfrefract.metrics.ray_errors`
+  with ``along_axis``), and ``frame_shift_mm`` that shift (the larger of the cameras');
 - ``stereo_rms_px``: the rig calibration's reprojection RMS; ``status`` and ``error``;
 - ``test_boards_found``: of the test boards' views, how many the method's images show the board in;
   ``corners_exact_share``: of their corners found, the share on output pixels the method renders
@@ -195,6 +197,8 @@ MEASURES = (
     "port_normal_err_deg",
     "port_distance_err_mm",
     "ray_rms_mm",
+    "ray_rms_aligned_mm",
+    "frame_shift_mm",
     "ray_angle_mrad",
     "stereo_rms_px",
 )
@@ -1000,23 +1004,28 @@ def _ray_measures(
 ) -> dict:
     """The ray models against the true rays (each camera's moved to ``origins``) at each true port's
     air-side face, RMS over the cameras."""
-    positions, angles = [], []
+    positions, aligned, shifts, angles = [], [], [], []
     for camera in truth.cameras:
         origin = origins[camera.name]
         model, ref, port = rays[camera.name], true[camera.name], camera.scene.port.seen_from(origin)
-        errors = ray_errors(
-            model.origins_cam,
-            model.directions_cam,
-            ref.origins_cam - origin,
-            ref.directions_cam,
-            plane_normal=port.normal,
-            plane_distance_m=port.distance_m,
-            valid=model.in_aperture & ref.in_aperture,
-        )
+        pair = (model.origins_cam, model.directions_cam, ref.origins_cam - origin, ref.directions_cam)
+        where = {
+            "plane_normal": port.normal,
+            "plane_distance_m": port.distance_m,
+            "valid": model.in_aperture & ref.in_aperture,
+        }
+        errors, moved = ray_errors(*pair, **where), ray_errors(*pair, **where, along_axis=True)
         positions.append(errors.position_rms_m)
+        aligned.append(moved.position_rms_m)
+        shifts.append(moved.axis_shift_m)
         angles.append(errors.angle_rms_rad)
     rms = lambda values: float(np.sqrt(np.mean(np.square(values))))  # noqa: E731
-    return {"ray_rms_mm": rms(positions) * 1e3, "ray_angle_mrad": rms(angles) * 1e3}
+    return {
+        "ray_rms_mm": rms(positions) * 1e3,
+        "ray_rms_aligned_mm": rms(aligned) * 1e3,
+        "frame_shift_mm": max(shifts, key=abs) * 1e3,
+        "ray_angle_mrad": rms(angles) * 1e3,
+    }
 
 
 def _corner_measures(

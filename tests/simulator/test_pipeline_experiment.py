@@ -85,6 +85,10 @@ def test_the_data_only_chain_stays_near_the_oracle_and_far_below_the_thin_lens_c
     assert data["port_normal_err_deg"] < PIPELINE_PORT_NORMAL_DEG < thin["port_normal_err_deg"]
     assert data["ray_rms_mm"] < thin["ray_rms_mm"]
     assert oracle["ray_rms_mm"] < 1e-9
+    # up to a shift along the axis (what in-air boards leave free), never worse than without it
+    assert data["ray_rms_aligned_mm"] <= data["ray_rms_mm"]
+    assert oracle["ray_rms_aligned_mm"] < 1e-9
+    assert abs(oracle["frame_shift_mm"]) < 1e-6
     assert oracle["port_normal_err_deg"] < 1e-5
     assert data["boards_left_out"] == thin["boards_left_out"] == ""  # every tiny board is located
     for name in ("planes.csv", "pipeline_summary.png", "commands.txt"):
