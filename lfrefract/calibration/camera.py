@@ -53,7 +53,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
-from lfrefract.calibration.port import BoardView, board_corners
+from lfrefract.calibration.port import MIN_BOARD_CORNERS, BoardView, board_corners
 from lfrefract.calibration.ray_fit import CapacityScore, PolynomialFit, choose_capacity, fit_polynomial
 from lfrefract.calibration.uncertainty import larger_covariance, spread_factors
 from lfrefract.errors import CalibrationError, ParameterError
@@ -483,12 +483,24 @@ def corrected_view(view: BoardView, correction: Correction, pinhole: PinholeCame
     (its view centre on z = 0 and the line of sight of its pixel in ``pinhole``) corrected, and
     expressed again as a centre and a pixel of ``pinhole``. The port calibration
     (:func:`lfrefract.calibration.calibrate_port`) then works on the calibrated model unchanged.
+    Observations whose ray the model's lens stops (a traced lens: NaN) are left out.
     """
     if not isinstance(view, BoardView):
         raise ParameterError(f"view must be a BoardView, got {type(view).__name__}")
     a, t = observed_rays(view, np.linalg.inv(pinhole.K))
     origins, directions = correction.apply(a, t)
     pixels = (directions / directions[:, 2:3]) @ pinhole.K.T
+    kept = np.all(np.isfinite(origins), axis=1) & np.all(np.isfinite(pixels), axis=1)
+    central = view.central[kept]
+    if np.count_nonzero(central) < MIN_BOARD_CORNERS:
+        raise ParameterError(
+            f"the camera's lens stops {len(kept) - np.count_nonzero(kept)} of a board view's "
+            f"{len(kept)} observations (rays outside its lens), leaving {np.count_nonzero(central)} corners "
+            f"seen from the lens's centre; a board view needs {MIN_BOARD_CORNERS}"
+        )
     return BoardView(
-        corners_px=pixels[:, :2], board_points_m=view.board_points_m, centres_m=origins, central_rows=view.central
+        corners_px=pixels[kept, :2],
+        board_points_m=view.board_points_m[kept],
+        centres_m=origins[kept],
+        central_rows=central,
     )

@@ -346,12 +346,41 @@ class TracedLens:
         centre_img = -(a - slope_in * cam.lens_to_mla_m)  # the microlens centre, image plane
         return cam.sensor.image_plane_to_pixels(centre_img + slope_in * cam.mla.focal_length_m)
 
+    @functools.cached_property
+    def _mla_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(A (2, 2), b (2,))``: the affine map of camera-frame points on the MLA plane from
+        :attr:`camera`'s lattice to the traced camera's, each microlens centre to the same lens's."""
+        idx = np.array([[0, 0], [1, 0], [0, 1]])
+        thin, true = -self.camera.mla.centres_m(idx), -self.real.camera.mla.centres_m(idx)  # camera frame
+        a = (true[1:] - true[0]).T @ np.linalg.inv((thin[1:] - thin[0]).T)
+        return a, true[0] - a @ thin[0]
+
     def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The traced rays of thin-lens rays (aperture points (N, 2), slopes (N, 2)): origins (N, 3)
         where they cross z = 0 and unit directions (N, 3), as the calibrated models give them; NaN
-        where the real lens stops the ray (a clear aperture, total reflection)."""
-        traced = self.real.chief_rays(self.pixels(aperture_points_m, slopes))
-        o, d = traced.origins_cam, traced.directions_cam
+        where the real lens stops the ray (a clear aperture, total reflection).
+
+        A thin-lens ray leaves the MLA plane at ``q`` with slope ``s``; its traced ray leaves the
+        traced camera's MLA plane at ``r = A q + b`` (:attr:`_mla_map`: each microlens centre to the
+        same lens's) with the slope that keeps the point ``q - s f`` it continues to on the sensor
+        (``f`` the microlenses' focal length). On a pixel's own ray (through its microlens's centre,
+        continuing to the pixel) that is the pixel's true chief ray; between pixels, a smooth map
+        (a board corner's observation from a point of the aperture lies between them)."""
+        cam, true = self.camera, self.real.camera
+        a, t = np.asarray(aperture_points_m, dtype=np.float64), np.asarray(slopes, dtype=np.float64)
+        slope_in = t + a / cam.focal_length_m  # before the thin main lens, towards +z
+        q = a - slope_in * cam.lens_to_mla_m  # on the MLA plane, camera frame
+        matrix, offset = self._mla_map
+        r = q @ matrix.T + offset
+        slope = slope_in + (r - q) / true.mla.focal_length_m
+        n = len(r)
+        trace = trace_lens(
+            self.real.lens,
+            np.column_stack([r, np.full(n, true.mla_z_m)]),
+            np.column_stack([slope, np.ones(n)]),
+            toward="object",
+        )
+        o, d = trace.points_cam, trace.directions_cam
         with np.errstate(invalid="ignore"):
             origins = o - (o[:, 2:3] / d[:, 2:3]) * d
         origins[:, 2] = 0.0
@@ -361,10 +390,7 @@ class TracedLens:
         self, points_cam: np.ndarray, directions_cam: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The thin-lens rays that :meth:`apply` maps to the given rays (its inverse): each ray traced
-        back through the lens to the MLA, to the sensor point its microlens sends it to (the sensor is
-        at the microlenses' focal plane: every ray of one slope through a microlens meets the sensor at
-        one point), and that point's thin-lens ray of :attr:`camera`. Exact for the chief rays
-        :meth:`apply` gives; a ray through no microlens centre gets the ray of the pixel that records it.
+        back through the lens to the MLA plane and mapped there as :meth:`apply` maps the other way.
 
         Parameters
         ----------
@@ -395,23 +421,23 @@ class TracedLens:
         found = np.zeros(n, dtype=bool)
         if not np.any(live):
             return a, t, found
-        cam = self.camera
+        cam, true = self.camera, self.real.camera
         start_z = self.real.extent_z_m[1] + _TRACE_START_GAP_M  # in front of the lens, in air
         pl, dl = p[live], d[live]
         start = pl + dl * ((start_z - pl[:, 2]) / dl[:, 2])[:, None]
         trace = trace_lens(self.real.lens, start, -dl, toward="image")
-        q, e = trace.points_cam, trace.directions_cam
-        true = self.real.camera
+        back, e = trace.points_cam, trace.directions_cam
         with np.errstate(invalid="ignore", divide="ignore"):
-            slope_in = e[:, :2] / e[:, 2:3]  # the same line towards +z
-            crossing_img = -(q[:, :2] + slope_in * (true.mla_z_m - q[:, 2:3]))  # at the MLA, image plane
-        ok = trace.passed & np.all(np.isfinite(crossing_img), axis=1) & np.all(np.isfinite(slope_in), axis=1)
-        centre_img = true.mla.centres_m(true.mla.nearest_indices(crossing_img[ok]))
-        uv = true.sensor.image_plane_to_pixels(centre_img + slope_in[ok] * true.mla.focal_length_m)
-        twin = cam.captured_rays(uv)
+            slope = e[:, :2] / e[:, 2:3]  # the same line towards +z
+            r = back[:, :2] + slope * (true.mla_z_m - back[:, 2:3])  # on the traced camera's MLA plane
+        matrix, offset = self._mla_map
+        q = (r - offset) @ np.linalg.inv(matrix).T
+        slope_in = slope - (r - q) / true.mla.focal_length_m
+        aperture = q + slope_in * cam.lens_to_mla_m
+        ok = trace.passed & np.all(np.isfinite(aperture), axis=1) & np.all(np.isfinite(slope_in), axis=1)
         rows = np.flatnonzero(live)[ok]
-        a[rows] = twin.origins_cam[:, :2]
-        t[rows] = twin.directions_cam[:, :2] / twin.directions_cam[:, 2:3]
+        a[rows] = aperture[ok]
+        t[rows] = slope_in[ok] - aperture[ok] / cam.focal_length_m
         found[rows] = True
         return a, t, found
 

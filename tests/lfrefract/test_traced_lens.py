@@ -82,6 +82,28 @@ def test_the_thin_lens_twin_inverts_the_map(real):
     assert np.all(np.isnan(t[~found]))
 
 
+def test_rays_between_the_pixels_map_smoothly_both_ways(real):
+    """A board corner seen from a point of the aperture is a thin-lens ray between the pixels' rays.
+    The map snapped such a ray to the pixel recording it, the true ray of the microlens's centre:
+    the double Gauss's port-board observations pointed 1.0-1.2 mm from their corners 0.2-0.4 m out
+    (0.02-0.03 mm through the thin lens), a third of them stopped, and a port fitted on the lens's
+    true rays ran to the end of its distance range. Rays leaving a microlens off its centre now map
+    to and from the thin-lens rays without loss."""
+    model = TracedLens(real=real)
+    uv = _every_pixel(real.camera)[::11]
+    pitch = real.camera.mla.pitch_m
+    offsets = np.random.default_rng(3).uniform(-0.4 * pitch, 0.4 * pitch, size=(len(uv), 2))
+    true = real.rays_through_lenses(uv, lens_offsets_m=offsets)  # off the microlenses' centres
+    keep = true.in_aperture
+    assert keep.mean() > 0.2  # the Petzval's image circle lights 64 % of the sensor
+    a, t, found = model.thin_lens_rays(true.origins_cam[keep], true.directions_cam[keep])
+    assert found.all()
+    origins, directions = model.apply(a, t)
+    np.testing.assert_allclose(directions, true.directions_cam[keep], rtol=0, atol=1e-12)
+    o, d = true.origins_cam[keep], true.directions_cam[keep]
+    np.testing.assert_allclose(origins, o - (o[:, 2:3] / d[:, 2:3]) * d, rtol=0, atol=1e-12)
+
+
 def test_its_table_round_trips_and_names_its_lens(real):
     model = TracedLens(real=real)
     table = json.loads(json.dumps(model.to_dict()))
@@ -139,3 +161,38 @@ def test_a_renders_meta_json_traces_its_recorded_lens(tmp_path):
     assert read_json(meta)["scene"]["lens"]["name"] == "double-gauss"
     with pytest.raises(FileFormatError, match=r"scene\.lens does not fit its camera"):
         camera_model_from_option(meta)
+
+
+def test_a_board_views_observations_the_lens_stops_are_left_out():
+    # A traced lens gives no ray (NaN) where its clear apertures stop one: a board view corrected by
+    # it failed as "corners_px must be finite" (calibrate port --camera meta.json).
+    from lfrefract.calibration.camera import corrected_view
+    from lfrefract.calibration.port import BoardView
+    from lfrefract.optics.pinhole import virtual_camera_for
+
+    camera = camera_preset("tiny-2x")
+    model = TracedLens(real=RealLensCamera(camera=camera, lens=main_lens("double-gauss", camera)))
+    view = virtual_camera_for(model.camera)
+    jj, ii = np.mgrid[0:3, 0:4]
+    board = np.stack([ii.ravel(), jj.ravel()], axis=1) * 0.01
+    pixels = np.array([view.K[0, 2], view.K[1, 2]]) + board * 500.0
+    far = np.tile([0.02, 0.0, 0.0], (12, 1))  # 20 mm off the axis: outside the lens
+    seen = BoardView(
+        corners_px=np.concatenate([pixels, pixels]),
+        board_points_m=np.concatenate([board, board]),
+        centres_m=np.concatenate([np.zeros((12, 3)), far]),
+        central_rows=np.repeat([True, False], 12),
+    )
+    kept = corrected_view(seen, model, view)
+    assert len(kept.corners_px) == 12
+    assert np.all(np.isfinite(kept.corners_px))
+    assert kept.central.all()
+    np.testing.assert_array_equal(kept.board_points_m, board)
+    few = BoardView(
+        corners_px=pixels,
+        board_points_m=board,
+        centres_m=np.where(np.arange(12)[:, None] < 6, 0.0, far),
+        central_rows=None,
+    )
+    with pytest.raises(ParameterError, match="the camera's lens stops 6 of a board view's 12 observations"):
+        corrected_view(few, model, view)
