@@ -496,7 +496,10 @@ def _seen_lattice(
     cols, rows = pattern
     grid = _sub_pixel(grey, corners, half).reshape((*shape, 2))
     score, spread = _x_junctions(grey, grid, np.gradient(grid, axis=1), np.gradient(grid, axis=0))
-    valid = (score > X_JUNCTION_MIN_SCORE) & (spread > X_JUNCTION_MIN_CONTRAST * float(np.median(spread)))
+    contrast = X_JUNCTION_MIN_CONTRAST * float(np.median(spread))
+    valid = (score > X_JUNCTION_MIN_SCORE) & (spread > contrast)
+    if _skips_corners(grey, grid, contrast) or _irregular(grid, valid):
+        return None
     kept_rows, kept_cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if np.count_nonzero(valid) < PART_MIN_CORNERS or len(kept_rows) < 2 or len(kept_cols) < 2:
         return None
@@ -519,6 +522,51 @@ def _seen_lattice(
     grid = np.where(valid[..., None], grid, placed)
     whole = {seen_cols, seen_rows} == {cols, rows} and bool(valid.all())
     return BoardLattice(grid.reshape(-1, 2), (seen_rows, seen_cols), valid.ravel(), whole)
+
+
+#: Largest difference between neighbouring steps of a chessboard's lattice (consecutive along a
+#: line, or side by side on neighbouring lines), as a share of the longer: a board's perspective and
+#: a lens's distortion change a step by a few per cent over one square.
+LATTICE_STEP_TOLERANCE = 0.3
+
+
+def _irregular(grid: np.ndarray, valid: np.ndarray) -> bool:
+    """Whether the lattice ``grid`` (rows, columns, 2) is no chessboard's: two neighbouring steps
+    between its ``valid`` (rows, columns) corners differ by more than :data:`LATTICE_STEP_TOLERANCE`.
+    OpenCV's growing search returned, on a board cut by a lens's image circle, a lattice of true
+    corners whose first row lay a square further out than its place (steps of 26 and 13 px)."""
+    for axis in (0, 1):
+        lines, kept = np.moveaxis(grid, axis, 0), np.moveaxis(valid, axis, 0)
+        step, both = lines[1:] - lines[:-1], kept[1:] & kept[:-1]
+        for first, second, seen in (
+            (step[1:], step[:-1], both[1:] & both[:-1]),
+            (step[:, 1:], step[:, :-1], both[:, 1:] & both[:, :-1]),
+        ):
+            gap = np.linalg.norm(first - second, axis=-1)
+            longer = np.maximum(np.linalg.norm(first, axis=-1), np.linalg.norm(second, axis=-1))
+            if np.any(seen & (gap > LATTICE_STEP_TOLERANCE * longer)):
+                return True
+    return False
+
+
+def _skips_corners(grey: np.ndarray, grid: np.ndarray, contrast: float) -> bool:
+    """Whether the lattice ``grid`` (rows, columns, 2) steps over corners: points halfway between
+    neighbouring corners that are X-junctions (two or more: a skipped row or column has one at each
+    of its corners), where a lattice of one square's steps has them on a square's edge. OpenCV's
+    search returned a lattice that skipped a column on a board cut by a lens's image circle, every
+    corner a true one."""
+    down, across = np.gradient(grid, axis=0), np.gradient(grid, axis=1)
+    for axis, other in ((1, down), (0, across)):
+        ahead = [slice(None)] * 2
+        behind = [slice(None)] * 2
+        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
+        a, b = tuple(ahead), tuple(behind)
+        mid = 0.5 * (grid[a] + grid[b])
+        # sampled as a corner of half the step's squares: the skipped corner, if there is one
+        score, spread = _x_junctions(grey, mid, 0.5 * (grid[a] - grid[b]), 0.5 * (other[a] + other[b]))
+        if np.count_nonzero((score > X_JUNCTION_MIN_SCORE) & (spread > contrast)) >= 2:
+            return True
+    return False
 
 
 def _sub_pixel(grey: np.ndarray, points: np.ndarray, half: int) -> np.ndarray:

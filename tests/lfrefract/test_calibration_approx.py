@@ -420,3 +420,32 @@ def test_views_that_do_not_determine_the_focal_length_are_refused(images):
     frontal = [images[4], np.roll(images[4], 25, axis=1), np.roll(images[4], -20, axis=0)]
     with pytest.raises(CalibrationError, match=r"do not determine the focal length: fx 22\d(\.\d+)? \+- 1\d\d px"):
         calibrate_approx(frontal, pattern=PATTERN, square_size_m=SQUARE_M)
+
+
+def test_a_lattice_of_true_corners_out_of_their_order_is_no_board(images):
+    # OpenCV's growing search returned, on a board the near-telecentric design's image circle cut, a
+    # lattice of true corners that skipped a column: its port calibration ran to the end of its
+    # distance range (one view 1.7 px RMS). Such lattices are refused: steps over corners, or
+    # neighbouring steps that differ (the case recorded here, in view pixels).
+    from lfrefract.calibration.approx import X_JUNCTION_MIN_CONTRAST, _grey, _irregular, _skips_corners
+
+    grey = _grey("image", images[3])
+    true = _true_corners(3).reshape(PATTERN[1], PATTERN[0], 2)
+    contrast = X_JUNCTION_MIN_CONTRAST * 0.5  # the board's squares: 0.05 and 0.9 of white
+    every = np.ones(true.shape[:2], dtype=bool)
+    assert not _skips_corners(grey, true, contrast)
+    assert not _irregular(true, every)
+    doubled = true[:, ::2]  # every other column: a regular lattice of two squares' steps
+    assert _skips_corners(grey, doubled, contrast)
+    gapped = true[:, [0, 2, 3, 4]]  # one column skipped
+    assert _irregular(gapped, every[:, :4])
+    assert not _irregular(gapped, every[:, :4] & (np.arange(4) > 0))  # unless the corner before the gap is not seen
+    recorded = np.array(
+        [
+            [[78.2, 57.2], [75.9, 41.0], [75.9, 25.5]],
+            [[104.5, 53.4], [102.5, 42.3], [100.4, 31.3]],
+            [[117.3, 54.2], [115.1, 42.8], [113.1, 32.3]],
+            [[129.7, 54.7], [127.3, 43.6], [124.5, 35.8]],
+        ]
+    )
+    assert _irregular(recorded, np.array([[0, 1, 0], [1, 1, 1], [1, 1, 1], [1, 1, 0]], dtype=bool))
