@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -316,7 +316,7 @@ def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, in
     return lattice, continues
 
 
-def _detector_images(grey: np.ndarray):
+def _detector_images(grey: np.ndarray) -> Iterator[np.ndarray]:
     """``grey`` (:func:`_grey`) as the 8-bit images OpenCV's detector is given: scaled to each of
     :data:`WHITE_PERCENTILES` in turn (one black at a percentile, a small board on a black
     background, skipped), OpenCV's random generator seeded before each."""
