@@ -59,6 +59,7 @@ __all__ = [
     "calibrate_approx",
     "detect_board_lattice",
     "detect_chessboard",
+    "lattice_points_m",
 ]
 
 #: Fewest pixels a chessboard square spans in an image where :func:`detect_chessboard` can find it
@@ -293,6 +294,12 @@ def _x_junctions(
     return gap / np.maximum(spread, np.finfo(float).tiny), spread
 
 
+def _junctions(score: np.ndarray, spread: np.ndarray, contrast: float) -> np.ndarray:
+    """Which points are X-junctions: score (:func:`_x_junctions`) above :data:`X_JUNCTION_MIN_SCORE`
+    and their squares' spread above ``contrast``."""
+    return (score > X_JUNCTION_MIN_SCORE) & (spread > contrast)
+
+
 def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, int]) -> tuple[bool, bool]:
     """Whether detected ``corners`` (row by row) are chessboard corners at their lattice places, and
     whether the lattice continues beyond one of its edges (a whole row or column of corners more)."""
@@ -301,7 +308,7 @@ def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, in
     along_row, along_col = np.gradient(grid, axis=1), np.gradient(grid, axis=0)
     score, spread = _x_junctions(grey, grid, along_row, along_col)
     contrast = X_JUNCTION_MIN_CONTRAST * float(np.median(spread))
-    junction = (score > X_JUNCTION_MIN_SCORE) & (spread > contrast)
+    junction = _junctions(score, spread, contrast)
     lattice = float(np.mean(junction)) >= LATTICE_MIN_FRACTION
     continues = False
     # The next line beyond each edge, extrapolated, with the edge's steps.
@@ -312,7 +319,7 @@ def _lattice_check(grey: np.ndarray, corners: np.ndarray, pattern: tuple[int, in
         (grid[-1], grid[-1] - grid[-2], along_row[-1], along_col[-1]),
     ):
         score, spread = _x_junctions(grey, line + step_out, row_step, col_step)
-        continues |= float(np.mean((score > X_JUNCTION_MIN_SCORE) & (spread > contrast))) >= CONTINUES_MIN_FRACTION
+        continues |= float(np.mean(_junctions(score, spread, contrast))) >= CONTINUES_MIN_FRACTION
     return lattice, continues
 
 
@@ -422,10 +429,16 @@ class BoardLattice:
 
         A chessboard's inner corners are a square lattice, so which part of the board a lattice is,
         and which way round, is a rigid motion of the board that its pose absorbs."""
-        rows, cols = self.shape
-        jj, ii = np.mgrid[0:rows, 0:cols]
-        points = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
-        return points * square_size_m
+        return lattice_points_m(self.shape, square_size_m)
+
+
+def lattice_points_m(shape: tuple[int, int], square_size_m: float) -> np.ndarray:
+    """A ``(rows, columns)`` lattice of chessboard corners on the board, row by row with the column
+    index fastest, centred on the lattice: shape (rows * columns, 2), metres."""
+    rows, cols = shape
+    jj, ii = np.mgrid[0:rows, 0:cols]
+    points = np.stack([ii.ravel() - (cols - 1) / 2, jj.ravel() - (rows - 1) / 2], axis=1)
+    return points * square_size_m
 
 
 def detect_board_lattice(
@@ -474,7 +487,7 @@ def detect_board_lattice(
         (c, r)
         for c in range(3, max(cols, rows) + 1)
         for r in range(3, max(cols, rows) + 1)
-        if ((c <= cols and r <= rows) or (c <= rows and r <= cols)) and {c, r} != {cols, rows}
+        if _fits((c, r), (cols, rows)) and {c, r} != {cols, rows}
     }
     for c, r in sorted(smaller, key=lambda cr: (-cr[0] * cr[1], cr)):
         corners = _find_chessboard(grey, (c, r))
@@ -488,6 +501,12 @@ def detect_board_lattice(
     return None
 
 
+def _fits(lattice: tuple[int, int], pattern: tuple[int, int]) -> bool:
+    """Whether a lattice of ``(columns, rows)`` corners fits in ``pattern``, either way round."""
+    (c, r), (cols, rows) = lattice, pattern
+    return (c <= cols and r <= rows) or (c <= rows and r <= cols)
+
+
 def _seen_lattice(
     grey: np.ndarray, corners: np.ndarray, shape: tuple[int, int], *, half: int, pattern: tuple[int, int], name: str
 ) -> BoardLattice | None:
@@ -497,7 +516,7 @@ def _seen_lattice(
     grid = _sub_pixel(grey, corners, half).reshape((*shape, 2))
     score, spread = _x_junctions(grey, grid, np.gradient(grid, axis=1), np.gradient(grid, axis=0))
     contrast = X_JUNCTION_MIN_CONTRAST * float(np.median(spread))
-    valid = (score > X_JUNCTION_MIN_SCORE) & (spread > contrast)
+    valid = _junctions(score, spread, contrast)
     if _skips_corners(grey, grid, contrast) or _irregular(grid, valid):
         return None
     kept_rows, kept_cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
@@ -506,7 +525,7 @@ def _seen_lattice(
     box = np.s_[kept_rows[0] : kept_rows[-1] + 1, kept_cols[0] : kept_cols[-1] + 1]
     grid, valid = grid[box], valid[box]
     seen_rows, seen_cols = valid.shape
-    if not ((seen_cols <= cols and seen_rows <= rows) or (seen_cols <= rows and seen_rows <= cols)):
+    if not _fits((seen_cols, seen_rows), pattern):
         raise ParameterError(
             f"{name}: a lattice of {seen_cols} x {seen_rows} inner corners is seen, more than pattern "
             f"{pattern!r} holds ({cols + 1} x {rows + 1} squares): the board has more squares; give "
@@ -564,7 +583,7 @@ def _skips_corners(grey: np.ndarray, grid: np.ndarray, contrast: float) -> bool:
         mid = 0.5 * (grid[a] + grid[b])
         # sampled as a corner of half the step's squares: the skipped corner, if there is one
         score, spread = _x_junctions(grey, mid, 0.5 * (grid[a] - grid[b]), 0.5 * (other[a] + other[b]))
-        if np.count_nonzero((score > X_JUNCTION_MIN_SCORE) & (spread > contrast)) >= 2:
+        if np.count_nonzero(_junctions(score, spread, contrast)) >= 2:
             return True
     return False
 

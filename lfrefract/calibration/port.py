@@ -41,7 +41,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from lfrefract.calibration.approx import BoardLattice, detect_board_lattice, detect_chessboard, square_size
+from lfrefract.calibration.approx import detect_board_lattice, detect_chessboard, lattice_points_m, square_size
 from lfrefract.calibration.corners import RIM_MARGIN_PX as LIGHT_FIELD_RIM_MARGIN_PX
 from lfrefract.calibration.corners import light_field_corners
 from lfrefract.calibration.distinct import require_distinct_corners, view_names
@@ -329,7 +329,7 @@ def board_view_from_light_field(
         if central is None:
             return None
         corners, centres = [central], [np.zeros((len(central), 3))]
-        board = BoardLattice(central, pattern[::-1], np.ones(len(central), dtype=bool), True).board_points_m(square)
+        board = lattice_points_m((pattern[1], pattern[0]), square)
     for offset in offsets[1:] if method == "views" else ():
         found = detect_chessboard(
             subaperture_view(camera, raw, offset, output=view, recorded=recorded), pattern, name=name

@@ -337,23 +337,14 @@ class TracedLens:
         """How reports name the model: ``"traced <lens name>"``."""
         return f"{TRACED_FAMILY} {self.real.lens.name}"
 
-    def pixels(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> np.ndarray:
-        """The raw pixel (N, 2) of each thin-lens ray of :attr:`camera` (aperture points on z = 0
-        (N, 2), metres; slopes (N, 2)): the inverse of :meth:`LightFieldCamera.captured_rays`."""
-        cam = self.camera
-        a, t = np.asarray(aperture_points_m, dtype=np.float64), np.asarray(slopes, dtype=np.float64)
-        slope_in = t + a / cam.focal_length_m  # before the thin main lens
-        centre_img = -(a - slope_in * cam.lens_to_mla_m)  # the microlens centre, image plane
-        return cam.sensor.image_plane_to_pixels(centre_img + slope_in * cam.mla.focal_length_m)
-
     @functools.cached_property
-    def _mla_map(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(A (2, 2), b (2,))``: the affine map of camera-frame points on the MLA plane from
+    def _mla_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(A (2, 2), b (2,), A^-1)``: the affine map of camera-frame points on the MLA plane from
         :attr:`camera`'s lattice to the traced camera's, each microlens centre to the same lens's."""
         idx = np.array([[0, 0], [1, 0], [0, 1]])
         thin, true = -self.camera.mla.centres_m(idx), -self.real.camera.mla.centres_m(idx)  # camera frame
         a = (true[1:] - true[0]).T @ np.linalg.inv((thin[1:] - thin[0]).T)
-        return a, true[0] - a @ thin[0]
+        return a, true[0] - a @ thin[0], np.linalg.inv(a)
 
     def apply(self, aperture_points_m: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The traced rays of thin-lens rays (aperture points (N, 2), slopes (N, 2)): origins (N, 3)
@@ -370,7 +361,7 @@ class TracedLens:
         a, t = np.asarray(aperture_points_m, dtype=np.float64), np.asarray(slopes, dtype=np.float64)
         slope_in = t + a / cam.focal_length_m  # before the thin main lens, towards +z
         q = a - slope_in * cam.lens_to_mla_m  # on the MLA plane, camera frame
-        matrix, offset = self._mla_map
+        matrix, offset, _ = self._mla_map
         r = q @ matrix.T + offset
         slope = slope_in + (r - q) / true.mla.focal_length_m
         n = len(r)
@@ -430,8 +421,8 @@ class TracedLens:
         with np.errstate(invalid="ignore", divide="ignore"):
             slope = e[:, :2] / e[:, 2:3]  # the same line towards +z
             r = back[:, :2] + slope * (true.mla_z_m - back[:, 2:3])  # on the traced camera's MLA plane
-        matrix, offset = self._mla_map
-        q = (r - offset) @ np.linalg.inv(matrix).T
+        _, offset, inverse = self._mla_map
+        q = (r - offset) @ inverse.T
         slope_in = slope - (r - q) / true.mla.focal_length_m
         aperture = q + slope_in * cam.lens_to_mla_m
         ok = trace.passed & np.all(np.isfinite(aperture), axis=1) & np.all(np.isfinite(slope_in), axis=1)
